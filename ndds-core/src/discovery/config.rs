@@ -1,0 +1,105 @@
+//! Configuration of the discovery engine.
+
+use std::time::Duration;
+
+use crate::wire::Locator;
+
+/// Settings of one discovery engine. [`DiscoveryConfig::new`] gives the documented defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiscoveryConfig {
+    /// Domain id carried in every header; datagrams of other domains are dropped.
+    pub domain: u16,
+    /// Seed of the engine's random numbers (node id, jitter). Same seed, same run.
+    pub seed: u64,
+    /// Host name announced to other nodes.
+    pub hostname: String,
+    /// Process id announced to other nodes.
+    pub pid: u32,
+    /// Unicast address where this node receives discovery datagrams.
+    pub unicast: Locator,
+    /// Software version announced to other nodes.
+    pub version: String,
+    /// Period of the full refresh announcement (default 1 s).
+    pub announce_period: Duration,
+    /// How long others keep our entries without a refresh (default 5 s). Must exceed the
+    /// announce period; a few periods make single losses harmless.
+    pub lease: Duration,
+    /// Delays after start at which `Solicit` is sent (default 0, 200 ms, 1 s).
+    pub solicit_delays: Vec<Duration>,
+    /// Upper bound of the random delay before answering a `Solicit` (default 10 ms), so that
+    /// many nodes do not answer a newcomer in the same instant.
+    pub reply_jitter: Duration,
+    /// Relative jitter applied to each refresh period (default 0.1 = ±10 %).
+    pub period_jitter: f64,
+    /// How many periodic announcements repeat a withdrawal (default 3).
+    pub withdraw_repeats: u8,
+    /// Target size of one announcement datagram; larger announcements are split (default 16 KiB).
+    pub announce_chunk: usize,
+}
+
+impl DiscoveryConfig {
+    /// Defaults for a node of `domain` receiving unicast at `unicast`.
+    pub fn new(domain: u16, unicast: Locator) -> Self {
+        DiscoveryConfig {
+            domain,
+            seed: 0,
+            hostname: String::new(),
+            pid: 0,
+            unicast,
+            version: String::new(),
+            announce_period: Duration::from_secs(1),
+            lease: Duration::from_secs(5),
+            solicit_delays: vec![
+                Duration::ZERO,
+                Duration::from_millis(200),
+                Duration::from_secs(1),
+            ],
+            reply_jitter: Duration::from_millis(10),
+            period_jitter: 0.1,
+            withdraw_repeats: 3,
+            announce_chunk: 16 * 1024,
+        }
+    }
+
+    /// Checks the relations between timers.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.announce_period.is_zero() {
+            return Err(ConfigError::ZeroPeriod);
+        }
+        if self.lease <= self.announce_period {
+            return Err(ConfigError::LeaseTooShort {
+                lease: self.lease,
+                period: self.announce_period,
+            });
+        }
+        if !(0.0..0.5).contains(&self.period_jitter) {
+            return Err(ConfigError::Jitter(self.period_jitter));
+        }
+        if u32::try_from(self.lease.as_millis()).is_err() {
+            return Err(ConfigError::LeaseTooLong(self.lease));
+        }
+        Ok(())
+    }
+}
+
+/// An inconsistent [`DiscoveryConfig`].
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    /// The announce period is zero.
+    #[error("announce period must be greater than zero")]
+    ZeroPeriod,
+    /// The lease does not exceed the announce period.
+    #[error("lease ({lease:?}) must be longer than the announce period ({period:?})")]
+    LeaseTooShort {
+        /// Configured lease.
+        lease: Duration,
+        /// Configured period.
+        period: Duration,
+    },
+    /// The lease does not fit the wire field.
+    #[error("lease {0:?} is too long (at most u32::MAX ms)")]
+    LeaseTooLong(Duration),
+    /// Jitter outside `0.0..0.5`.
+    #[error("period jitter {0} must be in 0.0..0.5")]
+    Jitter(f64),
+}

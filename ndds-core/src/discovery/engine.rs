@@ -1,0 +1,565 @@
+//! The discovery engine of one node (daemon).
+//!
+//! # Call order
+//! The driver owns one [`Engine`] and loops:
+//! 1. feed input: [`Engine::handle_datagram`] for each received datagram,
+//!    [`Engine::add_local`] / [`Engine::remove_locals`] for client requests, and
+//!    [`Engine::handle_timeout`] when the instant named by [`Engine::poll_timeout`] is reached;
+//! 2. drain output: send every [`Engine::poll_transmit`], deliver every [`Engine::poll_event`];
+//! 3. re-arm its single timer to [`Engine::poll_timeout`].
+//!
+//! # Behaviour
+//! At creation the engine schedules `Solicit`s (see [`DiscoveryConfig::solicit_delays`]) and an
+//! immediate full announcement. Every `announce_period` (± jitter) it multicasts a full
+//! announcement. A new local endpoint is announced at once; removed ones are withdrawn at once
+//! and repeated in the next announcements. Remote nodes and endpoints decay when not refreshed
+//! within the lease their node announced. [`Engine::close`] says `Bye`.
+
+use std::collections::{HashMap, VecDeque};
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use super::config::{ConfigError, DiscoveryConfig};
+use super::event::{Destination, Event, LossReason, Transmit};
+use super::table::{Entry, Origin, Table};
+use crate::wire::{
+    self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
+    NodeInfo, Solicit, Withdraw,
+};
+
+/// Longest topic name accepted, in bytes.
+pub const MAX_TOPIC_LEN: usize = 256;
+
+/// A remote node as this engine knows it.
+#[derive(Clone, Debug)]
+pub struct RemoteNode {
+    /// What it last said about itself.
+    pub info: NodeInfo,
+    /// Source address of its last datagram.
+    pub last_from: SocketAddr,
+    /// When it was last heard from.
+    pub last_seen: Instant,
+    /// When it is forgotten unless refreshed.
+    pub expires: Instant,
+}
+
+/// Counters kept by the engine.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Datagrams handed to [`Engine::handle_datagram`].
+    pub received: u64,
+    /// Datagrams accepted and processed.
+    pub accepted: u64,
+    /// Datagrams produced for sending.
+    pub sent: u64,
+    /// Dropped datagrams by reason, indexed by [`DropReason::index`].
+    pub dropped: [u64; DropReason::ALL.len()],
+    /// Announced endpoints ignored because they broke a rule (bad layout, wrong fingerprint,
+    /// foreign guid).
+    pub invalid_endpoints: u64,
+}
+
+impl Stats {
+    /// The count for one drop reason.
+    pub fn dropped(&self, reason: DropReason) -> u64 {
+        self.dropped[reason.index()]
+    }
+}
+
+/// Why a local endpoint was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LocalError {
+    /// An endpoint with this guid exists already.
+    #[error("endpoint {0} is already declared")]
+    Duplicate(Guid),
+    /// Empty or overlong topic name.
+    #[error("topic name must be 1 to {MAX_TOPIC_LEN} bytes, got {0}")]
+    TopicName(usize),
+    /// The type layout breaks a protocol limit.
+    #[error("type description rejected: {0}")]
+    Layout(#[from] crate::types::LayoutError),
+    /// The declared fingerprint is not the fingerprint of the declared type.
+    #[error("fingerprint {declared:016x} does not match the type description ({computed:016x})")]
+    Fingerprint {
+        /// As declared.
+        declared: u64,
+        /// As computed from the description.
+        computed: u64,
+    },
+    /// The declaration cannot be announced in one datagram.
+    #[error("declaration of {size} bytes does not fit in one datagram ({MAX_DATAGRAM} bytes)")]
+    TooLarge {
+        /// Encoded size of an announcement carrying only this endpoint.
+        size: usize,
+    },
+    /// The engine was closed.
+    #[error("the discovery engine is closed")]
+    Closed,
+}
+
+/// The sans-IO discovery engine. See the module docs for the call order.
+#[derive(Debug)]
+pub struct Engine {
+    config: DiscoveryConfig,
+    node_id: u64,
+    rng: fastrand::Rng,
+    table: Table,
+    nodes: HashMap<u64, RemoteNode>,
+    withdrawn: VecDeque<(Guid, u8)>,
+    solicits: VecDeque<Instant>,
+    replies: Vec<(Instant, Locator)>,
+    next_announce: Instant,
+    next_expiry: Option<Instant>,
+    transmits: VecDeque<Transmit>,
+    events: VecDeque<Event>,
+    stats: Stats,
+    closed: bool,
+}
+
+impl Engine {
+    /// Creates an engine that starts discovering at `now`.
+    pub fn new(config: DiscoveryConfig, now: Instant) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let mut rng = fastrand::Rng::with_seed(config.seed);
+        let node_id = loop {
+            let id = rng.u64(..);
+            if id != 0 {
+                break id;
+            }
+        };
+        let solicits = config.solicit_delays.iter().map(|d| now + *d).collect();
+        Ok(Engine {
+            config,
+            node_id,
+            rng,
+            table: Table::default(),
+            nodes: HashMap::new(),
+            withdrawn: VecDeque::new(),
+            solicits,
+            replies: Vec::new(),
+            next_announce: now,
+            next_expiry: None,
+            transmits: VecDeque::new(),
+            events: VecDeque::new(),
+            stats: Stats::default(),
+            closed: false,
+        })
+    }
+
+    /// This node's id (the sender id of its datagrams).
+    pub fn node_id(&self) -> u64 {
+        self.node_id
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &DiscoveryConfig {
+        &self.config
+    }
+
+    /// What this node says about itself.
+    pub fn node_info(&self) -> NodeInfo {
+        NodeInfo {
+            hostname: self.config.hostname.clone(),
+            pid: self.config.pid,
+            unicast: self.config.unicast,
+            lease_ms: u32::try_from(self.config.lease.as_millis()).unwrap_or(u32::MAX),
+            announce_period_ms: u32::try_from(self.config.announce_period.as_millis())
+                .unwrap_or(u32::MAX),
+            version: self.config.version.clone(),
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> &Stats {
+        &self.stats
+    }
+
+    /// Known remote nodes.
+    pub fn nodes(&self) -> impl Iterator<Item = (u64, &RemoteNode)> {
+        self.nodes.iter().map(|(id, node)| (*id, node))
+    }
+
+    /// Every known endpoint, local and remote.
+    pub fn endpoints(&self) -> impl Iterator<Item = &Entry> {
+        self.table.iter()
+    }
+
+    /// The entry of one endpoint.
+    pub fn endpoint(&self, guid: &Guid) -> Option<&Entry> {
+        self.table.get(guid)
+    }
+
+    // ----- input -------------------------------------------------------------------------
+
+    /// Processes one received datagram.
+    pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) {
+        self.stats.received += 1;
+        match self.accept(now, from, bytes) {
+            Ok(()) => self.stats.accepted += 1,
+            Err(reason) => {
+                self.stats.dropped[reason.index()] += 1;
+                tracing::trace!(%from, reason = reason.name(), "dropped discovery datagram");
+            }
+        }
+        self.update_expiry();
+    }
+
+    fn accept(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) -> Result<(), DropReason> {
+        if self.closed {
+            return Err(DropReason::Unexpected);
+        }
+        let (header, message) = wire::decode_for_domain(bytes, self.config.domain)?;
+        if header.sender == self.node_id {
+            return Err(DropReason::Own);
+        }
+        match message {
+            Message::Solicit(solicit) => {
+                self.touch_node(now, header.sender, from, solicit.node.clone());
+                let delay = self.jitter(self.config.reply_jitter);
+                self.replies.push((now + delay, solicit.node.unicast));
+            }
+            Message::Announce(announce) => self.on_announce(now, header, from, announce),
+            Message::Withdraw(withdraw) => {
+                for guid in &withdraw.endpoints {
+                    self.remove_remote(header.sender, guid);
+                }
+            }
+            Message::Bye(Bye) => self.forget_node(header.sender, LossReason::Bye),
+            Message::Data(_) => return Err(DropReason::Unexpected),
+        }
+        Ok(())
+    }
+
+    fn on_announce(&mut self, now: Instant, header: Header, from: SocketAddr, announce: Announce) {
+        let node = header.sender;
+        let lease = Duration::from_millis(u64::from(announce.node.lease_ms));
+        let unicast = announce.node.unicast;
+        if self.touch_node(now, node, from, announce.node) {
+            // A node we did not know: answer with everything we have so it need not wait for
+            // our next refresh (its Solicit may have been lost).
+            let delay = self.jitter(self.config.reply_jitter);
+            self.replies.push((now + delay, unicast));
+        }
+        for guid in &announce.withdrawn {
+            self.remove_remote(node, guid);
+        }
+        for info in announce.endpoints {
+            self.upsert_remote(node, now + lease, info);
+        }
+    }
+
+    /// Records that `node` spoke; returns true when it was not known before.
+    fn touch_node(&mut self, now: Instant, node: u64, from: SocketAddr, info: NodeInfo) -> bool {
+        let lease = Duration::from_millis(u64::from(info.lease_ms));
+        match self.nodes.get_mut(&node) {
+            Some(known) => {
+                known.info = info;
+                known.last_from = from;
+                known.last_seen = now;
+                known.expires = now + lease;
+                false
+            }
+            None => {
+                self.events.push_back(Event::NodeDiscovered {
+                    node,
+                    info: info.clone(),
+                });
+                self.nodes.insert(
+                    node,
+                    RemoteNode {
+                        info,
+                        last_from: from,
+                        last_seen: now,
+                        expires: now + lease,
+                    },
+                );
+                true
+            }
+        }
+    }
+
+    fn upsert_remote(&mut self, node: u64, expires: Instant, info: EndpointInfo) {
+        if let Some(existing) = self.table.get(&info.guid) {
+            if existing.origin != Origin::Remote(node) {
+                // A guid owned by another node (or by us): never let one node replace another's.
+                self.stats.invalid_endpoints += 1;
+                return;
+            }
+            if existing.info == info {
+                self.table.refresh(&info.guid, expires);
+                return;
+            }
+        }
+        if let Err(reason) = check_endpoint(&info) {
+            self.stats.invalid_endpoints += 1;
+            tracing::debug!(guid = %info.guid, %reason, "ignored announced endpoint");
+            return;
+        }
+        let guid = info.guid;
+        self.table.remove(&guid, &mut self.events);
+        let entry = Entry {
+            info,
+            origin: Origin::Remote(node),
+            expires: Some(expires),
+        };
+        self.table.insert(entry, &mut self.events);
+    }
+
+    fn remove_remote(&mut self, node: u64, guid: &Guid) {
+        if self
+            .table
+            .get(guid)
+            .is_some_and(|e| e.origin == Origin::Remote(node))
+        {
+            self.table.remove(guid, &mut self.events);
+        }
+    }
+
+    fn forget_node(&mut self, node: u64, reason: LossReason) {
+        for guid in self.table.owned_by(Origin::Remote(node)) {
+            self.table.remove(&guid, &mut self.events);
+        }
+        if self.nodes.remove(&node).is_some() {
+            self.events.push_back(Event::NodeLost { node, reason });
+        }
+    }
+
+    /// Declares a local endpoint: matches it at once and announces it to the domain.
+    pub fn add_local(&mut self, now: Instant, info: EndpointInfo) -> Result<(), LocalError> {
+        let _ = now;
+        if self.closed {
+            return Err(LocalError::Closed);
+        }
+        if self.table.get(&info.guid).is_some() {
+            return Err(LocalError::Duplicate(info.guid));
+        }
+        check_endpoint(&info)?;
+        let announce = Message::Announce(Announce {
+            node: self.node_info(),
+            endpoints: vec![info.clone()],
+            withdrawn: Vec::new(),
+        });
+        let mut payload = Vec::new();
+        if let Err(wire::EncodeError::TooLarge { size }) =
+            wire::encode(self.config.domain, self.node_id, &announce, &mut payload)
+        {
+            return Err(LocalError::TooLarge { size });
+        }
+        let entry = Entry {
+            info,
+            origin: Origin::Local,
+            expires: None,
+        };
+        self.table.insert(entry, &mut self.events);
+        self.push_transmit(Destination::Multicast, payload);
+        Ok(())
+    }
+
+    /// Removes local endpoints (a client closed them or disconnected) and withdraws them.
+    /// Unknown guids are ignored.
+    pub fn remove_locals(&mut self, now: Instant, guids: &[Guid]) {
+        let _ = now;
+        let mut removed = Vec::new();
+        for guid in guids {
+            if self.table.get(guid).is_some_and(|e| e.origin == Origin::Local) {
+                self.table.remove(guid, &mut self.events);
+                removed.push(*guid);
+            }
+        }
+        if removed.is_empty() || self.closed {
+            return;
+        }
+        for guid in &removed {
+            self.withdrawn
+                .push_back((*guid, self.config.withdraw_repeats));
+        }
+        for chunk in removed.chunks(2048) {
+            let message = Message::Withdraw(Withdraw {
+                endpoints: chunk.to_vec(),
+            });
+            self.encode_and_push(Destination::Multicast, &message);
+        }
+    }
+
+    /// Leaves the domain: says `Bye` and stops producing output.
+    pub fn close(&mut self, now: Instant) {
+        let _ = now;
+        if self.closed {
+            return;
+        }
+        self.encode_and_push(Destination::Multicast, &Message::Bye(Bye));
+        self.closed = true;
+    }
+
+    /// Runs the timers that are due at `now`.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        if self.closed {
+            return;
+        }
+        while self.solicits.front().is_some_and(|t| *t <= now) {
+            self.solicits.pop_front();
+            let message = Message::Solicit(Solicit {
+                node: self.node_info(),
+            });
+            self.encode_and_push(Destination::Multicast, &message);
+        }
+        let mut due = Vec::new();
+        self.replies.retain(|(at, to)| {
+            let is_due = *at <= now;
+            if is_due && !due.contains(to) {
+                due.push(*to);
+            }
+            !is_due
+        });
+        for to in due {
+            self.announce_all(Destination::Unicast(to), false);
+        }
+        if self.next_announce <= now {
+            self.announce_all(Destination::Multicast, true);
+            let jittered = self.jittered_period();
+            self.next_announce = now + jittered;
+        }
+        self.expire(now);
+        self.update_expiry();
+    }
+
+    fn expire(&mut self, now: Instant) {
+        let expired_nodes: Vec<u64> = self
+            .nodes
+            .iter()
+            .filter(|(_, node)| node.expires <= now)
+            .map(|(id, _)| *id)
+            .collect();
+        for node in expired_nodes {
+            tracing::debug!(node = format_args!("{node:016x}"), "node lease expired");
+            self.forget_node(node, LossReason::Expired);
+        }
+        for guid in self.table.expired(now) {
+            self.table.remove(&guid, &mut self.events);
+        }
+    }
+
+    // ----- output ------------------------------------------------------------------------
+
+    /// The next datagram to send.
+    pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        self.transmits.pop_front()
+    }
+
+    /// The next event for the driver.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// When [`Engine::handle_timeout`] must next be called (`None` once closed).
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        if self.closed {
+            return None;
+        }
+        let mut next = self.next_announce;
+        let candidates = self
+            .solicits
+            .front()
+            .copied()
+            .into_iter()
+            .chain(self.replies.iter().map(|(at, _)| *at))
+            .chain(self.next_expiry);
+        for at in candidates {
+            next = next.min(at);
+        }
+        Some(next)
+    }
+
+    // ----- helpers -----------------------------------------------------------------------
+
+    /// Sends every local endpoint (split over datagrams of `announce_chunk` bytes) plus the
+    /// recent withdrawals. A periodic announcement also ages the withdrawal list.
+    fn announce_all(&mut self, destination: Destination, periodic: bool) {
+        let withdrawn: Vec<Guid> = self.withdrawn.iter().map(|(g, _)| *g).collect();
+        if periodic {
+            for (_, left) in self.withdrawn.iter_mut() {
+                *left = left.saturating_sub(1);
+            }
+            self.withdrawn.retain(|(_, left)| *left > 0);
+        }
+        let mut locals: Vec<&EndpointInfo> = self
+            .table
+            .iter()
+            .filter(|e| e.origin == Origin::Local)
+            .map(|e| &e.info)
+            .collect();
+        locals.sort_by_key(|info| info.guid);
+        let mut chunks: Vec<Vec<EndpointInfo>> = vec![Vec::new()];
+        let mut size = 0;
+        for info in locals {
+            let info_size = postcard::to_allocvec(info).map_or(0, |v| v.len());
+            let current = chunks.last().map_or(0, Vec::len);
+            if current > 0 && size + info_size > self.config.announce_chunk {
+                chunks.push(Vec::new());
+                size = 0;
+            }
+            size += info_size;
+            if let Some(chunk) = chunks.last_mut() {
+                chunk.push(info.clone());
+            }
+        }
+        for (i, endpoints) in chunks.into_iter().enumerate() {
+            let message = Message::Announce(Announce {
+                node: self.node_info(),
+                endpoints,
+                withdrawn: if i == 0 { withdrawn.clone() } else { Vec::new() },
+            });
+            self.encode_and_push(destination, &message);
+        }
+    }
+
+    fn encode_and_push(&mut self, destination: Destination, message: &Message<'_>) {
+        let mut payload = Vec::new();
+        match wire::encode(self.config.domain, self.node_id, message, &mut payload) {
+            Ok(()) => self.push_transmit(destination, payload),
+            Err(err) => tracing::error!(%err, kind = message.kind().name(), "cannot encode"),
+        }
+    }
+
+    fn push_transmit(&mut self, destination: Destination, payload: Vec<u8>) {
+        self.stats.sent += 1;
+        self.transmits.push_back(Transmit {
+            destination,
+            payload,
+        });
+    }
+
+    fn update_expiry(&mut self) {
+        let node_min = self.nodes.values().map(|n| n.expires).min();
+        let entry_min = self.table.earliest_expiry();
+        self.next_expiry = match (node_min, entry_min) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+    }
+
+    fn jitter(&mut self, max: Duration) -> Duration {
+        max.mul_f64(self.rng.f64())
+    }
+
+    fn jittered_period(&mut self) -> Duration {
+        let spread = self.config.period_jitter * (2.0 * self.rng.f64() - 1.0);
+        self.config.announce_period.mul_f64(1.0 + spread)
+    }
+}
+
+/// The rules every endpoint declaration must satisfy, local or announced.
+fn check_endpoint(info: &EndpointInfo) -> Result<(), LocalError> {
+    if info.topic.is_empty() || info.topic.len() > MAX_TOPIC_LEN {
+        return Err(LocalError::TopicName(info.topic.len()));
+    }
+    info.type_desc.validate()?;
+    let computed = info.type_desc.fingerprint();
+    if computed != info.fingerprint {
+        return Err(LocalError::Fingerprint {
+            declared: info.fingerprint,
+            computed,
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,14 @@
+//! The sans-IO discovery engine: announce local endpoints, refresh them, solicit at start-up,
+//! withdraw on close, decay remote entries, and match producers with consumers.
+//!
+//! See [`engine`] for the call order and behaviour, [`table`] for the matching rules.
+
+pub mod config;
+pub mod engine;
+pub mod event;
+pub mod table;
+
+pub use config::{ConfigError, DiscoveryConfig};
+pub use engine::{Engine, LocalError, MAX_TOPIC_LEN, RemoteNode, Stats};
+pub use event::{Destination, Event, LossReason, Transmit};
+pub use table::{Entry, Origin};

@@ -1,0 +1,66 @@
+//! How a domain id maps to discovery addresses and the local socket path.
+//!
+//! | what | value for domain `d` (0 ≤ d ≤ 232) |
+//! |---|---|
+//! | discovery multicast group | `239.255.76.d` |
+//! | discovery UDP port | `7600 + d` |
+//! | daemon Unix socket | `/tmp/ndds-d.sock` |
+//!
+//! Every value can be overridden (daemon flags and config file, `NDDS_SOCKET`); these are only
+//! the defaults that let daemons and clients of one domain find each other with no set-up.
+
+use std::net::Ipv4Addr;
+use std::path::PathBuf;
+
+/// Largest valid domain id.
+pub const MAX_DOMAIN: u16 = 232;
+/// Discovery port of domain 0; domain `d` uses `BASE_PORT + d`.
+pub const BASE_PORT: u16 = 7600;
+
+/// A domain id outside `0..=MAX_DOMAIN`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("domain id {0} is out of range (0..={MAX_DOMAIN})")]
+pub struct DomainError(pub u32);
+
+/// Checks that `domain` is a valid domain id.
+pub fn check(domain: u32) -> Result<u16, DomainError> {
+    u16::try_from(domain)
+        .ok()
+        .filter(|d| *d <= MAX_DOMAIN)
+        .ok_or(DomainError(domain))
+}
+
+/// The discovery multicast group of a domain.
+pub fn multicast_group(domain: u16) -> Ipv4Addr {
+    Ipv4Addr::new(239, 255, 76, domain.min(MAX_DOMAIN) as u8)
+}
+
+/// The discovery UDP port of a domain.
+pub fn discovery_port(domain: u16) -> u16 {
+    BASE_PORT + domain.min(MAX_DOMAIN)
+}
+
+/// The default path of the daemon's Unix socket for a domain.
+pub fn default_socket_path(domain: u16) -> PathBuf {
+    PathBuf::from(format!("/tmp/ndds-{domain}.sock"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mapping_matches_the_documented_table() {
+        assert_eq!(multicast_group(0), Ipv4Addr::new(239, 255, 76, 0));
+        assert_eq!(multicast_group(232), Ipv4Addr::new(239, 255, 76, 232));
+        assert_eq!(discovery_port(0), 7600);
+        assert_eq!(discovery_port(17), 7617);
+        assert_eq!(
+            default_socket_path(3),
+            PathBuf::from("/tmp/ndds-3.sock")
+        );
+        assert_eq!(check(232), Ok(232));
+        assert_eq!(check(233), Err(DomainError(233)));
+        assert_eq!(check(70_000), Err(DomainError(70_000)));
+    }
+}

@@ -1,0 +1,230 @@
+//! Building a [`TypeDescription`] for a Rust type by tracing its serde implementation with
+//! serde-reflection.
+
+use std::collections::{BTreeSet, HashMap};
+use std::sync::OnceLock;
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use serde_reflection::{
+    ContainerFormat, Format as SrFormat, Named, Registry, Samples, Tracer, TracerConfig,
+    VariantFormat,
+};
+
+use super::TypeDescription;
+use super::layout::{
+    Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
+};
+
+/// Why a type could not be described structurally.
+#[derive(Debug, thiserror::Error)]
+pub enum DescribeError {
+    /// serde-reflection could not trace the type (untagged enums, `flatten`, custom
+    /// deserializers that reject default values, ...).
+    #[error("serde-reflection cannot trace {type_name}: {reason}")]
+    Trace {
+        /// The Rust type.
+        type_name: &'static str,
+        /// serde-reflection's message.
+        reason: String,
+    },
+    /// The traced layout breaks a limit of the protocol (too deep, too many nodes, ...).
+    #[error("the layout of {type_name} is not representable: {source}")]
+    Layout {
+        /// The Rust type.
+        type_name: &'static str,
+        /// The broken limit.
+        source: LayoutError,
+    },
+}
+
+/// Traces `T` and builds its description.
+pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, DescribeError> {
+    let type_name = std::any::type_name::<T>();
+    let trace_err = |err: serde_reflection::Error| DescribeError::Trace {
+        type_name,
+        reason: err.to_string(),
+    };
+    let (root, registry) = trace::<T>().map_err(trace_err)?;
+    let names: HashMap<&str, u32> = registry
+        .keys()
+        .enumerate()
+        .map(|(i, name)| (name.as_str(), i as u32))
+        .collect();
+    let mut builder = Builder {
+        names: &names,
+        formats: Vec::new(),
+        dedup: HashMap::new(),
+    };
+    let unsupported = |what: &str| DescribeError::Trace {
+        type_name,
+        reason: format!("incomplete trace ({what})"),
+    };
+    let root = builder.add(&root).ok_or_else(|| unsupported("root"))?;
+    let mut containers = Vec::with_capacity(registry.len());
+    for (name, container) in &registry {
+        let shape = builder
+            .container(container)
+            .ok_or_else(|| unsupported(name))?;
+        containers.push(Container {
+            name: name.clone(),
+            shape,
+        });
+    }
+    let layout = TypeLayout {
+        formats: builder.formats,
+        root,
+        containers,
+    };
+    layout
+        .validate()
+        .map_err(|source| DescribeError::Layout { type_name, source })?;
+    Ok(TypeDescription {
+        name: type_name.to_owned(),
+        layout: Some(layout),
+    })
+}
+
+/// Traces `T` until every variant of every enum inside it is known.
+///
+/// serde-reflection explores one level of enum variants per pass and only repeats passes for a
+/// top-level enum by itself. Nested enums are named by the `MissingVariants` error of a first
+/// attempt; later attempts repeat passes until none of the named enums is incomplete.
+fn trace<T: DeserializeOwned>() -> Result<(SrFormat, Registry), serde_reflection::Error> {
+    static SAMPLES: OnceLock<Samples> = OnceLock::new();
+    let samples = SAMPLES.get_or_init(Samples::new);
+    let mut enums: BTreeSet<String> = BTreeSet::new();
+    for _attempt in 0..MAX_TRACE_ATTEMPTS {
+        let mut tracer = Tracer::new(TracerConfig::default());
+        let mut root = SrFormat::Unit;
+        for _pass in 0..MAX_TRACE_PASSES {
+            let (format, _value) = tracer.trace_type_once::<T>(samples)?;
+            if let SrFormat::TypeName(name) = &format {
+                enums.insert(name.clone());
+            }
+            root = format;
+            let mut incomplete = false;
+            for name in &enums {
+                incomplete |= tracer.check_incomplete_enum(name).is_some();
+            }
+            if !incomplete {
+                break;
+            }
+        }
+        match tracer.registry() {
+            Ok(registry) => return Ok((root, registry)),
+            Err(serde_reflection::Error::MissingVariants(missing))
+                if missing.iter().any(|name| !enums.contains(name)) =>
+            {
+                enums.extend(missing);
+            }
+            Err(err) => return Err(err),
+        }
+    }
+    Err(serde_reflection::Error::Custom(
+        "enum variants still unknown after repeated tracing".to_owned(),
+    ))
+}
+
+/// Fresh tracers started before giving up on nested enums.
+const MAX_TRACE_ATTEMPTS: usize = 16;
+/// Passes over the type within one attempt.
+const MAX_TRACE_PASSES: usize = 1024;
+
+struct Builder<'a> {
+    names: &'a HashMap<&'a str, u32>,
+    formats: Vec<Format>,
+    dedup: HashMap<Format, u32>,
+}
+
+impl Builder<'_> {
+    fn push(&mut self, format: Format) -> u32 {
+        if let Some(index) = self.dedup.get(&format) {
+            return *index;
+        }
+        let index = self.formats.len() as u32;
+        self.formats.push(format.clone());
+        self.dedup.insert(format, index);
+        index
+    }
+
+    /// Adds a format and its children (children first). `None` for an incomplete trace.
+    fn add(&mut self, format: &SrFormat) -> Option<u32> {
+        let node = match format {
+            SrFormat::Variable(_) => return None,
+            SrFormat::TypeName(name) => Format::Named(*self.names.get(name.as_str())?),
+            SrFormat::Unit => Format::Unit,
+            SrFormat::Bool => Format::Bool,
+            SrFormat::I8 => Format::I8,
+            SrFormat::I16 => Format::I16,
+            SrFormat::I32 => Format::I32,
+            SrFormat::I64 => Format::I64,
+            SrFormat::I128 => Format::I128,
+            SrFormat::U8 => Format::U8,
+            SrFormat::U16 => Format::U16,
+            SrFormat::U32 => Format::U32,
+            SrFormat::U64 => Format::U64,
+            SrFormat::U128 => Format::U128,
+            SrFormat::F32 => Format::F32,
+            SrFormat::F64 => Format::F64,
+            SrFormat::Char => Format::Char,
+            SrFormat::Str => Format::Str,
+            SrFormat::Bytes => Format::Bytes,
+            SrFormat::Option(inner) => Format::Option(self.add(inner)?),
+            SrFormat::Seq(inner) => Format::Seq(self.add(inner)?),
+            SrFormat::Map { key, value } => Format::Map {
+                key: self.add(key)?,
+                value: self.add(value)?,
+            },
+            SrFormat::Tuple(items) => Format::Tuple(self.list(items)?),
+            SrFormat::TupleArray { content, size } => Format::Array {
+                item: self.add(content)?,
+                len: u32::try_from(*size).ok()?,
+            },
+        };
+        Some(self.push(node))
+    }
+
+    fn list(&mut self, items: &[SrFormat]) -> Option<Vec<u32>> {
+        items.iter().map(|item| self.add(item)).collect()
+    }
+
+    fn fields(&mut self, fields: &[Named<SrFormat>]) -> Option<Vec<Field>> {
+        fields
+            .iter()
+            .map(|field| {
+                Some(Field {
+                    name: field.name.clone(),
+                    format: self.add(&field.value)?,
+                })
+            })
+            .collect()
+    }
+
+    fn container(&mut self, container: &ContainerFormat) -> Option<ContainerShape> {
+        Some(match container {
+            ContainerFormat::UnitStruct => ContainerShape::UnitStruct,
+            ContainerFormat::NewTypeStruct(inner) => ContainerShape::NewType(self.add(inner)?),
+            ContainerFormat::TupleStruct(items) => ContainerShape::TupleStruct(self.list(items)?),
+            ContainerFormat::Struct(fields) => ContainerShape::Struct(self.fields(fields)?),
+            ContainerFormat::Enum(variants) => {
+                let mut out = Vec::with_capacity(variants.len());
+                for (index, variant) in variants {
+                    let shape = match &variant.value {
+                        VariantFormat::Variable(_) => return None,
+                        VariantFormat::Unit => VariantShape::Unit,
+                        VariantFormat::NewType(inner) => VariantShape::NewType(self.add(inner)?),
+                        VariantFormat::Tuple(items) => VariantShape::Tuple(self.list(items)?),
+                        VariantFormat::Struct(fields) => VariantShape::Struct(self.fields(fields)?),
+                    };
+                    out.push(Variant {
+                        index: *index,
+                        name: variant.name.clone(),
+                        shape,
+                    });
+                }
+                ContainerShape::Enum(out)
+            }
+        })
+    }
+}

@@ -1,0 +1,152 @@
+//! Type descriptions: what a topic's sample type looks like, so that producers and consumers
+//! of different types never match and tools can decode any topic without its Rust type.
+//!
+//! A [`TypeDescription`] is a display name plus an optional structural [`TypeLayout`] traced
+//! from the type's serde implementation. Its [`fingerprint`](TypeDescription::fingerprint) is
+//! derived from the [canonical text](canonical) of the layout. Types that serde-reflection
+//! cannot trace are *opaque*: they still match by name, but tools show their bytes in hex.
+
+pub mod canonical;
+pub mod describe;
+pub mod layout;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+pub use describe::DescribeError;
+pub use layout::{
+    Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
+};
+
+/// The description of a topic's sample type.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TypeDescription {
+    /// Display name, usually the full Rust type path. Not part of the fingerprint unless the
+    /// type is opaque.
+    pub name: String,
+    /// Structural layout, or `None` for an opaque type.
+    pub layout: Option<TypeLayout>,
+}
+
+impl TypeDescription {
+    /// Describes `T` by tracing it; an untraceable type becomes opaque (see the module docs).
+    pub fn of<T: Serialize + DeserializeOwned>() -> Self {
+        match describe::describe::<T>() {
+            Ok(desc) => desc,
+            Err(err) => {
+                tracing::debug!(error = %err, "type is opaque to ndds tools");
+                Self::opaque(std::any::type_name::<T>())
+            }
+        }
+    }
+
+    /// Describes `T` by tracing it, failing if it cannot be traced.
+    pub fn try_of<T: Serialize + DeserializeOwned>() -> Result<Self, DescribeError> {
+        describe::describe::<T>()
+    }
+
+    /// A description carrying only a name.
+    pub fn opaque(name: &str) -> Self {
+        TypeDescription {
+            name: name.to_owned(),
+            layout: None,
+        }
+    }
+
+    /// The canonical text the fingerprint is computed from.
+    pub fn canonical_text(&self) -> String {
+        match &self.layout {
+            Some(layout) => canonical::canonical_text(layout),
+            None => canonical::opaque_text(&self.name),
+        }
+    }
+
+    /// The type fingerprint: first 8 bytes of SHA-256 of the canonical text, big-endian.
+    pub fn fingerprint(&self) -> u64 {
+        canonical::fingerprint_of_text(&self.canonical_text())
+    }
+
+    /// Checks the layout's structural rules (see [`TypeLayout::validate`]).
+    pub fn validate(&self) -> Result<(), LayoutError> {
+        self.layout.as_ref().map_or(Ok(()), TypeLayout::validate)
+    }
+}
+
+/// Formats a fingerprint the way every ndds tool prints it: 16 lowercase hex digits.
+pub fn fingerprint_hex(fingerprint: u64) -> String {
+    format!("{fingerprint:016x}")
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use serde::{Deserialize, Serialize};
+
+    use super::*;
+
+    #[derive(Serialize, Deserialize)]
+    struct Pose {
+        x: f64,
+        y: f64,
+        label: Option<String>,
+    }
+
+    #[derive(Serialize, Deserialize)]
+    enum Mode {
+        Idle,
+        Move { speed: f32 },
+        Hold(u8, u8),
+    }
+
+    #[derive(Serialize, Deserialize)]
+    struct Tree {
+        value: i32,
+        children: Vec<Tree>,
+        table: BTreeMap<String, [u16; 3]>,
+        mode: Mode,
+    }
+
+    #[test]
+    fn canonical_text_of_a_struct() {
+        let desc = TypeDescription::try_of::<Pose>().unwrap();
+        assert_eq!(
+            desc.canonical_text(),
+            r#"root="Pose";"Pose"=struct{"x":f64,"y":f64,"label":option<str>};"#
+        );
+        assert!(desc.name.ends_with("Pose"));
+    }
+
+    #[test]
+    fn recursive_types_and_enums_are_described() {
+        let desc = TypeDescription::try_of::<Tree>().unwrap();
+        assert_eq!(
+            desc.canonical_text(),
+            concat!(
+                r#"root="Tree";"#,
+                r#""Mode"=enum{0:"Idle":unit,1:"Move":struct{"speed":f32},2:"Hold":tuple(u8,u8)};"#,
+                r#""Tree"=struct{"value":i32,"children":seq<"Tree">,"#,
+                r#""table":map<str,array<u16;3>>,"mode":"Mode"};"#
+            )
+        );
+        desc.validate().unwrap();
+    }
+
+    #[test]
+    fn fingerprint_is_stable_and_structural() {
+        // The value is part of the protocol: changing how fingerprints are computed breaks
+        // matching with every deployed node, so this constant must never change silently.
+        let f64_desc = TypeDescription::try_of::<f64>().unwrap();
+        assert_eq!(f64_desc.canonical_text(), "root=f64;");
+        // sha256("root=f64;") = 68568ad56bcbc0f8...
+        assert_eq!(fingerprint_hex(f64_desc.fingerprint()), "68568ad56bcbc0f8");
+        assert_ne!(
+            TypeDescription::try_of::<f32>().unwrap().fingerprint(),
+            f64_desc.fingerprint()
+        );
+        assert_ne!(
+            TypeDescription::opaque("f64").fingerprint(),
+            f64_desc.fingerprint()
+        );
+    }
+}
