@@ -1,0 +1,72 @@
+//! Frames from a daemon to a client or tool.
+
+use serde::{Deserialize, Serialize};
+
+use super::graph::Graph;
+use crate::wire::{EndpointInfo, Guid};
+
+/// The daemon's answer to a valid `Hello`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Welcome {
+    /// The daemon's [`super::IPC_VERSION`].
+    pub ipc_version: u16,
+    /// The daemon's node id.
+    pub node: u64,
+    /// The daemon's domain.
+    pub domain: u16,
+    /// Host name.
+    pub hostname: String,
+    /// IPv4 address of the interface the daemon uses; clients bind their data sockets to it.
+    pub interface: [u8; 4],
+    /// Daemon process id.
+    pub pid: u32,
+    /// Daemon software version.
+    pub version: String,
+}
+
+/// A frame from daemon to client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DaemonMessage {
+    /// The session is open.
+    Welcome(Welcome),
+    /// The session is refused; the daemon closes the connection after this frame.
+    Refused {
+        /// Why, for the user.
+        reason: String,
+    },
+    /// Result of a `Declare`.
+    Declared {
+        /// The entity declared.
+        entity: u32,
+        /// `Err` carries the reason for the user.
+        result: Result<(), String>,
+    },
+    /// A local endpoint of this client matched another endpoint.
+    Matched {
+        /// The client's entity.
+        local: u32,
+        /// The other endpoint.
+        remote: EndpointInfo,
+    },
+    /// A local endpoint shares its topic with an endpoint of another type.
+    Incompatible {
+        /// The client's entity.
+        local: u32,
+        /// The other endpoint.
+        remote: EndpointInfo,
+    },
+    /// A matched or incompatible endpoint went away.
+    Unmatched {
+        /// The client's entity.
+        local: u32,
+        /// The endpoint that went away.
+        remote: Guid,
+    },
+    /// Answer to `QueryGraph`.
+    Graph {
+        /// The request number.
+        request: u32,
+        /// The daemon's view of the domain.
+        graph: Graph,
+    },
+}

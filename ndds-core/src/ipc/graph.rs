@@ -1,0 +1,66 @@
+//! The daemon's view of the domain, as tools receive it.
+
+use serde::{Deserialize, Serialize};
+
+use super::client::Role;
+use crate::wire::{EndpointInfo, Locator, NodeInfo};
+
+/// A daemon's complete view: itself, the nodes it knows, its clients, every endpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Graph {
+    /// The answering daemon.
+    pub local: NodeSummary,
+    /// Remote nodes it currently knows.
+    pub nodes: Vec<NodeSummary>,
+    /// Its connected clients and tools.
+    pub clients: Vec<ClientSummary>,
+    /// Every endpoint it knows, local and remote.
+    pub endpoints: Vec<EndpointSummary>,
+    /// Named counters (datagrams received, dropped by reason, ...).
+    pub counters: Vec<(String, u64)>,
+}
+
+/// One daemon.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NodeSummary {
+    /// Node id.
+    pub node: u64,
+    /// What it says about itself.
+    pub info: NodeInfo,
+    /// The discovery multicast group and port (known for the local node only).
+    pub multicast: Option<Locator>,
+    /// Interface address the node uses (the address of its unicast locator).
+    pub interface: [u8; 4],
+    /// Milliseconds since it was last heard from (0 for the local node).
+    pub last_seen_ms: u64,
+    /// Milliseconds until it is forgotten unless refreshed (`None` for the local node).
+    pub expires_in_ms: Option<u64>,
+}
+
+/// One client or tool connected to the answering daemon.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClientSummary {
+    /// Participant id.
+    pub participant: u64,
+    /// Process id.
+    pub pid: u32,
+    /// Process name.
+    pub name: String,
+    /// Client or tool.
+    pub role: Role,
+    /// Number of endpoints it declared.
+    pub endpoints: u32,
+}
+
+/// One endpoint, local or remote.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EndpointSummary {
+    /// As declared or announced.
+    pub info: EndpointInfo,
+    /// Node id of the daemon that owns it.
+    pub node: u64,
+    /// Host name of that daemon.
+    pub hostname: String,
+    /// Milliseconds until it decays unless refreshed (`None` for local endpoints).
+    pub expires_in_ms: Option<u64>,
+}

@@ -1,0 +1,123 @@
+//! The command line of `ndds-daemon`.
+
+use std::net::Ipv4Addr;
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::Parser;
+use tokio_util::sync::CancellationToken;
+
+use crate::config::ConfigFile;
+use crate::daemon::Daemon;
+
+/// The ndds discovery daemon: run one per host and domain.
+///
+/// Clients on this host connect to it through its Unix socket; it finds the daemons of other
+/// hosts over UDP multicast on the chosen interface. By default it uses the loopback interface
+/// only: pass `--interface` (an address or a name such as eth0) to reach other hosts.
+#[derive(Debug, Parser)]
+#[command(name = "ndds-daemon", version)]
+pub struct Args {
+    /// Domain id (0-232).
+    #[arg(long, env = "NDDS_DOMAIN")]
+    pub domain: Option<u32>,
+    /// Unix socket path [default: /tmp/ndds-<domain>.sock].
+    #[arg(long, env = "NDDS_SOCKET")]
+    pub socket: Option<PathBuf>,
+    /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
+    #[arg(long)]
+    pub interface: Option<String>,
+    /// TOML config file; flags and environment override it.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Discovery multicast group [default: 239.255.76.<domain>].
+    #[arg(long)]
+    pub multicast_group: Option<Ipv4Addr>,
+    /// Discovery multicast port [default: 7600 + domain].
+    #[arg(long)]
+    pub discovery_port: Option<u16>,
+    /// Unicast discovery port [default: any free port].
+    #[arg(long)]
+    pub unicast_port: Option<u16>,
+    /// Refresh period in milliseconds [default: 1000].
+    #[arg(long)]
+    pub announce_period_ms: Option<u64>,
+    /// Lease in milliseconds: how long others remember us without a refresh [default: 5000].
+    #[arg(long)]
+    pub lease_ms: Option<u64>,
+    /// Multicast TTL [default: 1].
+    #[arg(long)]
+    pub multicast_ttl: Option<u32>,
+    /// Random seed (node id, jitter) [default: random].
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+impl Args {
+    fn layer(&self) -> ConfigFile {
+        ConfigFile {
+            domain: self.domain,
+            socket: self.socket.clone(),
+            interface: self.interface.clone(),
+            multicast_group: self.multicast_group,
+            discovery_port: self.discovery_port,
+            unicast_port: self.unicast_port,
+            announce_period_ms: self.announce_period_ms,
+            lease_ms: self.lease_ms,
+            multicast_ttl: self.multicast_ttl,
+            seed: self.seed,
+        }
+    }
+}
+
+/// Parses the command line, runs the daemon until SIGINT or SIGTERM, and returns.
+pub fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    init_logging();
+    let file = match &args.config {
+        Some(path) => ConfigFile::load(path)?,
+        None => ConfigFile::default(),
+    };
+    let config = args.layer().or(file).resolve()?;
+    if config.interface.is_loopback() {
+        tracing::info!("discovery is limited to this host (loopback); use --interface to reach other hosts");
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the tokio runtime")?;
+    runtime.block_on(async move {
+        let daemon = Daemon::bind(config).await?;
+        let shutdown = CancellationToken::new();
+        tokio::spawn(stop_on_signal(shutdown.clone()));
+        daemon.run(shutdown).await?;
+        Ok(())
+    })
+}
+
+/// Logs to stderr through tracing; `RUST_LOG` chooses the level (default `info`).
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .try_init();
+}
+
+async fn stop_on_signal(shutdown: CancellationToken) {
+    use tokio::signal::unix::{SignalKind, signal};
+    let (Ok(mut int), Ok(mut term)) = (
+        signal(SignalKind::interrupt()),
+        signal(SignalKind::terminate()),
+    ) else {
+        tracing::error!("cannot install signal handlers");
+        return;
+    };
+    tokio::select! {
+        _ = int.recv() => tracing::info!("SIGINT: shutting down"),
+        _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    }
+    shutdown.cancel();
+}

@@ -1,0 +1,255 @@
+//! Daemon configuration: defaults, the TOML config file, and their merge.
+//!
+//! Precedence, highest first: command-line flags (and the environment variables `NDDS_DOMAIN`,
+//! `NDDS_SOCKET` that stand for them), the config file, the defaults below.
+//!
+//! | setting | default |
+//! |---|---|
+//! | `domain` | 0 |
+//! | `socket` | `/tmp/ndds-<domain>.sock` |
+//! | `interface` | `127.0.0.1` (loopback: this host only; name an interface to reach others) |
+//! | `multicast_group` | `239.255.76.<domain>` |
+//! | `discovery_port` | `7600 + domain` |
+//! | `unicast_port` | 0 (any free port) |
+//! | `announce_period_ms` | 1000 |
+//! | `lease_ms` | 5000 |
+//! | `multicast_ttl` | 1 |
+
+use std::net::Ipv4Addr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use ndds_core::domain;
+use serde::Deserialize;
+
+use crate::iface;
+
+/// The config file, every key optional. Unknown keys are an error.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConfigFile {
+    /// Domain id.
+    pub domain: Option<u32>,
+    /// Unix socket path.
+    pub socket: Option<PathBuf>,
+    /// Interface: an IPv4 address or an interface name.
+    pub interface: Option<String>,
+    /// Discovery multicast group.
+    pub multicast_group: Option<Ipv4Addr>,
+    /// Discovery multicast port.
+    pub discovery_port: Option<u16>,
+    /// Unicast discovery port (0: any).
+    pub unicast_port: Option<u16>,
+    /// Refresh period.
+    pub announce_period_ms: Option<u64>,
+    /// Lease announced to other nodes.
+    pub lease_ms: Option<u64>,
+    /// Multicast time-to-live.
+    pub multicast_ttl: Option<u32>,
+    /// Random seed (node id, jitter); random when absent.
+    pub seed: Option<u64>,
+}
+
+impl ConfigFile {
+    /// Reads and parses a config file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|err| ConfigError::Parse {
+            path: path.to_owned(),
+            message: err.to_string(),
+        })
+    }
+
+    /// Fills every field that is `None` here from `lower`.
+    pub fn or(self, lower: ConfigFile) -> ConfigFile {
+        ConfigFile {
+            domain: self.domain.or(lower.domain),
+            socket: self.socket.or(lower.socket),
+            interface: self.interface.or(lower.interface),
+            multicast_group: self.multicast_group.or(lower.multicast_group),
+            discovery_port: self.discovery_port.or(lower.discovery_port),
+            unicast_port: self.unicast_port.or(lower.unicast_port),
+            announce_period_ms: self.announce_period_ms.or(lower.announce_period_ms),
+            lease_ms: self.lease_ms.or(lower.lease_ms),
+            multicast_ttl: self.multicast_ttl.or(lower.multicast_ttl),
+            seed: self.seed.or(lower.seed),
+        }
+    }
+
+    /// Applies the defaults and resolves the interface.
+    pub fn resolve(self) -> Result<DaemonConfig, ConfigError> {
+        let domain = domain::check(self.domain.unwrap_or(0))?;
+        let interface = match self.interface.as_deref() {
+            Some(spec) => iface::resolve(spec)?,
+            None => Ipv4Addr::LOCALHOST,
+        };
+        let mut config = DaemonConfig::new(domain, interface);
+        if let Some(socket) = self.socket {
+            config.socket = socket;
+        }
+        if let Some(group) = self.multicast_group {
+            if !group.is_multicast() {
+                return Err(ConfigError::NotMulticast(group));
+            }
+            config.group = group;
+        }
+        config.port = self.discovery_port.unwrap_or(config.port);
+        config.unicast_port = self.unicast_port.unwrap_or(config.unicast_port);
+        if let Some(ms) = self.announce_period_ms {
+            config.announce_period = Duration::from_millis(ms);
+        }
+        if let Some(ms) = self.lease_ms {
+            config.lease = Duration::from_millis(ms);
+        }
+        config.ttl = self.multicast_ttl.unwrap_or(config.ttl);
+        config.seed = self.seed;
+        config.discovery().validate()?;
+        Ok(config)
+    }
+}
+
+/// A complete, validated daemon configuration.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DaemonConfig {
+    /// Domain id.
+    pub domain: u16,
+    /// Unix socket path clients connect to.
+    pub socket: PathBuf,
+    /// Address of the interface used for discovery and data.
+    pub interface: Ipv4Addr,
+    /// Discovery multicast group.
+    pub group: Ipv4Addr,
+    /// Discovery multicast port.
+    pub port: u16,
+    /// Unicast discovery port (0: any free port).
+    pub unicast_port: u16,
+    /// Refresh period.
+    pub announce_period: Duration,
+    /// Lease announced to other nodes.
+    pub lease: Duration,
+    /// Multicast time-to-live.
+    pub ttl: u32,
+    /// Random seed; `None` picks one at start.
+    pub seed: Option<u64>,
+}
+
+impl DaemonConfig {
+    /// The defaults for `domain` on `interface`.
+    pub fn new(domain: u16, interface: Ipv4Addr) -> Self {
+        let defaults = ndds_core::discovery::DiscoveryConfig::new(
+            domain,
+            ndds_core::wire::Locator::UNSPECIFIED,
+        );
+        DaemonConfig {
+            domain,
+            socket: domain::default_socket_path(domain),
+            interface,
+            group: domain::multicast_group(domain),
+            port: domain::discovery_port(domain),
+            unicast_port: 0,
+            announce_period: defaults.announce_period,
+            lease: defaults.lease,
+            ttl: 1,
+            seed: None,
+        }
+    }
+
+    /// The discovery settings implied by this configuration (unicast locator and identity
+    /// are filled in when the daemon binds).
+    pub fn discovery(&self) -> ndds_core::discovery::DiscoveryConfig {
+        let mut config = ndds_core::discovery::DiscoveryConfig::new(
+            self.domain,
+            ndds_core::wire::Locator::UNSPECIFIED,
+        );
+        config.announce_period = self.announce_period;
+        config.lease = self.lease;
+        config
+    }
+}
+
+/// A configuration that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The config file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The config file is not valid TOML or has unknown or mistyped keys.
+    #[error("invalid config file {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// toml's message, with line and column.
+        message: String,
+    },
+    /// Domain id out of range.
+    #[error(transparent)]
+    Domain(#[from] domain::DomainError),
+    /// The interface could not be resolved.
+    #[error(transparent)]
+    Interface(#[from] iface::InterfaceError),
+    /// The group is not a multicast address.
+    #[error("{0} is not an IPv4 multicast address (224.0.0.0/4)")]
+    NotMulticast(Ipv4Addr),
+    /// Inconsistent timers.
+    #[error(transparent)]
+    Timers(#[from] ndds_core::discovery::ConfigError),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_follow_the_domain() {
+        let config = ConfigFile {
+            domain: Some(5),
+            ..Default::default()
+        }
+        .resolve()
+        .unwrap();
+        assert_eq!(config.interface, Ipv4Addr::LOCALHOST);
+        assert_eq!(config.port, 7605);
+        assert_eq!(config.group, Ipv4Addr::new(239, 255, 76, 5));
+        assert_eq!(config.socket, PathBuf::from("/tmp/ndds-5.sock"));
+    }
+
+    #[test]
+    fn higher_layers_win() {
+        let flags = ConfigFile {
+            domain: Some(2),
+            ..Default::default()
+        };
+        let file: ConfigFile = toml::from_str("domain = 9\nlease_ms = 9000\n").unwrap();
+        let merged = flags.or(file).resolve().unwrap();
+        assert_eq!(merged.domain, 2);
+        assert_eq!(merged.lease, Duration::from_millis(9000));
+    }
+
+    #[test]
+    fn bad_files_are_reported_with_their_location() {
+        let err = toml::from_str::<ConfigFile>("domian = 3\n").unwrap_err();
+        assert!(err.to_string().contains("domian"), "{err}");
+        let err = ConfigFile {
+            lease_ms: Some(10),
+            ..Default::default()
+        }
+        .resolve()
+        .unwrap_err();
+        assert!(err.to_string().contains("lease"), "{err}");
+        let err = ConfigFile {
+            multicast_group: Some(Ipv4Addr::new(10, 0, 0, 1)),
+            ..Default::default()
+        }
+        .resolve()
+        .unwrap_err();
+        assert!(err.to_string().contains("multicast"), "{err}");
+    }
+}

@@ -1,0 +1,280 @@
+//! Binding and running a daemon.
+//!
+//! [`Daemon::bind`] claims every resource (UDP sockets, Unix socket) and fails with a clear
+//! [`DaemonError`] if one is unavailable; [`Daemon::run`] then serves until its shutdown token
+//! is cancelled, says `Bye` to the domain, waits for its tasks and removes its socket file.
+
+use std::net::SocketAddr;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use ndds_core::discovery::Engine;
+use ndds_core::wire::{Locator, MAX_DATAGRAM};
+use tokio::net::{UdpSocket, UnixListener};
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+use tokio_util::task::TaskTracker;
+
+use crate::config::DaemonConfig;
+use crate::connection;
+use crate::driver::{Counters, Driver, Input};
+use crate::sockets::{self, DiscoverySockets, SocketError};
+
+/// Datagrams and frames queued for the driver before datagrams are dropped (and counted).
+const INPUT_QUEUE: usize = 4096;
+/// How long shutdown waits for connection tasks.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
+
+/// Why a daemon could not start or stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// Another daemon answers on the socket path.
+    #[error("a daemon is already serving {path} (stop it, or pick another --socket / --domain)")]
+    AlreadyRunning {
+        /// The socket path.
+        path: PathBuf,
+    },
+    /// The Unix socket could not be created.
+    #[error("cannot listen on {path}: {source}")]
+    Listen {
+        /// The socket path.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A UDP socket could not be set up.
+    #[error("cannot set up discovery sockets: {0}")]
+    Socket(#[from] SocketError),
+    /// The discovery timers are inconsistent.
+    #[error(transparent)]
+    Config(#[from] ndds_core::discovery::ConfigError),
+}
+
+/// A daemon whose sockets are bound; call [`Daemon::run`].
+#[derive(Debug)]
+pub struct Daemon {
+    config: DaemonConfig,
+    engine: Engine,
+    sockets: DiscoverySockets,
+    listener: UnixListener,
+    socket_inode: Option<u64>,
+}
+
+impl Daemon {
+    /// Binds the discovery sockets and the Unix socket. Must be called inside a tokio runtime.
+    pub async fn bind(config: DaemonConfig) -> Result<Self, DaemonError> {
+        let sockets = sockets::open(
+            config.interface,
+            config.group,
+            config.port,
+            config.unicast_port,
+            config.ttl,
+        )?;
+        let unicast = match sockets.unicast.local_addr() {
+            Ok(SocketAddr::V4(addr)) => Locator::from(addr),
+            _ => Locator::UNSPECIFIED,
+        };
+        let mut discovery = config.discovery();
+        discovery.seed = config.seed.unwrap_or_else(|| fastrand::u64(..));
+        discovery.hostname = gethostname::gethostname().to_string_lossy().into_owned();
+        discovery.pid = std::process::id();
+        discovery.unicast = unicast;
+        discovery.version = env!("CARGO_PKG_VERSION").to_owned();
+        let engine = Engine::new(discovery, Instant::now())?;
+        let listener = listen(&config.socket)?;
+        let socket_inode = std::fs::metadata(&config.socket).ok().map(|m| m.ino());
+        Ok(Daemon {
+            config,
+            engine,
+            sockets,
+            listener,
+            socket_inode,
+        })
+    }
+
+    /// The node id this daemon announces.
+    pub fn node_id(&self) -> u64 {
+        self.engine.node_id()
+    }
+
+    /// The unicast discovery locator.
+    pub fn unicast(&self) -> Locator {
+        self.engine.config().unicast
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &DaemonConfig {
+        &self.config
+    }
+
+    /// Serves until `shutdown` is cancelled.
+    pub async fn run(self, shutdown: CancellationToken) -> Result<(), DaemonError> {
+        let Daemon {
+            config,
+            engine,
+            sockets,
+            listener,
+            socket_inode,
+        } = self;
+        tracing::info!(
+            domain = config.domain,
+            node = %crate::driver::hex(engine.node_id()),
+            socket = %config.socket.display(),
+            interface = %config.interface,
+            unicast = %engine.config().unicast,
+            group = %sockets.group,
+            "ndds-daemon serving"
+        );
+        let counters = Arc::new(Counters::default());
+        let (inputs, mut queue) = mpsc::channel(INPUT_QUEUE);
+        let tasks = TaskTracker::new();
+        let children = shutdown.child_token();
+        let unicast = Arc::new(sockets.unicast);
+        let multicast = Arc::new(sockets.multicast);
+        for socket in [multicast, unicast.clone()] {
+            let (inputs, counters, stop) = (inputs.clone(), counters.clone(), children.clone());
+            tasks.spawn(receive(socket, inputs, counters, stop));
+        }
+        tasks.spawn(accept(
+            listener,
+            inputs.clone(),
+            counters.clone(),
+            children.clone(),
+            tasks.clone(),
+        ));
+        drop(inputs);
+
+        let mut driver = Driver::new(engine, unicast, sockets.group, counters);
+        driver.flush().await;
+        loop {
+            let deadline = driver.deadline().map(tokio::time::Instant::from_std);
+            tokio::select! {
+                biased;
+                () = shutdown.cancelled() => break,
+                input = queue.recv() => match input {
+                    Some(input) => driver.on_input(input),
+                    None => break,
+                },
+                () = sleep_until(deadline) => driver.on_timer(),
+            }
+            driver.flush().await;
+        }
+        driver.close();
+        driver.flush().await;
+        children.cancel();
+        tasks.close();
+        if tokio::time::timeout(SHUTDOWN_GRACE, tasks.wait())
+            .await
+            .is_err()
+        {
+            tracing::warn!("some connection tasks did not stop in time");
+        }
+        remove_socket(&config.socket, socket_inode);
+        tracing::info!("ndds-daemon stopped");
+        Ok(())
+    }
+}
+
+async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    match deadline {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}
+
+async fn receive(
+    socket: Arc<UdpSocket>,
+    inputs: mpsc::Sender<Input>,
+    counters: Arc<Counters>,
+    stop: CancellationToken,
+) {
+    let mut buf = vec![0u8; MAX_DATAGRAM + 1];
+    loop {
+        let received = tokio::select! {
+            () = stop.cancelled() => return,
+            received = socket.recv_from(&mut buf) => received,
+        };
+        match received {
+            Ok((len, from)) => {
+                let input = Input::Datagram {
+                    from,
+                    bytes: buf[..len].to_vec(),
+                };
+                match inputs.try_send(input) {
+                    Ok(()) => {}
+                    Err(mpsc::error::TrySendError::Full(_)) => {
+                        counters.input_overflow.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(mpsc::error::TrySendError::Closed(_)) => return,
+                }
+            }
+            Err(err) => tracing::debug!(%err, "discovery receive error"),
+        }
+    }
+}
+
+async fn accept(
+    listener: UnixListener,
+    inputs: mpsc::Sender<Input>,
+    counters: Arc<Counters>,
+    stop: CancellationToken,
+    tasks: TaskTracker,
+) {
+    let mut next_client = 1;
+    loop {
+        let accepted = tokio::select! {
+            () = stop.cancelled() => return,
+            accepted = listener.accept() => accepted,
+        };
+        match accepted {
+            Ok((stream, _)) => {
+                let client = next_client;
+                next_client += 1;
+                let cancel = stop.child_token();
+                tasks.spawn(connection::serve(
+                    stream,
+                    client,
+                    inputs.clone(),
+                    cancel,
+                    counters.clone(),
+                ));
+            }
+            Err(err) => {
+                tracing::warn!(%err, "accept failed");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
+}
+
+/// Claims the socket path: refuses if a daemon answers there, removes a stale file otherwise.
+fn listen(path: &Path) -> Result<UnixListener, DaemonError> {
+    let listen_err = |source| DaemonError::Listen {
+        path: path.to_owned(),
+        source,
+    };
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(listen_err)?;
+    }
+    if std::os::unix::net::UnixStream::connect(path).is_ok() {
+        return Err(DaemonError::AlreadyRunning {
+            path: path.to_owned(),
+        });
+    }
+    if path.exists() {
+        tracing::info!(path = %path.display(), "removing stale daemon socket");
+        std::fs::remove_file(path).map_err(listen_err)?;
+    }
+    UnixListener::bind(path).map_err(listen_err)
+}
+
+/// Removes the socket file if it is still the one this daemon created.
+fn remove_socket(path: &Path, inode: Option<u64>) {
+    let current = std::fs::metadata(path).ok().map(|m| m.ino());
+    if current.is_some() && current == inode {
+        let _ = std::fs::remove_file(path);
+    }
+}

@@ -1,0 +1,474 @@
+//! The driver: one task that owns the discovery engine and the table of connected clients.
+//!
+//! Every input (a datagram, a client frame, a connection opening or closing, the engine's
+//! timer) is handled here in order, then the engine's transmits are sent and its events routed
+//! to the clients that own the local endpoints they name.
+
+use std::collections::{BTreeSet, HashMap};
+use std::net::{SocketAddr, SocketAddrV4};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use ndds_core::discovery::{Destination, Engine, Event, Origin};
+use ndds_core::ipc::{
+    ClientMessage, ClientSummary, DaemonMessage, EndpointDecl, EndpointSummary, Graph, Hello,
+    IPC_VERSION, NodeSummary, Role, Welcome,
+};
+use ndds_core::wire::{DropReason, EndpointInfo, Guid, Locator};
+use tokio::net::UdpSocket;
+
+use crate::connection::ClientLink;
+
+/// Daemon-local number of a connection.
+pub type ClientId = u64;
+
+/// Inputs of the driver.
+#[derive(Debug)]
+pub enum Input {
+    /// A discovery datagram arrived.
+    Datagram {
+        /// Its source.
+        from: SocketAddr,
+        /// Its bytes.
+        bytes: Vec<u8>,
+    },
+    /// A connection was accepted.
+    Opened {
+        /// Its number.
+        client: ClientId,
+        /// How to reach it.
+        link: ClientLink,
+    },
+    /// A connection sent a frame.
+    Frame {
+        /// Its number.
+        client: ClientId,
+        /// The frame.
+        message: ClientMessage,
+    },
+    /// A connection ended.
+    Closed {
+        /// Its number.
+        client: ClientId,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// Counters kept outside the engine; shared with the socket tasks.
+#[derive(Debug, Default)]
+pub struct Counters {
+    /// Datagrams dropped because the driver's input queue was full.
+    pub input_overflow: AtomicU64,
+    /// Sessions refused (bad version, duplicate participant, frame before Hello, ...).
+    pub sessions_refused: AtomicU64,
+    /// Connections dropped because the client stopped reading.
+    pub slow_clients: AtomicU64,
+    /// Connections that ended with a protocol error.
+    pub protocol_errors: AtomicU64,
+    /// Datagrams the OS refused to send.
+    pub send_errors: AtomicU64,
+}
+
+#[derive(Debug)]
+struct Client {
+    link: ClientLink,
+    hello: Option<Hello>,
+    entities: BTreeSet<u32>,
+}
+
+/// The driver's state.
+#[derive(Debug)]
+pub struct Driver {
+    engine: Engine,
+    socket: Arc<UdpSocket>,
+    group: SocketAddrV4,
+    interface: [u8; 4],
+    clients: HashMap<ClientId, Client>,
+    by_participant: HashMap<u64, ClientId>,
+    counters: Arc<Counters>,
+}
+
+impl Driver {
+    /// A driver around `engine`, sending through `socket`.
+    pub fn new(
+        engine: Engine,
+        socket: Arc<UdpSocket>,
+        group: SocketAddrV4,
+        counters: Arc<Counters>,
+    ) -> Self {
+        let interface = engine.config().unicast.addr;
+        Driver {
+            engine,
+            socket,
+            group,
+            interface,
+            clients: HashMap::new(),
+            by_participant: HashMap::new(),
+            counters,
+        }
+    }
+
+    /// When the engine's timer must fire next.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.engine.poll_timeout()
+    }
+
+    /// Runs the engine's due timers.
+    pub fn on_timer(&mut self) {
+        self.engine.handle_timeout(Instant::now());
+    }
+
+    /// Handles one input.
+    pub fn on_input(&mut self, input: Input) {
+        match input {
+            Input::Datagram { from, bytes } => {
+                self.engine.handle_datagram(Instant::now(), from, &bytes);
+            }
+            Input::Opened { client, link } => {
+                self.clients.insert(
+                    client,
+                    Client {
+                        link,
+                        hello: None,
+                        entities: BTreeSet::new(),
+                    },
+                );
+            }
+            Input::Frame { client, message } => self.on_frame(client, message),
+            Input::Closed { client, reason } => self.on_closed(client, &reason),
+        }
+    }
+
+    /// Says `Bye` and stops discovery.
+    pub fn close(&mut self) {
+        self.engine.close(Instant::now());
+    }
+
+    /// Sends the engine's pending datagrams and routes its events.
+    pub async fn flush(&mut self) {
+        while let Some(transmit) = self.engine.poll_transmit() {
+            let to = match transmit.destination {
+                Destination::Multicast => self.group,
+                Destination::Unicast(locator) => SocketAddrV4::from(locator),
+            };
+            if let Err(err) = self.socket.send_to(&transmit.payload, to).await {
+                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(%to, %err, "discovery send failed");
+            }
+        }
+        while let Some(event) = self.engine.poll_event() {
+            self.route(event);
+        }
+    }
+
+    fn route(&mut self, event: Event) {
+        let (local, message) = match event {
+            Event::Matched { local, remote } => (
+                local,
+                DaemonMessage::Matched {
+                    local: local.entity,
+                    remote,
+                },
+            ),
+            Event::Incompatible { local, remote } => {
+                tracing::warn!(
+                    topic = remote.topic,
+                    local = %local,
+                    remote = %remote.guid,
+                    remote_type = remote.type_desc.name,
+                    "incompatible types on one topic"
+                );
+                (
+                    local,
+                    DaemonMessage::Incompatible {
+                        local: local.entity,
+                        remote,
+                    },
+                )
+            }
+            Event::Unmatched { local, remote } => (
+                local,
+                DaemonMessage::Unmatched {
+                    local: local.entity,
+                    remote,
+                },
+            ),
+            Event::NodeDiscovered { node, info } => {
+                tracing::info!(node = %hex(node), host = info.hostname, at = %info.unicast, "node discovered");
+                return;
+            }
+            Event::NodeLost { node, reason } => {
+                tracing::info!(node = %hex(node), ?reason, "node lost");
+                return;
+            }
+        };
+        if let Some(client) = self.by_participant.get(&local.participant).copied() {
+            self.send(client, message);
+        }
+    }
+
+    fn send(&mut self, client: ClientId, message: DaemonMessage) {
+        let Some(entry) = self.clients.get(&client) else {
+            return;
+        };
+        if entry.link.outbox.try_send(message).is_err() {
+            self.counters.slow_clients.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(client, "client is not reading its socket; disconnecting it");
+            entry.link.cancel.cancel();
+            self.on_closed(client, "not reading");
+        }
+    }
+
+    fn on_frame(&mut self, client: ClientId, message: ClientMessage) {
+        let has_session = self
+            .clients
+            .get(&client)
+            .is_some_and(|c| c.hello.is_some());
+        match message {
+            ClientMessage::Hello(hello) if !has_session => self.on_hello(client, hello),
+            ClientMessage::Hello(_) => self.protocol_error(client, "second Hello"),
+            _ if !has_session => self.refuse(client, "the first frame must be Hello".into()),
+            ClientMessage::Declare(decl) => self.on_declare(client, decl),
+            ClientMessage::Undeclare { entity } => self.on_undeclare(client, entity),
+            ClientMessage::QueryGraph { request } => {
+                let graph = self.graph();
+                self.send(client, DaemonMessage::Graph { request, graph });
+            }
+        }
+    }
+
+    fn on_hello(&mut self, client: ClientId, hello: Hello) {
+        if hello.ipc_version != IPC_VERSION {
+            let reason = format!(
+                "client speaks ipc version {}, this daemon speaks {IPC_VERSION}",
+                hello.ipc_version
+            );
+            return self.refuse(client, reason);
+        }
+        if hello.participant == 0 || self.by_participant.contains_key(&hello.participant) {
+            let reason = format!("participant id {} is zero or in use", hex(hello.participant));
+            return self.refuse(client, reason);
+        }
+        tracing::info!(client, pid = hello.pid, name = hello.name, role = ?hello.role, "client connected");
+        self.by_participant.insert(hello.participant, client);
+        if let Some(entry) = self.clients.get_mut(&client) {
+            entry.hello = Some(hello);
+        }
+        let welcome = self.welcome();
+        self.send(client, DaemonMessage::Welcome(welcome));
+    }
+
+    fn welcome(&self) -> Welcome {
+        let config = self.engine.config();
+        Welcome {
+            ipc_version: IPC_VERSION,
+            node: self.engine.node_id(),
+            domain: config.domain,
+            hostname: config.hostname.clone(),
+            interface: self.interface,
+            pid: config.pid,
+            version: config.version.clone(),
+        }
+    }
+
+    fn refuse(&mut self, client: ClientId, reason: String) {
+        self.counters
+            .sessions_refused
+            .fetch_add(1, Ordering::Relaxed);
+        tracing::warn!(client, %reason, "session refused");
+        self.send(client, DaemonMessage::Refused { reason });
+        // Dropping the link ends the connection once `Refused` is written.
+        self.clients.remove(&client);
+    }
+
+    fn protocol_error(&mut self, client: ClientId, what: &str) {
+        self.counters.protocol_errors.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!(client, what, "protocol error; disconnecting client");
+        if let Some(entry) = self.clients.get(&client) {
+            entry.link.cancel.cancel();
+        }
+        self.on_closed(client, what);
+    }
+
+    fn on_declare(&mut self, client: ClientId, decl: EndpointDecl) {
+        let Some(entry) = self.clients.get(&client) else {
+            return;
+        };
+        let Some(hello) = entry.hello.as_ref() else {
+            return;
+        };
+        let entity = decl.entity;
+        let info = EndpointInfo {
+            guid: Guid {
+                participant: hello.participant,
+                entity,
+            },
+            topic: decl.topic,
+            type_desc: decl.type_desc,
+            fingerprint: decl.fingerprint,
+            qos: decl.qos,
+            locator: decl.locator,
+            pid: hello.pid,
+            process: hello.name.clone(),
+        };
+        let result = self
+            .engine
+            .add_local(Instant::now(), info)
+            .map_err(|err| err.to_string());
+        if result.is_ok()
+            && let Some(entry) = self.clients.get_mut(&client)
+        {
+            entry.entities.insert(entity);
+        }
+        // `Declared` goes out before the match events the declaration caused.
+        self.send(client, DaemonMessage::Declared { entity, result });
+    }
+
+    fn on_undeclare(&mut self, client: ClientId, entity: u32) {
+        let Some(entry) = self.clients.get_mut(&client) else {
+            return;
+        };
+        let Some(hello) = entry.hello.as_ref() else {
+            return;
+        };
+        if entry.entities.remove(&entity) {
+            let guid = Guid {
+                participant: hello.participant,
+                entity,
+            };
+            self.engine.remove_locals(Instant::now(), &[guid]);
+        }
+    }
+
+    fn on_closed(&mut self, client: ClientId, reason: &str) {
+        let Some(entry) = self.clients.remove(&client) else {
+            return;
+        };
+        let Some(hello) = entry.hello else {
+            return;
+        };
+        tracing::info!(client, pid = hello.pid, name = hello.name, reason, "client disconnected");
+        self.by_participant.remove(&hello.participant);
+        let guids: Vec<Guid> = entry
+            .entities
+            .iter()
+            .map(|entity| Guid {
+                participant: hello.participant,
+                entity: *entity,
+            })
+            .collect();
+        self.engine.remove_locals(Instant::now(), &guids);
+    }
+
+    /// The daemon's current view, as `ndds topics` and `ndds nodes` show it.
+    pub fn graph(&self) -> Graph {
+        let now = Instant::now();
+        let millis_until = |t: Instant| t.saturating_duration_since(now).as_millis() as u64;
+        let local_info = self.engine.node_info();
+        let local = NodeSummary {
+            node: self.engine.node_id(),
+            interface: local_info.unicast.addr,
+            info: local_info,
+            multicast: Some(Locator::from(self.group)),
+            last_seen_ms: 0,
+            expires_in_ms: None,
+        };
+        let mut nodes: Vec<NodeSummary> = self
+            .engine
+            .nodes()
+            .map(|(node, remote)| NodeSummary {
+                node,
+                interface: remote.info.unicast.addr,
+                info: remote.info.clone(),
+                multicast: None,
+                last_seen_ms: now.saturating_duration_since(remote.last_seen).as_millis() as u64,
+                expires_in_ms: Some(millis_until(remote.expires)),
+            })
+            .collect();
+        nodes.sort_by(|a, b| a.info.hostname.cmp(&b.info.hostname).then(a.node.cmp(&b.node)));
+        let hostname_of = |origin: Origin| match origin {
+            Origin::Local => (self.engine.node_id(), local.info.hostname.clone()),
+            Origin::Remote(node) => (
+                node,
+                nodes
+                    .iter()
+                    .find(|n| n.node == node)
+                    .map(|n| n.info.hostname.clone())
+                    .unwrap_or_default(),
+            ),
+        };
+        let mut endpoints: Vec<EndpointSummary> = self
+            .engine
+            .endpoints()
+            .map(|entry| {
+                let (node, hostname) = hostname_of(entry.origin);
+                EndpointSummary {
+                    info: entry.info.clone(),
+                    node,
+                    hostname,
+                    expires_in_ms: entry.expires.map(millis_until),
+                }
+            })
+            .collect();
+        endpoints.sort_by(|a, b| {
+            (a.info.topic.as_str(), a.info.guid).cmp(&(b.info.topic.as_str(), b.info.guid))
+        });
+        Graph {
+            local,
+            nodes,
+            clients: self.client_summaries(),
+            endpoints,
+            counters: self.counters(),
+        }
+    }
+
+    fn client_summaries(&self) -> Vec<ClientSummary> {
+        let mut clients: Vec<ClientSummary> = self
+            .clients
+            .values()
+            .filter_map(|c| {
+                let hello = c.hello.as_ref()?;
+                Some(ClientSummary {
+                    participant: hello.participant,
+                    pid: hello.pid,
+                    name: hello.name.clone(),
+                    role: hello.role,
+                    endpoints: c.entities.len() as u32,
+                })
+            })
+            .collect();
+        clients.sort_by_key(|c| (c.role == Role::Tool, c.pid, c.participant));
+        clients
+    }
+
+    fn counters(&self) -> Vec<(String, u64)> {
+        let stats = self.engine.stats();
+        let mut out = vec![
+            ("datagrams_received".to_owned(), stats.received),
+            ("datagrams_accepted".to_owned(), stats.accepted),
+            ("datagrams_sent".to_owned(), stats.sent),
+            ("invalid_endpoints".to_owned(), stats.invalid_endpoints),
+        ];
+        for reason in DropReason::ALL {
+            out.push((format!("dropped_{}", reason.name()), stats.dropped(reason)));
+        }
+        let c = &self.counters;
+        for (name, value) in [
+            ("input_overflow", &c.input_overflow),
+            ("sessions_refused", &c.sessions_refused),
+            ("slow_clients", &c.slow_clients),
+            ("protocol_errors", &c.protocol_errors),
+            ("send_errors", &c.send_errors),
+        ] {
+            out.push((name.to_owned(), value.load(Ordering::Relaxed)));
+        }
+        out
+    }
+}
+
+/// A node or participant id as tools print it.
+pub fn hex(id: u64) -> String {
+    format!("{id:016x}")
+}

@@ -1,0 +1,31 @@
+//! # ndds-daemon
+//!
+//! The per-host discovery daemon of ndds: a thin tokio driver around
+//! [`ndds_core::discovery::Engine`]. One daemon runs per host and domain. It
+//! - exchanges discovery datagrams with the other daemons of its domain over UDP multicast
+//!   on one chosen interface ([`sockets`]),
+//! - serves local clients and tools over a Unix socket with length-delimited postcard frames
+//!   ([`connection`]), and withdraws a client's endpoints the moment its connection drops,
+//! - routes the engine's match events to the clients that own the endpoints ([`driver`]).
+//!
+//! It never carries user data: samples go directly from producing to consuming processes.
+//! It can run as the `ndds-daemon` binary or inside another process ([`embed`]).
+//!
+//! ## Layout
+//! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution.
+//! - [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
+//! - [`cli`]: the binary's command line, usable from other binaries too.
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod config;
+pub mod connection;
+pub mod daemon;
+pub mod driver;
+pub mod embed;
+pub mod iface;
+pub mod sockets;
+
+pub use config::{ConfigError, ConfigFile, DaemonConfig};
+pub use daemon::{Daemon, DaemonError};
+pub use embed::{EmbedError, EmbeddedDaemon};
