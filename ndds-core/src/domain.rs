@@ -55,10 +55,7 @@ mod tests {
         assert_eq!(multicast_group(232), Ipv4Addr::new(239, 255, 76, 232));
         assert_eq!(discovery_port(0), 7600);
         assert_eq!(discovery_port(17), 7617);
-        assert_eq!(
-            default_socket_path(3),
-            PathBuf::from("/tmp/ndds-3.sock")
-        );
+        assert_eq!(default_socket_path(3), PathBuf::from("/tmp/ndds-3.sock"));
         assert_eq!(check(232), Ok(232));
         assert_eq!(check(233), Err(DomainError(233)));
         assert_eq!(check(70_000), Err(DomainError(70_000)));

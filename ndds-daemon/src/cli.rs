@@ -80,7 +80,9 @@ pub fn main() -> anyhow::Result<()> {
     };
     let config = args.layer().or(file).resolve()?;
     if config.interface.is_loopback() {
-        tracing::info!("discovery is limited to this host (loopback); use --interface to reach other hosts");
+        tracing::info!(
+            "discovery is limited to this host (loopback); use --interface to reach other hosts"
+        );
     }
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -222,10 +222,7 @@ impl Driver {
     }
 
     fn on_frame(&mut self, client: ClientId, message: ClientMessage) {
-        let has_session = self
-            .clients
-            .get(&client)
-            .is_some_and(|c| c.hello.is_some());
+        let has_session = self.clients.get(&client).is_some_and(|c| c.hello.is_some());
         match message {
             ClientMessage::Hello(hello) if !has_session => self.on_hello(client, hello),
             ClientMessage::Hello(_) => self.protocol_error(client, "second Hello"),
@@ -248,7 +245,10 @@ impl Driver {
             return self.refuse(client, reason);
         }
         if hello.participant == 0 || self.by_participant.contains_key(&hello.participant) {
-            let reason = format!("participant id {} is zero or in use", hex(hello.participant));
+            let reason = format!(
+                "participant id {} is zero or in use",
+                hex(hello.participant)
+            );
             return self.refuse(client, reason);
         }
         tracing::info!(client, pid = hello.pid, name = hello.name, role = ?hello.role, "client connected");
@@ -284,7 +284,9 @@ impl Driver {
     }
 
     fn protocol_error(&mut self, client: ClientId, what: &str) {
-        self.counters.protocol_errors.fetch_add(1, Ordering::Relaxed);
+        self.counters
+            .protocol_errors
+            .fetch_add(1, Ordering::Relaxed);
         tracing::warn!(client, what, "protocol error; disconnecting client");
         if let Some(entry) = self.clients.get(&client) {
             entry.link.cancel.cancel();
@@ -349,7 +351,13 @@ impl Driver {
         let Some(hello) = entry.hello else {
             return;
         };
-        tracing::info!(client, pid = hello.pid, name = hello.name, reason, "client disconnected");
+        tracing::info!(
+            client,
+            pid = hello.pid,
+            name = hello.name,
+            reason,
+            "client disconnected"
+        );
         self.by_participant.remove(&hello.participant);
         let guids: Vec<Guid> = entry
             .entities
@@ -387,7 +395,12 @@ impl Driver {
                 expires_in_ms: Some(millis_until(remote.expires)),
             })
             .collect();
-        nodes.sort_by(|a, b| a.info.hostname.cmp(&b.info.hostname).then(a.node.cmp(&b.node)));
+        nodes.sort_by(|a, b| {
+            a.info
+                .hostname
+                .cmp(&b.info.hostname)
+                .then(a.node.cmp(&b.node))
+        });
         let hostname_of = |origin: Origin| match origin {
             Origin::Local => (self.engine.node_id(), local.info.hostname.clone()),
             Origin::Remote(node) => (

@@ -85,7 +85,10 @@ mod tests {
     fn unknown_and_unusable_interfaces_are_refused_with_choices() {
         let err = resolve("no-such-nic0").unwrap_err();
         let text = err.to_string();
-        assert!(text.contains("no-such-nic0") && text.contains("lo 127.0.0.1"), "{text}");
+        assert!(
+            text.contains("no-such-nic0") && text.contains("lo 127.0.0.1"),
+            "{text}"
+        );
         assert!(matches!(
             resolve("0.0.0.0"),
             Err(InterfaceError::Unusable(_))

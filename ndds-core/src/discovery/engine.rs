@@ -361,7 +361,11 @@ impl Engine {
         let _ = now;
         let mut removed = Vec::new();
         for guid in guids {
-            if self.table.get(guid).is_some_and(|e| e.origin == Origin::Local) {
+            if self
+                .table
+                .get(guid)
+                .is_some_and(|e| e.origin == Origin::Local)
+            {
                 self.table.remove(guid, &mut self.events);
                 removed.push(*guid);
             }
@@ -507,7 +511,11 @@ impl Engine {
             let message = Message::Announce(Announce {
                 node: self.node_info(),
                 endpoints,
-                withdrawn: if i == 0 { withdrawn.clone() } else { Vec::new() },
+                withdrawn: if i == 0 {
+                    withdrawn.clone()
+                } else {
+                    Vec::new()
+                },
             });
             self.encode_and_push(destination, &message);
         }

@@ -307,7 +307,11 @@ mod tests {
             layout(vec![Format::Seq(1), Format::U8], 0).validate(),
             Err(LayoutError::BadChild { .. })
         ));
-        assert!(layout(vec![Format::U8, Format::Seq(0)], 1).validate().is_ok());
+        assert!(
+            layout(vec![Format::U8, Format::Seq(0)], 1)
+                .validate()
+                .is_ok()
+        );
     }
 
     #[test]

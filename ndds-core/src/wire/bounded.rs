@@ -25,6 +25,15 @@ where
     deserializer.deserialize_seq(BoundedVecVisitor(PhantomData))
 }
 
+/// Like [`vec`], for `Cow<'_, [T]>` fields (always decoded as owned).
+pub fn cow_vec<'de, 'a, D, T>(deserializer: D) -> Result<std::borrow::Cow<'a, [T]>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de> + Clone,
+{
+    vec(deserializer).map(std::borrow::Cow::Owned)
+}
+
 struct BoundedVecVisitor<T>(PhantomData<T>);
 
 impl<'de, T: Deserialize<'de>> Visitor<'de> for BoundedVecVisitor<T> {

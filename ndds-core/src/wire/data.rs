@@ -12,6 +12,8 @@
 //! postcard encoding of the sample value. Strength and persistence travel with every sample so a
 //! consumer can arbitrate between producers without consulting discovery.
 
+use std::borrow::Cow;
+
 use serde::{Deserialize, Serialize};
 
 /// Body of a `Data` datagram. The payload borrows from the received buffer.
@@ -22,8 +24,9 @@ pub struct Data<'a> {
     /// Participant id of the consuming process this datagram is for.
     pub reader_participant: u64,
     /// Entity numbers of the consuming endpoints, within `reader_participant`.
-    #[serde(deserialize_with = "super::bounded::vec")]
-    pub readers: Vec<u32>,
+    /// Borrowed when sending (no allocation per sample), owned after decoding.
+    #[serde(deserialize_with = "super::bounded::cow_vec")]
+    pub readers: Cow<'a, [u32]>,
     /// Per-writer sequence number, starting at 1.
     pub seq: u64,
     /// Source timestamp: nanoseconds since the Unix epoch when the sample was written.

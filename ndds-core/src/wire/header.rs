@@ -141,7 +141,10 @@ mod tests {
     #[test]
     fn foreign_and_short_datagrams_are_classified() {
         assert_eq!(Header::parse(b"ND"), Err(DropReason::Truncated));
-        assert_eq!(Header::parse(b"RTPS\x02\x01"), Err(DropReason::ForeignMagic));
+        assert_eq!(
+            Header::parse(b"RTPS\x02\x01"),
+            Err(DropReason::ForeignMagic)
+        );
         let mut other_version = Vec::new();
         Header {
             kind: MessageKind::Bye,

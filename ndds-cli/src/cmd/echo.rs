@@ -1,0 +1,101 @@
+//! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
+
+use std::time::{Duration, Instant, SystemTime};
+
+use ndds_client::{ConsumerQos, RawSample, TypeDescription};
+use ndds_core::dynamic;
+use serde_json::{Value, json};
+
+use crate::connect::{DaemonArgs, connect};
+use crate::render;
+
+/// Options of `ndds echo`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Topic name.
+    topic: String,
+    /// Stop after this many samples.
+    #[arg(long)]
+    count: Option<u64>,
+    /// One JSON object per sample (value and metadata).
+    #[arg(long)]
+    json: bool,
+    /// Choose among incompatible types on the topic by fingerprint.
+    #[arg(long)]
+    fingerprint: Option<String>,
+    /// Seconds to wait for the topic to appear [default: 0, fail at once].
+    #[arg(long, default_value_t = 0.0)]
+    wait: f64,
+}
+
+/// Runs `ndds echo`.
+pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    let participant = connect(daemon)?;
+    let desc = wait_for_type(&args.topic, args.fingerprint.as_deref(), args.wait, || {
+        Ok(participant.graph()?)
+    })?;
+    let consumer =
+        participant.raw_consumer(&args.topic, desc.clone(), ConsumerQos { depth: 1024 })?;
+    let mut printed = 0u64;
+    while args.count.is_none_or(|count| printed < count) {
+        let sample = consumer.recv_raw()?;
+        match decode(&desc, &sample) {
+            Ok(value) => println!("{}", line(args.json, &args.topic, &sample, value)),
+            Err(err) => eprintln!(
+                "ndds: sample {} from {} skipped: {err}",
+                sample.info.seq, sample.info.writer
+            ),
+        }
+        printed += 1;
+    }
+    Ok(())
+}
+
+/// Resolves the topic's type, retrying until `wait` seconds have passed.
+pub fn wait_for_type(
+    topic: &str,
+    fingerprint: Option<&str>,
+    wait: f64,
+    mut graph: impl FnMut() -> anyhow::Result<ndds_client::Graph>,
+) -> anyhow::Result<TypeDescription> {
+    let deadline = Instant::now() + Duration::from_secs_f64(wait.max(0.0));
+    loop {
+        match render::topic_type(&graph()?, topic, fingerprint) {
+            Ok(desc) => return Ok(desc),
+            Err(err) if Instant::now() >= deadline => return Err(err),
+            Err(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+}
+
+/// The sample's value as JSON (hex for opaque types).
+pub fn decode(desc: &TypeDescription, sample: &RawSample) -> anyhow::Result<Value> {
+    match &desc.layout {
+        Some(layout) => Ok(dynamic::decode_json(layout, &sample.payload)?),
+        None => Ok(Value::String(
+            sample.payload.iter().map(|b| format!("{b:02x}")).collect(),
+        )),
+    }
+}
+
+fn line(as_json: bool, topic: &str, sample: &RawSample, value: Value) -> String {
+    let info = &sample.info;
+    if as_json {
+        json!({
+            "topic": topic,
+            "writer": info.writer.to_string(),
+            "seq": info.seq,
+            "source_timestamp": seconds(info.source_timestamp),
+            "reception_timestamp": seconds(info.reception_timestamp),
+            "value": value,
+        })
+        .to_string()
+    } else {
+        format!("[{} #{}] {value}", info.writer, info.seq)
+    }
+}
+
+fn seconds(time: SystemTime) -> f64 {
+    time.duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}

@@ -1,0 +1,46 @@
+//! The subcommands, one per file, collected in one clap enum.
+
+mod echo;
+mod hz;
+mod nodes;
+mod publish;
+mod topics;
+
+use clap::{Parser, Subcommand};
+
+use crate::connect::DaemonArgs;
+
+/// Inspect and drive a live ndds domain.
+#[derive(Debug, Parser)]
+#[command(name = "ndds", version, about)]
+pub struct Cli {
+    #[command(flatten)]
+    daemon: DaemonArgs,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List topics with their types, producers and consumers.
+    Topics(topics::Args),
+    /// List daemons (hosts) and client processes.
+    Nodes(nodes::Args),
+    /// Print the samples of a topic, decoded from the type carried in discovery.
+    Echo(echo::Args),
+    /// Publish JSON values on a topic.
+    Pub(publish::Args),
+    /// Measure the sample rate of a topic.
+    Hz(hz::Args),
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Topics(args) => topics::run(&cli.daemon, &args),
+        Command::Nodes(args) => nodes::run(&cli.daemon, &args),
+        Command::Echo(args) => echo::run(&cli.daemon, &args),
+        Command::Pub(args) => publish::run(&cli.daemon, &args),
+        Command::Hz(args) => hz::run(&cli.daemon, &args),
+    }
+}

@@ -1,0 +1,34 @@
+//! Connecting to the local daemon as a tool.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use ndds_client::{EmbeddedPolicy, Participant};
+
+/// Where the daemon is: flags first, then `NDDS_DOMAIN` / `NDDS_SOCKET` (read by the SDK).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct DaemonArgs {
+    /// Domain id (0-232) [env: NDDS_DOMAIN] [default: 0].
+    #[arg(long, global = true)]
+    pub domain: Option<u16>,
+    /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-<domain>.sock].
+    #[arg(long, global = true)]
+    pub socket: Option<PathBuf>,
+}
+
+/// Opens a tool session with the local daemon; never starts an embedded daemon.
+pub fn connect(args: &DaemonArgs) -> anyhow::Result<Participant> {
+    let mut builder = Participant::builder()
+        .embedded(EmbeddedPolicy::Never)
+        .name("ndds")
+        .tool();
+    if let Some(domain) = args.domain {
+        builder = builder.domain(domain);
+    }
+    if let Some(socket) = &args.socket {
+        builder = builder.socket(socket);
+    }
+    builder
+        .connect()
+        .context("is a daemon running? (`ndds-daemon`, or a program using an embedded one)")
+}

@@ -1,0 +1,114 @@
+//! Errors of the SDK, one enum per operation.
+
+use std::path::PathBuf;
+
+/// [`crate::Participant::connect`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    /// No daemon answers on the socket and the embedded fallback is disabled.
+    #[error(
+        "no ndds daemon at {path} ({reason}); start `ndds-daemon`, set NDDS_SOCKET, or allow the embedded daemon"
+    )]
+    NoDaemon {
+        /// The socket path tried.
+        path: PathBuf,
+        /// The OS error.
+        reason: String,
+    },
+    /// The daemon refused the session.
+    #[error("the daemon at {path} refused the session: {reason}")]
+    Refused {
+        /// The socket path.
+        path: PathBuf,
+        /// Its reason.
+        reason: String,
+    },
+    /// The daemon did not complete the handshake.
+    #[error("handshake with the daemon at {path} failed: {reason}")]
+    Handshake {
+        /// The socket path.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// The embedded daemon could not start.
+    #[error("cannot start the embedded daemon: {0}")]
+    Embedded(#[from] ndds_daemon::EmbedError),
+    /// The data socket could not be opened.
+    #[error("cannot open the data socket on {interface}: {source}")]
+    DataSocket {
+        /// The interface address.
+        interface: std::net::Ipv4Addr,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A setting (environment variable or builder value) is invalid.
+    #[error("invalid setting: {0}")]
+    Setting(String),
+    /// A helper thread could not be started.
+    #[error("cannot start a participant thread: {0}")]
+    Thread(std::io::Error),
+}
+
+/// Declaring a producer or consumer failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DeclareError {
+    /// The daemon rejected the declaration.
+    #[error("the daemon rejected {topic:?}: {reason}")]
+    Rejected {
+        /// The topic.
+        topic: String,
+        /// The daemon's reason.
+        reason: String,
+    },
+    /// The connection to the daemon is gone.
+    #[error("the connection to the daemon is closed")]
+    Disconnected,
+    /// The daemon did not answer in time.
+    #[error("the daemon did not answer the declaration of {0:?} in time")]
+    Timeout(String),
+}
+
+/// Writing a sample failed.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The value could not be serialized.
+    #[error("cannot serialize the sample: {0}")]
+    Serialize(#[from] postcard::Error),
+    /// The sample does not fit in one datagram.
+    #[error("sample datagram of {size} bytes exceeds the {max}-byte limit")]
+    TooLarge {
+        /// Size of the datagram.
+        size: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// Sending failed for every destination; the last OS error.
+    #[error("send failed: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// Receiving a sample failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum RecvError {
+    /// `try_recv`: nothing queued.
+    #[error("no sample available")]
+    Empty,
+    /// `recv_timeout`: nothing arrived in time.
+    #[error("timed out waiting for a sample")]
+    Timeout,
+    /// The consumer or its participant is closed.
+    #[error("the consumer is closed")]
+    Closed,
+}
+
+/// A query to the daemon failed.
+#[derive(Debug, thiserror::Error)]
+pub enum QueryError {
+    /// The connection to the daemon is gone.
+    #[error("the connection to the daemon is closed")]
+    Disconnected,
+    /// The daemon did not answer in time.
+    #[error("the daemon did not answer in time")]
+    Timeout,
+}

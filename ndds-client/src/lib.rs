@@ -1,0 +1,56 @@
+//! # ndds-client
+//!
+//! The SDK that control programs link: typed producers and consumers of named topics, with
+//! samples sent directly from producing to consuming processes over UDP, and discovery handled
+//! by the host's `ndds-daemon` (or an embedded one when none runs).
+//!
+//! ```no_run
+//! use std::time::Duration;
+//! use ndds_client::{ConsumerQos, Participant, ProducerQos};
+//! use serde::{Deserialize, Serialize};
+//!
+//! #[derive(Serialize, Deserialize, Debug)]
+//! struct Pose { x: f64, y: f64 }
+//!
+//! let participant = Participant::connect()?;   // local daemon, else an embedded one
+//! let producer = participant.producer::<Pose>("arm/pose", ProducerQos::default())?;
+//! let consumer = participant.consumer::<Pose>("arm/pose", ConsumerQos::default())?;
+//! producer.wait_for_consumers(1, Duration::from_secs(1));
+//! producer.write(&Pose { x: 1.0, y: 2.0 })?;
+//! let sample = consumer.recv_timeout(Duration::from_secs(1))?;
+//! println!("{:?} from {}", sample.value, sample.info.writer);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! Any `T: Serialize + DeserializeOwned` can be a sample type. Its structure is traced with
+//! serde-reflection and announced with the endpoint, so producers and consumers of different
+//! types never match (both sides log an *incompatible type* warning) and tools such as
+//! `ndds echo` decode the topic without the Rust type.
+//!
+//! ## Layout
+//! - [`participant`]: connecting, the embedded-daemon fallback, declaring endpoints.
+//! - [`producer`], [`consumer`]: the endpoint handles; [`sample`]: what consumers receive.
+//! - `session` (the daemon connection) and `data` (the UDP data plane) are internal.
+#![warn(missing_docs)]
+
+pub mod consumer;
+mod data;
+pub mod error;
+pub mod participant;
+mod peers;
+pub mod producer;
+pub mod qos;
+pub mod sample;
+mod session;
+mod sync;
+
+pub use consumer::{CallbackConsumer, Consumer, ConsumerStats, RawConsumer, SampleStream};
+pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
+pub use ndds_core::ipc::Graph;
+pub use ndds_core::types::TypeDescription;
+pub use ndds_core::wire::{EndpointInfo, Guid};
+pub use ndds_daemon::DaemonConfig;
+pub use participant::{EmbeddedPolicy, Participant, ParticipantBuilder};
+pub use producer::{Producer, RawProducer};
+pub use qos::{ConsumerQos, ProducerQos};
+pub use sample::{RawSample, Sample, SampleInfo};

@@ -1,0 +1,564 @@
+//! The participant: one process's session with its local daemon, its data socket, and the
+//! producers and consumers declared through it.
+//!
+//! Two threads serve a participant: the *session* thread reads the daemon's frames (match
+//! events and answers) and the *data* thread receives samples. Neither keeps the participant
+//! alive: when the last handle ([`Participant`], producers, consumers) is dropped, the session
+//! is closed, the daemon withdraws every endpoint at once, and both threads end.
+
+use std::collections::HashMap;
+use std::net::Ipv4Addr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex, RwLock, Weak};
+use std::thread::JoinHandle;
+
+use ndds_core::domain;
+use ndds_core::ipc::{
+    ClientMessage, DaemonMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome,
+};
+use ndds_core::types::TypeDescription;
+use ndds_core::wire::EndpointQos;
+use ndds_daemon::{DaemonConfig, DaemonError, EmbedError, EmbeddedDaemon};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::consumer::{Consumer, ConsumerState, RawConsumer};
+use crate::data::{ConsumerSlot, DataPlane};
+use crate::error::{ConnectError, DeclareError, QueryError};
+use crate::producer::{Producer, ProducerState, RawProducer};
+use crate::qos::{ConsumerQos, ProducerQos};
+use crate::session::{self, Session};
+use crate::sync::{lock, read, write};
+
+/// Whether a participant may start a daemon inside its own process.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum EmbeddedPolicy {
+    /// Connect to the local daemon; if none answers, start an embedded one (default).
+    #[default]
+    Auto,
+    /// Only ever connect to a running daemon.
+    Never,
+    /// Always start an embedded daemon (fails if another daemon owns the socket).
+    Always,
+}
+
+impl std::str::FromStr for EmbeddedPolicy {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "auto" | "" => Ok(EmbeddedPolicy::Auto),
+            "never" | "no" | "0" | "false" => Ok(EmbeddedPolicy::Never),
+            "always" | "yes" | "1" | "true" => Ok(EmbeddedPolicy::Always),
+            other => Err(format!(
+                "embedded daemon policy {other:?} is not one of auto, never, always"
+            )),
+        }
+    }
+}
+
+/// Options of [`Participant::connect`]; see each setter for its environment variable.
+#[derive(Clone, Debug, Default)]
+pub struct ParticipantBuilder {
+    domain: Option<u16>,
+    socket: Option<PathBuf>,
+    embedded: Option<EmbeddedPolicy>,
+    embedded_config: Option<DaemonConfig>,
+    name: Option<String>,
+    role: Option<Role>,
+}
+
+impl ParticipantBuilder {
+    /// Domain id (default: `NDDS_DOMAIN`, else 0).
+    pub fn domain(mut self, domain: u16) -> Self {
+        self.domain = Some(domain);
+        self
+    }
+
+    /// Daemon socket path (default: `NDDS_SOCKET`, else the domain's default path).
+    pub fn socket(mut self, path: impl Into<PathBuf>) -> Self {
+        self.socket = Some(path.into());
+        self
+    }
+
+    /// Embedded-daemon policy (default: `NDDS_EMBEDDED` = auto | never | always, else auto).
+    pub fn embedded(mut self, policy: EmbeddedPolicy) -> Self {
+        self.embedded = Some(policy);
+        self
+    }
+
+    /// Configuration of the embedded daemon, if one is started (default: the domain's
+    /// defaults on loopback). Its domain and socket override [`Self::domain`] and
+    /// [`Self::socket`].
+    pub fn embedded_config(mut self, config: DaemonConfig) -> Self {
+        self.embedded_config = Some(config);
+        self
+    }
+
+    /// Process name shown by `ndds nodes` (default: the executable's name).
+    pub fn name(mut self, name: impl Into<String>) -> Self {
+        self.name = Some(name.into());
+        self
+    }
+
+    /// Connect as a tool (listed apart from control programs).
+    pub fn tool(mut self) -> Self {
+        self.role = Some(Role::Tool);
+        self
+    }
+
+    /// Connects to the local daemon, or starts an embedded one as the policy allows.
+    pub fn connect(self) -> Result<Participant, ConnectError> {
+        let settings = self.resolve()?;
+        Participant::open(settings)
+    }
+
+    fn resolve(self) -> Result<Settings, ConnectError> {
+        let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
+        let domain = match (
+            self.embedded_config.as_ref(),
+            self.domain,
+            env("NDDS_DOMAIN"),
+        ) {
+            (Some(config), _, _) => config.domain,
+            (None, Some(domain), _) => domain,
+            (None, None, Some(text)) => {
+                let value: u32 = text.parse().map_err(|_| {
+                    ConnectError::Setting(format!("NDDS_DOMAIN={text:?} is not a number"))
+                })?;
+                domain::check(value).map_err(|err| ConnectError::Setting(err.to_string()))?
+            }
+            (None, None, None) => 0,
+        };
+        let socket = match (
+            self.embedded_config.as_ref(),
+            self.socket,
+            env("NDDS_SOCKET"),
+        ) {
+            (Some(config), _, _) => config.socket.clone(),
+            (None, Some(path), _) => path,
+            (None, None, Some(path)) => PathBuf::from(path),
+            (None, None, None) => domain::default_socket_path(domain),
+        };
+        let embedded = match (self.embedded, env("NDDS_EMBEDDED")) {
+            (Some(policy), _) => policy,
+            (None, Some(text)) => text
+                .parse()
+                .map_err(|err: String| ConnectError::Setting(format!("NDDS_EMBEDDED: {err}")))?,
+            (None, None) => EmbeddedPolicy::Auto,
+        };
+        let embedded_config = self.embedded_config.unwrap_or_else(|| {
+            let mut config = DaemonConfig::new(domain, Ipv4Addr::LOCALHOST);
+            config.socket = socket.clone();
+            config
+        });
+        Ok(Settings {
+            socket,
+            embedded,
+            embedded_config,
+            name: self.name.unwrap_or_else(process_name),
+            role: self.role.unwrap_or(Role::Client),
+        })
+    }
+}
+
+#[derive(Debug)]
+struct Settings {
+    socket: PathBuf,
+    embedded: EmbeddedPolicy,
+    embedded_config: DaemonConfig,
+    name: String,
+    role: Role,
+}
+
+fn process_name() -> String {
+    std::env::current_exe()
+        .ok()
+        .and_then(|path| path.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "ndds-client".to_owned())
+}
+
+/// Embedded daemons of this process, by socket path; shared by its participants.
+static EMBEDDED: Mutex<Vec<(PathBuf, Weak<EmbeddedDaemon>)>> = Mutex::new(Vec::new());
+
+fn embedded_daemon(config: &DaemonConfig) -> Result<Option<Arc<EmbeddedDaemon>>, ConnectError> {
+    let mut daemons = lock(&EMBEDDED);
+    daemons.retain(|(_, weak)| weak.strong_count() > 0);
+    if let Some(daemon) = daemons
+        .iter()
+        .find(|(path, _)| *path == config.socket)
+        .and_then(|(_, weak)| weak.upgrade())
+    {
+        return Ok(Some(daemon));
+    }
+    match EmbeddedDaemon::start(config.clone()) {
+        Ok(daemon) => {
+            tracing::info!(socket = %config.socket.display(), interface = %config.interface, "started an embedded ndds daemon");
+            let daemon = Arc::new(daemon);
+            daemons.push((config.socket.clone(), Arc::downgrade(&daemon)));
+            Ok(Some(daemon))
+        }
+        // Another process started a daemon in the meantime: use it.
+        Err(EmbedError::Daemon(DaemonError::AlreadyRunning { .. })) => Ok(None),
+        Err(err) => Err(err.into()),
+    }
+}
+
+/// Local endpoints by entity number, for routing the daemon's events.
+#[derive(Debug, Default)]
+pub(crate) struct Router {
+    endpoints: RwLock<HashMap<u32, Endpoint>>,
+}
+
+#[derive(Debug, Clone)]
+enum Endpoint {
+    Producer(Arc<ProducerState>),
+    Consumer(Arc<ConsumerState>),
+}
+
+impl Router {
+    fn route(&self, message: DaemonMessage) {
+        let entity = match &message {
+            DaemonMessage::Matched { local, .. }
+            | DaemonMessage::Incompatible { local, .. }
+            | DaemonMessage::Unmatched { local, .. } => *local,
+            other => {
+                tracing::debug!(?other, "unexpected frame from the daemon");
+                return;
+            }
+        };
+        let Some(endpoint) = read(&self.endpoints).get(&entity).cloned() else {
+            return;
+        };
+        match endpoint {
+            Endpoint::Producer(state) => match message {
+                DaemonMessage::Matched { remote, .. } => {
+                    state.set_matched(&state.peers.matched(remote))
+                }
+                DaemonMessage::Unmatched { remote, .. } => {
+                    state.set_matched(&state.peers.unmatched(&remote))
+                }
+                DaemonMessage::Incompatible { remote, .. } => state.peers.incompatible(
+                    &state.topic,
+                    (&state.type_desc.name, state.fingerprint),
+                    remote,
+                ),
+                _ => {}
+            },
+            Endpoint::Consumer(state) => match message {
+                DaemonMessage::Matched { remote, .. } => {
+                    state.peers.matched(remote);
+                }
+                DaemonMessage::Unmatched { remote, .. } => {
+                    state.peers.unmatched(&remote);
+                }
+                DaemonMessage::Incompatible { remote, .. } => state.peers.incompatible(
+                    &state.topic,
+                    (&state.type_desc.name, state.fingerprint),
+                    remote,
+                ),
+                _ => {}
+            },
+        }
+    }
+}
+
+/// Shared by the participant and every endpoint handle; dropped with the last of them.
+#[derive(Debug)]
+pub(crate) struct Inner {
+    pub(crate) participant: u64,
+    pub(crate) welcome: Welcome,
+    session: Arc<Session>,
+    pub(crate) data: Arc<DataPlane>,
+    router: Arc<Router>,
+    next_entity: AtomicU32,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+    _embedded: Option<Arc<EmbeddedDaemon>>,
+}
+
+impl Inner {
+    pub(crate) fn domain(&self) -> u16 {
+        self.welcome.domain
+    }
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        self.session.shutdown();
+        self.data.close();
+        for thread in lock(&self.threads).drain(..) {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// Keeps the participant alive and withdraws the endpoint when dropped.
+#[derive(Debug)]
+pub(crate) struct EndpointHandle {
+    pub(crate) inner: Arc<Inner>,
+    entity: u32,
+}
+
+impl Drop for EndpointHandle {
+    fn drop(&mut self) {
+        write(&self.inner.router.endpoints).remove(&self.entity);
+        self.inner.data.remove_consumer(self.entity);
+        let _ = self.inner.session.send(&ClientMessage::Undeclare {
+            entity: self.entity,
+        });
+    }
+}
+
+/// A process's connection to ndds: declares producers and consumers. Cheap to clone.
+///
+/// ```no_run
+/// use std::time::Duration;
+/// use ndds_client::{ConsumerQos, Participant, ProducerQos};
+///
+/// let participant = Participant::connect()?;
+/// let producer = participant.producer::<f64>("demo/value", ProducerQos::default())?;
+/// let consumer = participant.consumer::<f64>("demo/value", ConsumerQos::default())?;
+/// producer.wait_for_consumers(1, Duration::from_secs(1));
+/// producer.write(&1.5)?;
+/// let sample = consumer.recv_timeout(Duration::from_secs(1))?;
+/// assert_eq!(sample.value, 1.5);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Participant {
+    inner: Arc<Inner>,
+}
+
+impl Participant {
+    /// Connects with the default options (see [`ParticipantBuilder`]): the local daemon of
+    /// the domain, else an embedded one.
+    pub fn connect() -> Result<Self, ConnectError> {
+        ParticipantBuilder::default().connect()
+    }
+
+    /// Options for connecting.
+    pub fn builder() -> ParticipantBuilder {
+        ParticipantBuilder::default()
+    }
+
+    fn open(settings: Settings) -> Result<Self, ConnectError> {
+        let participant = loop {
+            let id = fastrand::u64(..);
+            if id != 0 {
+                break id;
+            }
+        };
+        let hello = Hello {
+            ipc_version: IPC_VERSION,
+            participant,
+            pid: std::process::id(),
+            name: settings.name.clone(),
+            role: settings.role,
+        };
+        let (embedded, (stream, welcome)) = Self::reach_daemon(&settings, hello)?;
+        let interface = Ipv4Addr::from(welcome.interface);
+        let data = DataPlane::open(interface, welcome.domain, participant)
+            .map_err(|source| ConnectError::DataSocket { interface, source })?;
+        let reader = stream.try_clone().map_err(ConnectError::Thread)?;
+        let inner = Arc::new(Inner {
+            participant,
+            welcome,
+            session: Arc::new(Session::new(settings.socket.clone(), stream)),
+            data: Arc::new(data),
+            router: Arc::new(Router::default()),
+            next_entity: AtomicU32::new(1),
+            threads: Mutex::new(Vec::new()),
+            _embedded: embedded,
+        });
+        inner.spawn_threads(reader)?;
+        tracing::debug!(participant = format_args!("{participant:016x}"), socket = %settings.socket.display(), "participant connected");
+        Ok(Participant { inner })
+    }
+
+    /// Connects to the daemon at the socket, starting an embedded one as the policy allows.
+    fn reach_daemon(
+        settings: &Settings,
+        hello: Hello,
+    ) -> Result<
+        (
+            Option<Arc<EmbeddedDaemon>>,
+            (std::os::unix::net::UnixStream, Welcome),
+        ),
+        ConnectError,
+    > {
+        if settings.embedded != EmbeddedPolicy::Always {
+            match session::handshake(&settings.socket, hello.clone()) {
+                Ok(session) => return Ok((None, session)),
+                Err(ConnectError::NoDaemon { .. }) if settings.embedded == EmbeddedPolicy::Auto => {
+                }
+                Err(err) => return Err(err),
+            }
+        }
+        let embedded = embedded_daemon(&settings.embedded_config)?;
+        if embedded.is_none() && settings.embedded == EmbeddedPolicy::Always {
+            return Err(ConnectError::Embedded(EmbedError::Daemon(
+                DaemonError::AlreadyRunning {
+                    path: settings.socket.clone(),
+                },
+            )));
+        }
+        Ok((embedded, session::handshake(&settings.socket, hello)?))
+    }
+
+    /// This participant's id (the sender id of its data datagrams).
+    pub fn id(&self) -> u64 {
+        self.inner.participant
+    }
+
+    /// What the daemon said about itself when the session opened.
+    pub fn daemon(&self) -> &Welcome {
+        &self.inner.welcome
+    }
+
+    /// True while the session with the daemon is open.
+    pub fn is_connected(&self) -> bool {
+        self.inner.session.is_open()
+    }
+
+    /// The daemon's current view of the domain (what `ndds topics` and `ndds nodes` show).
+    pub fn graph(&self) -> Result<Graph, QueryError> {
+        self.inner.session.query_graph()
+    }
+
+    /// Declares a producer of `T` on `topic`.
+    pub fn producer<T: Serialize + DeserializeOwned>(
+        &self,
+        topic: &str,
+        qos: ProducerQos,
+    ) -> Result<Producer<T>, DeclareError> {
+        self.raw_producer(topic, TypeDescription::of::<T>(), qos)
+            .map(Producer::new)
+    }
+
+    /// Declares a producer of already-encoded samples of the described type.
+    pub fn raw_producer(
+        &self,
+        topic: &str,
+        type_desc: TypeDescription,
+        qos: ProducerQos,
+    ) -> Result<RawProducer, DeclareError> {
+        let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
+        let wire_qos = qos.to_wire();
+        let state = Arc::new(ProducerState::new(entity, topic, type_desc, wire_qos));
+        let handle = self.declare(
+            entity,
+            Endpoint::Producer(state.clone()),
+            EndpointQos::Producer(wire_qos),
+        )?;
+        Ok(RawProducer { handle, state })
+    }
+
+    /// Declares a consumer of `T` on `topic`.
+    pub fn consumer<T: Serialize + DeserializeOwned>(
+        &self,
+        topic: &str,
+        qos: ConsumerQos,
+    ) -> Result<Consumer<T>, DeclareError> {
+        self.raw_consumer(topic, TypeDescription::of::<T>(), qos)
+            .map(Consumer::new)
+    }
+
+    /// Declares a consumer of samples of the described type, delivered undecoded.
+    pub fn raw_consumer(
+        &self,
+        topic: &str,
+        type_desc: TypeDescription,
+        qos: ConsumerQos,
+    ) -> Result<RawConsumer, DeclareError> {
+        let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
+        let (slot, rx) = ConsumerSlot::new(qos.depth);
+        let state = Arc::new(ConsumerState::new(topic, type_desc, slot.clone()));
+        self.inner.data.add_consumer(entity, slot);
+        let handle = self.declare(
+            entity,
+            Endpoint::Consumer(state.clone()),
+            EndpointQos::Consumer(qos.to_wire()),
+        )?;
+        Ok(RawConsumer {
+            _handle: handle,
+            state,
+            rx,
+        })
+    }
+
+    /// Registers the endpoint locally, then declares it to the daemon.
+    fn declare(
+        &self,
+        entity: u32,
+        endpoint: Endpoint,
+        qos: EndpointQos,
+    ) -> Result<EndpointHandle, DeclareError> {
+        let (topic, type_desc, fingerprint) = match &endpoint {
+            Endpoint::Producer(s) => (s.topic.clone(), s.type_desc.clone(), s.fingerprint),
+            Endpoint::Consumer(s) => (s.topic.clone(), s.type_desc.clone(), s.fingerprint),
+        };
+        write(&self.inner.router.endpoints).insert(entity, endpoint);
+        // From here on, dropping the handle undoes the local registration.
+        let handle = EndpointHandle {
+            inner: self.inner.clone(),
+            entity,
+        };
+        self.inner.session.declare(EndpointDecl {
+            entity,
+            topic,
+            type_desc,
+            fingerprint,
+            qos,
+            locator: self.inner.data.locator,
+        })?;
+        Ok(handle)
+    }
+}
+
+impl Inner {
+    fn spawn_threads(
+        self: &Arc<Self>,
+        reader: std::os::unix::net::UnixStream,
+    ) -> Result<(), ConnectError> {
+        let data = self.data.clone();
+        let data_thread = std::thread::Builder::new()
+            .name("ndds-data".into())
+            .spawn(move || data.run())
+            .map_err(ConnectError::Thread)?;
+        let (session, router) = (self.session.clone(), self.router.clone());
+        let session_thread = std::thread::Builder::new()
+            .name("ndds-session".into())
+            .spawn(move || read_session(reader, &session, &router))
+            .map_err(ConnectError::Thread)?;
+        lock(&self.threads).extend([data_thread, session_thread]);
+        Ok(())
+    }
+}
+
+/// The session thread: answers go to waiting requests, events to the router.
+fn read_session(mut reader: std::os::unix::net::UnixStream, session: &Session, router: &Router) {
+    loop {
+        match session::read_frame(&mut reader) {
+            Ok(Some(DaemonMessage::Refused { reason })) => {
+                tracing::error!(%reason, "the daemon ended the session");
+                break;
+            }
+            Ok(Some(message)) => {
+                if let Some(event) = session.complete(message) {
+                    router.route(event);
+                }
+            }
+            Ok(None) | Err(_) if !session.is_open() => break,
+            Ok(None) => {
+                tracing::warn!(socket = %session.path().display(), "the daemon closed the session; samples keep flowing to known peers, but discovery stops");
+                break;
+            }
+            Err(err) => {
+                tracing::warn!(%err, "lost the daemon session; samples keep flowing to known peers, but discovery stops");
+                break;
+            }
+        }
+    }
+    session.mark_closed();
+}

@@ -1,0 +1,90 @@
+//! The endpoints a local producer or consumer is matched with (or incompatible with), kept
+//! current by the daemon's match events.
+
+use std::collections::BTreeMap;
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use ndds_core::types::fingerprint_hex;
+use ndds_core::wire::{EndpointInfo, Guid};
+
+use crate::sync::lock;
+
+#[derive(Debug, Default)]
+struct Maps {
+    matched: BTreeMap<Guid, EndpointInfo>,
+    incompatible: BTreeMap<Guid, EndpointInfo>,
+}
+
+/// Matched and incompatible peers of one local endpoint.
+#[derive(Debug, Default)]
+pub(crate) struct Peers {
+    maps: Mutex<Maps>,
+    changed: Condvar,
+}
+
+impl Peers {
+    /// Records a match; returns the matched endpoints after the change.
+    pub(crate) fn matched(&self, remote: EndpointInfo) -> Vec<EndpointInfo> {
+        let mut maps = lock(&self.maps);
+        maps.incompatible.remove(&remote.guid);
+        maps.matched.insert(remote.guid, remote);
+        self.changed.notify_all();
+        maps.matched.values().cloned().collect()
+    }
+
+    /// Records an incompatible peer and logs it.
+    pub(crate) fn incompatible(&self, topic: &str, local_type: (&str, u64), remote: EndpointInfo) {
+        tracing::warn!(
+            topic,
+            local_type = local_type.0,
+            local_fingerprint = fingerprint_hex(local_type.1),
+            remote_type = remote.type_desc.name,
+            remote_fingerprint = fingerprint_hex(remote.fingerprint),
+            remote_pid = remote.pid,
+            remote_process = remote.process,
+            "incompatible type on topic: samples will not flow between these endpoints"
+        );
+        let mut maps = lock(&self.maps);
+        maps.matched.remove(&remote.guid);
+        maps.incompatible.insert(remote.guid, remote);
+        self.changed.notify_all();
+    }
+
+    /// Forgets a peer; returns the matched endpoints after the change.
+    pub(crate) fn unmatched(&self, remote: &Guid) -> Vec<EndpointInfo> {
+        let mut maps = lock(&self.maps);
+        maps.incompatible.remove(remote);
+        maps.matched.remove(remote);
+        self.changed.notify_all();
+        maps.matched.values().cloned().collect()
+    }
+
+    /// The matched endpoints.
+    pub(crate) fn matched_list(&self) -> Vec<EndpointInfo> {
+        lock(&self.maps).matched.values().cloned().collect()
+    }
+
+    /// The incompatible endpoints.
+    pub(crate) fn incompatible_list(&self) -> Vec<EndpointInfo> {
+        lock(&self.maps).incompatible.values().cloned().collect()
+    }
+
+    /// Waits until at least `count` endpoints are matched; false at the timeout.
+    pub(crate) fn wait_matched(&self, count: usize, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        let mut maps = lock(&self.maps);
+        while maps.matched.len() < count {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            maps = self
+                .changed
+                .wait_timeout(maps, left)
+                .map(|(guard, _)| guard)
+                .unwrap_or_else(|poison| poison.into_inner().0);
+        }
+        true
+    }
+}

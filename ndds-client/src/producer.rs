@@ -1,0 +1,242 @@
+//! Producers: write samples of a topic straight to every matched consuming process.
+
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::marker::PhantomData;
+use std::net::SocketAddrV4;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Duration, SystemTime};
+
+use ndds_core::types::TypeDescription;
+use ndds_core::wire::{
+    self, Data, EncodeError, EndpointInfo, MAX_DATAGRAM, Message, ProducerQosWire,
+};
+use serde::Serialize;
+
+use crate::error::WriteError;
+use crate::participant::{EndpointHandle, Inner};
+use crate::peers::Peers;
+use crate::sync::{lock, read, write};
+
+/// One consuming process: where to send, and which of its consumers to address.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Destination {
+    addr: SocketAddrV4,
+    participant: u64,
+    readers: Vec<u32>,
+}
+
+/// Reused buffers, so steady-state writing does not allocate.
+#[derive(Debug, Default)]
+struct Scratch {
+    payload: Vec<u8>,
+    datagram: Vec<u8>,
+}
+
+/// State of one producer shared with the participant's event router.
+#[derive(Debug)]
+pub(crate) struct ProducerState {
+    pub(crate) entity: u32,
+    pub(crate) topic: String,
+    pub(crate) type_desc: TypeDescription,
+    pub(crate) fingerprint: u64,
+    qos: ProducerQosWire,
+    pub(crate) peers: Peers,
+    destinations: RwLock<Vec<Destination>>,
+    seq: AtomicU64,
+    scratch: Mutex<Scratch>,
+    sent: AtomicU64,
+}
+
+impl ProducerState {
+    pub(crate) fn new(
+        entity: u32,
+        topic: &str,
+        type_desc: TypeDescription,
+        qos: ProducerQosWire,
+    ) -> Self {
+        ProducerState {
+            entity,
+            topic: topic.to_owned(),
+            fingerprint: type_desc.fingerprint(),
+            type_desc,
+            qos,
+            peers: Peers::default(),
+            destinations: RwLock::new(Vec::new()),
+            seq: AtomicU64::new(0),
+            scratch: Mutex::new(Scratch::default()),
+            sent: AtomicU64::new(0),
+        }
+    }
+
+    /// Rebuilds the destination list from the matched consumers.
+    pub(crate) fn set_matched(&self, matched: &[EndpointInfo]) {
+        let mut by_locator: BTreeMap<SocketAddrV4, Destination> = BTreeMap::new();
+        for consumer in matched {
+            let addr = SocketAddrV4::from(consumer.locator);
+            by_locator
+                .entry(addr)
+                .or_insert_with(|| Destination {
+                    addr,
+                    participant: consumer.guid.participant,
+                    readers: Vec::new(),
+                })
+                .readers
+                .push(consumer.guid.entity);
+        }
+        *write(&self.destinations) = by_locator.into_values().collect();
+    }
+
+    fn write_with(
+        &self,
+        inner: &Inner,
+        encode: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
+    ) -> Result<(), WriteError> {
+        let mut scratch = lock(&self.scratch);
+        let Scratch { payload, datagram } = &mut *scratch;
+        payload.clear();
+        encode(payload)?;
+        self.send(inner, payload, datagram)
+    }
+
+    fn send(
+        &self,
+        inner: &Inner,
+        payload: &[u8],
+        datagram: &mut Vec<u8>,
+    ) -> Result<(), WriteError> {
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
+        let timestamp_ns = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        let destinations = read(&self.destinations);
+        let mut last_error = None;
+        let mut delivered = 0usize;
+        for destination in destinations.iter() {
+            datagram.clear();
+            let message = Message::Data(Data {
+                writer: self.entity,
+                reader_participant: destination.participant,
+                readers: Cow::Borrowed(&destination.readers),
+                seq,
+                timestamp_ns,
+                strength: self.qos.strength,
+                persistence_us: self.qos.persistence_us,
+                payload,
+            });
+            match wire::encode(inner.domain(), inner.participant, &message, datagram) {
+                Ok(()) => {}
+                Err(EncodeError::TooLarge { size }) => {
+                    return Err(WriteError::TooLarge {
+                        size,
+                        max: MAX_DATAGRAM,
+                    });
+                }
+                Err(EncodeError::Postcard(err)) => return Err(WriteError::Serialize(err)),
+            }
+            match inner.data.socket.send_to(datagram, destination.addr) {
+                Ok(_) => {
+                    delivered += 1;
+                    self.sent.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(err) => {
+                    tracing::debug!(to = %destination.addr, %err, "data send failed");
+                    last_error = Some(err);
+                }
+            }
+        }
+        match last_error {
+            Some(err) if delivered == 0 => Err(err.into()),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A producer of samples of type `T` on one topic. Closing (dropping) it withdraws it.
+#[derive(Debug)]
+pub struct Producer<T> {
+    raw: RawProducer,
+    _type: PhantomData<fn(&T)>,
+}
+
+impl<T: Serialize> Producer<T> {
+    pub(crate) fn new(raw: RawProducer) -> Self {
+        Producer {
+            raw,
+            _type: PhantomData,
+        }
+    }
+
+    /// Sends `value` to every matched consumer. Returns once the datagrams are handed to the
+    /// operating system; best effort: a consumer may miss it.
+    pub fn write(&self, value: &T) -> Result<(), WriteError> {
+        self.raw
+            .state
+            .write_with(&self.raw.handle.inner, |payload| {
+                let buffer = std::mem::take(payload);
+                *payload = postcard::to_extend(value, buffer)?;
+                Ok(())
+            })
+    }
+
+    /// The untyped producer underneath.
+    pub fn raw(&self) -> &RawProducer {
+        &self.raw
+    }
+}
+
+impl<T> std::ops::Deref for Producer<T> {
+    type Target = RawProducer;
+
+    fn deref(&self) -> &RawProducer {
+        &self.raw
+    }
+}
+
+/// A producer of already-encoded samples (postcard bytes of the declared type), as tools use
+/// it. Closing (dropping) it withdraws it.
+#[derive(Debug)]
+pub struct RawProducer {
+    pub(crate) handle: EndpointHandle,
+    pub(crate) state: Arc<ProducerState>,
+}
+
+impl RawProducer {
+    /// Sends an encoded sample to every matched consumer.
+    pub fn write_bytes(&self, payload: &[u8]) -> Result<(), WriteError> {
+        let mut scratch = lock(&self.state.scratch);
+        self.state
+            .send(&self.handle.inner, payload, &mut scratch.datagram)
+    }
+
+    /// The topic name.
+    pub fn topic(&self) -> &str {
+        &self.state.topic
+    }
+
+    /// The type description announced with this producer.
+    pub fn type_description(&self) -> &TypeDescription {
+        &self.state.type_desc
+    }
+
+    /// The consumers currently matched.
+    pub fn matched(&self) -> Vec<EndpointInfo> {
+        self.state.peers.matched_list()
+    }
+
+    /// Consumers of this topic whose type differs.
+    pub fn incompatible(&self) -> Vec<EndpointInfo> {
+        self.state.peers.incompatible_list()
+    }
+
+    /// Waits until at least `count` consumers are matched; false at the timeout.
+    pub fn wait_for_consumers(&self, count: usize, timeout: Duration) -> bool {
+        self.state.peers.wait_matched(count, timeout)
+    }
+
+    /// Number of samples written so far.
+    pub fn written(&self) -> u64 {
+        self.state.seq.load(Ordering::Relaxed)
+    }
+}

@@ -1,0 +1,206 @@
+//! The client's session with its daemon over the Unix socket: framing, handshake, and
+//! request/answer bookkeeping. A reader thread (started by the participant) hands every frame
+//! to [`Session::complete`] or to the participant's router.
+
+use std::collections::HashMap;
+use std::io::{self, Read, Write};
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::time::Duration;
+
+use ndds_core::ipc::{
+    self, ClientMessage, DaemonMessage, EndpointDecl, FRAME_PREFIX, Graph, Hello, MAX_FRAME,
+    Welcome,
+};
+
+use crate::error::{ConnectError, DeclareError, QueryError};
+use crate::sync::lock;
+
+/// How long the handshake and each request wait for the daemon.
+pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Writes one frame.
+pub(crate) fn write_frame(stream: &mut impl Write, message: &ClientMessage) -> io::Result<()> {
+    let frame = ipc::encode_frame(message).map_err(io::Error::other)?;
+    stream.write_all(&frame)
+}
+
+/// Reads one frame; `Ok(None)` when the daemon closed the connection between frames.
+pub(crate) fn read_frame(stream: &mut impl Read) -> io::Result<Option<DaemonMessage>> {
+    let mut prefix = [0u8; FRAME_PREFIX];
+    match stream.read_exact(&mut prefix) {
+        Ok(()) => {}
+        Err(err) if err.kind() == io::ErrorKind::UnexpectedEof => return Ok(None),
+        Err(err) => return Err(err),
+    }
+    let len = u32::from_be_bytes(prefix) as usize;
+    if len > MAX_FRAME {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("frame of {len} bytes exceeds {MAX_FRAME}"),
+        ));
+    }
+    let mut body = vec![0u8; len];
+    stream.read_exact(&mut body)?;
+    ipc::decode_body(&body)
+        .map(Some)
+        .map_err(|err| io::Error::new(io::ErrorKind::InvalidData, err))
+}
+
+/// Connects to the daemon at `path` and opens a session.
+pub(crate) fn handshake(path: &Path, hello: Hello) -> Result<(UnixStream, Welcome), ConnectError> {
+    let mut stream = UnixStream::connect(path).map_err(|err| ConnectError::NoDaemon {
+        path: path.to_owned(),
+        reason: err.to_string(),
+    })?;
+    let failed = |reason: String| ConnectError::Handshake {
+        path: path.to_owned(),
+        reason,
+    };
+    stream
+        .set_read_timeout(Some(ANSWER_TIMEOUT))
+        .map_err(|e| failed(e.to_string()))?;
+    write_frame(&mut stream, &ClientMessage::Hello(hello)).map_err(|e| failed(e.to_string()))?;
+    let answer = read_frame(&mut stream).map_err(|e| failed(e.to_string()))?;
+    stream
+        .set_read_timeout(None)
+        .map_err(|e| failed(e.to_string()))?;
+    match answer {
+        Some(DaemonMessage::Welcome(welcome)) => Ok((stream, welcome)),
+        Some(DaemonMessage::Refused { reason }) => Err(ConnectError::Refused {
+            path: path.to_owned(),
+            reason,
+        }),
+        Some(other) => Err(failed(format!("unexpected first frame {other:?}"))),
+        None => Err(failed("the daemon closed the connection".to_owned())),
+    }
+}
+
+/// The writing half of a session plus the requests waiting for answers.
+#[derive(Debug)]
+pub(crate) struct Session {
+    path: PathBuf,
+    writer: Mutex<UnixStream>,
+    declares: Mutex<HashMap<u32, SyncSender<Result<(), String>>>>,
+    queries: Mutex<HashMap<u32, SyncSender<Graph>>>,
+    next_request: AtomicU32,
+    open: AtomicBool,
+}
+
+impl Session {
+    pub(crate) fn new(path: PathBuf, stream: UnixStream) -> Self {
+        let _ = stream.set_write_timeout(Some(ANSWER_TIMEOUT));
+        Session {
+            path,
+            writer: Mutex::new(stream),
+            declares: Mutex::new(HashMap::new()),
+            queries: Mutex::new(HashMap::new()),
+            next_request: AtomicU32::new(1),
+            open: AtomicBool::new(true),
+        }
+    }
+
+    /// The daemon's socket path.
+    pub(crate) fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// True until the daemon connection is lost or closed.
+    pub(crate) fn is_open(&self) -> bool {
+        self.open.load(Ordering::Acquire)
+    }
+
+    /// Sends a frame; a failure marks the session closed.
+    pub(crate) fn send(&self, message: &ClientMessage) -> io::Result<()> {
+        if !self.is_open() {
+            return Err(io::Error::new(
+                io::ErrorKind::NotConnected,
+                "session closed",
+            ));
+        }
+        let result = write_frame(&mut *lock(&self.writer), message);
+        if result.is_err() {
+            self.mark_closed();
+        }
+        result
+    }
+
+    /// Declares an endpoint and waits for the daemon's verdict.
+    pub(crate) fn declare(&self, decl: EndpointDecl) -> Result<(), DeclareError> {
+        let (entity, topic) = (decl.entity, decl.topic.clone());
+        let (tx, rx) = sync_channel(1);
+        lock(&self.declares).insert(entity, tx);
+        if self.send(&ClientMessage::Declare(decl)).is_err() {
+            lock(&self.declares).remove(&entity);
+            return Err(DeclareError::Disconnected);
+        }
+        let answer = self.wait(&rx, || lock(&self.declares).remove(&entity));
+        match answer {
+            Some(Ok(())) => Ok(()),
+            Some(Err(reason)) => Err(DeclareError::Rejected { topic, reason }),
+            None if self.is_open() => Err(DeclareError::Timeout(topic)),
+            None => Err(DeclareError::Disconnected),
+        }
+    }
+
+    /// Asks for the daemon's graph.
+    pub(crate) fn query_graph(&self) -> Result<Graph, QueryError> {
+        let request = self.next_request.fetch_add(1, Ordering::Relaxed);
+        let (tx, rx) = sync_channel(1);
+        lock(&self.queries).insert(request, tx);
+        if self.send(&ClientMessage::QueryGraph { request }).is_err() {
+            lock(&self.queries).remove(&request);
+            return Err(QueryError::Disconnected);
+        }
+        match self.wait(&rx, || lock(&self.queries).remove(&request)) {
+            Some(graph) => Ok(graph),
+            None if self.is_open() => Err(QueryError::Timeout),
+            None => Err(QueryError::Disconnected),
+        }
+    }
+
+    /// Waits for an answer; gives up at the timeout or when the session closes.
+    fn wait<T, R>(&self, rx: &Receiver<T>, forget: impl FnOnce() -> R) -> Option<T> {
+        let answer = rx.recv_timeout(ANSWER_TIMEOUT).ok();
+        if answer.is_none() {
+            forget();
+        }
+        answer
+    }
+
+    /// Hands an answer frame to the request waiting for it. Returns the frame back if it is
+    /// not an answer.
+    pub(crate) fn complete(&self, message: DaemonMessage) -> Option<DaemonMessage> {
+        match message {
+            DaemonMessage::Declared { entity, result } => {
+                if let Some(tx) = lock(&self.declares).remove(&entity) {
+                    let _ = tx.try_send(result);
+                }
+                None
+            }
+            DaemonMessage::Graph { request, graph } => {
+                if let Some(tx) = lock(&self.queries).remove(&request) {
+                    let _ = tx.try_send(graph);
+                }
+                None
+            }
+            other => Some(other),
+        }
+    }
+
+    /// Marks the session closed and wakes every waiting request.
+    pub(crate) fn mark_closed(&self) {
+        self.open.store(false, Ordering::Release);
+        lock(&self.declares).clear();
+        lock(&self.queries).clear();
+    }
+
+    /// Closes the connection (both directions).
+    pub(crate) fn shutdown(&self) {
+        self.mark_closed();
+        let _ = lock(&self.writer).shutdown(std::net::Shutdown::Both);
+    }
+}

@@ -1,0 +1,268 @@
+//! Publish/subscribe through the SDK with real daemons (embedded, in this process) on
+//! loopback: one daemon shared by two participants, and two daemons standing for two hosts.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use common::{eventually, participant, sibling, unique_config};
+use ndds_client::{
+    ConsumerQos, EmbeddedPolicy, Participant, ProducerQos, RecvError, TypeDescription,
+};
+use serde::{Deserialize, Serialize};
+
+const WAIT: Duration = Duration::from_secs(5);
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Pose {
+    x: f64,
+    y: f64,
+    frame: String,
+    tags: BTreeMap<String, u32>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct OtherPose {
+    x: f32,
+}
+
+fn pose(i: u32) -> Pose {
+    Pose {
+        x: f64::from(i),
+        y: -f64::from(i),
+        frame: format!("frame-{i}"),
+        tags: BTreeMap::from([("i".to_owned(), i)]),
+    }
+}
+
+#[test]
+fn typed_samples_flow_between_participants_of_one_daemon() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let writer_side = participant(&config);
+    let reader_side = participant(&config);
+    let consumer = reader_side
+        .consumer::<Pose>("arm/pose", ConsumerQos::default())
+        .unwrap();
+    let producer = writer_side
+        .producer::<Pose>("arm/pose", ProducerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    for i in 1..=3 {
+        producer.write(&pose(i)).unwrap();
+    }
+    for i in 1..=3 {
+        let sample = consumer.recv_timeout(WAIT).unwrap();
+        assert_eq!(sample.value, pose(i));
+        assert_eq!(sample.info.seq, u64::from(i));
+        assert_eq!(sample.info.writer.participant, writer_side.id());
+    }
+    assert_eq!(consumer.try_recv().unwrap_err(), RecvError::Empty);
+    assert_eq!(
+        consumer
+            .recv_timeout(Duration::from_millis(50))
+            .unwrap_err(),
+        RecvError::Timeout
+    );
+    assert_eq!(consumer.matched().len(), 1);
+}
+
+#[test]
+fn samples_cross_between_two_daemons() {
+    let dir = tempfile::tempdir().unwrap();
+    let host_a = unique_config(dir.path(), "host-a");
+    let host_b = sibling(&host_a, dir.path(), "host-b");
+    let producer_side = participant(&host_a);
+    let consumer_side = participant(&host_b);
+    assert_ne!(
+        producer_side.daemon().node,
+        consumer_side.daemon().node,
+        "two daemons"
+    );
+    let producer = producer_side
+        .producer::<Pose>("arm/pose", ProducerQos::default())
+        .unwrap();
+    let consumer = consumer_side
+        .consumer::<Pose>("arm/pose", ConsumerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    assert!(consumer.wait_for_producers(1, WAIT));
+    producer.write(&pose(7)).unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, pose(7));
+
+    // Daemon B sees both endpoints, the one on daemon A as remote.
+    let graph = consumer_side.graph().unwrap();
+    let on_topic: Vec<_> = graph
+        .endpoints
+        .iter()
+        .filter(|e| e.info.topic == "arm/pose")
+        .collect();
+    assert_eq!(on_topic.len(), 2);
+    assert!(
+        on_topic
+            .iter()
+            .any(|e| e.node == producer_side.daemon().node)
+    );
+    assert!(
+        graph
+            .nodes
+            .iter()
+            .any(|n| n.node == producer_side.daemon().node)
+    );
+}
+
+#[test]
+fn closing_an_endpoint_unmatches_it_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let host_a = unique_config(dir.path(), "host-a");
+    let host_b = sibling(&host_a, dir.path(), "host-b");
+    let a = participant(&host_a);
+    let b = participant(&host_b);
+    let producer = a.producer::<u64>("count", ProducerQos::default()).unwrap();
+    let consumer = b.consumer::<u64>("count", ConsumerQos::default()).unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    drop(consumer);
+    // Far below the 1 s lease: the withdrawal is announced, not left to decay.
+    assert!(eventually(Duration::from_millis(500), || producer
+        .matched()
+        .is_empty()));
+}
+
+#[test]
+fn different_types_on_one_topic_are_incompatible_on_both_sides() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let producer = p
+        .producer::<Pose>("shared", ProducerQos::default())
+        .unwrap();
+    let consumer = p
+        .consumer::<OtherPose>("shared", ConsumerQos::default())
+        .unwrap();
+    assert!(eventually(WAIT, || !producer.incompatible().is_empty()
+        && !consumer.incompatible().is_empty()));
+    assert!(producer.matched().is_empty());
+    let seen_by_consumer = &consumer.incompatible()[0];
+    assert_eq!(
+        seen_by_consumer.fingerprint,
+        TypeDescription::of::<Pose>().fingerprint()
+    );
+    assert!(seen_by_consumer.type_desc.name.ends_with("Pose"));
+    producer.write(&pose(1)).unwrap();
+    assert_eq!(
+        consumer
+            .recv_timeout(Duration::from_millis(200))
+            .unwrap_err(),
+        RecvError::Timeout
+    );
+}
+
+#[test]
+fn slow_consumer_keeps_the_newest_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let consumer = p.consumer::<u32>("fast", ConsumerQos { depth: 4 }).unwrap();
+    let producer = p.producer::<u32>("fast", ProducerQos::default()).unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    for i in 0..20 {
+        producer.write(&i).unwrap();
+    }
+    assert!(
+        eventually(WAIT, || consumer.stats().received == 20),
+        "{:?}",
+        consumer.stats()
+    );
+    let kept: Vec<u32> = std::iter::from_fn(|| consumer.try_recv().ok().map(|s| s.value)).collect();
+    assert_eq!(kept, vec![16, 17, 18, 19]);
+    assert_eq!(consumer.stats().overflow, 16);
+}
+
+#[test]
+fn undecodable_samples_are_skipped_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let consumer = p
+        .consumer::<String>("text", ConsumerQos::default())
+        .unwrap();
+    let raw = p
+        .raw_producer(
+            "text",
+            TypeDescription::of::<String>(),
+            ProducerQos::default(),
+        )
+        .unwrap();
+    assert!(raw.wait_for_consumers(1, WAIT));
+    raw.write_bytes(&[0xff, 0xff, 0xff]).unwrap(); // claims a huge string: does not decode
+    let good = postcard::to_allocvec(&"fine".to_owned()).unwrap();
+    raw.write_bytes(&good).unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, "fine");
+    assert_eq!(consumer.stats().decode_errors, 1);
+}
+
+#[test]
+fn callback_and_stream_forms_deliver() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let producer = p.producer::<u32>("ticks", ProducerQos::default()).unwrap();
+
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let sink = seen.clone();
+    let callback = p
+        .consumer::<u32>("ticks", ConsumerQos::default())
+        .unwrap()
+        .on_sample(move |sample| sink.lock().unwrap().push(sample.value))
+        .unwrap();
+    let streamed = p.consumer::<u32>("ticks", ConsumerQos::default()).unwrap();
+    assert!(producer.wait_for_consumers(2, WAIT));
+    for i in 0..5 {
+        producer.write(&i).unwrap();
+    }
+    assert!(eventually(WAIT, || seen.lock().unwrap().len() == 5));
+    assert_eq!(*seen.lock().unwrap(), vec![0, 1, 2, 3, 4]);
+
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let values: Vec<u32> = runtime.block_on(async {
+        use futures_util::StreamExt;
+        streamed.stream().take(5).map(|s| s.value).collect().await
+    });
+    assert_eq!(values, vec![0, 1, 2, 3, 4]);
+
+    drop(callback);
+    assert!(eventually(WAIT, || producer.matched().len() == 1));
+}
+
+#[test]
+fn no_daemon_and_no_embedding_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = Participant::builder()
+        .socket(dir.path().join("nobody.sock"))
+        .embedded(EmbeddedPolicy::Never)
+        .connect()
+        .unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("no ndds daemon") && text.contains("nobody.sock"),
+        "{text}"
+    );
+}
+
+#[test]
+fn participants_share_one_embedded_daemon_and_it_stops_with_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let first = participant(&config);
+    let second = participant(&config);
+    assert_eq!(first.daemon().node, second.daemon().node);
+    assert!(config.socket.exists());
+    drop(first);
+    drop(second);
+    assert!(eventually(WAIT, || !config.socket.exists()));
+}
