@@ -78,9 +78,26 @@ impl DiscoveryConfig {
         if u32::try_from(self.lease.as_millis()).is_err() {
             return Err(ConfigError::LeaseTooLong(self.lease));
         }
+        if !self.solicit_delays.is_sorted() || self.solicit_delays.iter().any(|d| *d > MAX_DELAY)
+        {
+            return Err(ConfigError::SolicitDelays);
+        }
+        if self.reply_jitter > MAX_DELAY {
+            return Err(ConfigError::ReplyJitter(self.reply_jitter));
+        }
+        if !(MIN_CHUNK..=MAX_CHUNK).contains(&self.announce_chunk) {
+            return Err(ConfigError::Chunk(self.announce_chunk));
+        }
         Ok(())
     }
 }
+
+/// Longest solicit delay or reply jitter accepted.
+const MAX_DELAY: Duration = Duration::from_secs(60);
+/// Smallest announcement chunk accepted.
+const MIN_CHUNK: usize = 512;
+/// Largest announcement chunk accepted (leaves room for the header and node info).
+const MAX_CHUNK: usize = crate::wire::MAX_DATAGRAM - 4096;
 
 /// An inconsistent [`DiscoveryConfig`].
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -102,4 +119,13 @@ pub enum ConfigError {
     /// Jitter outside `0.0..0.5`.
     #[error("period jitter {0} must be in 0.0..0.5")]
     Jitter(f64),
+    /// Solicit delays not ascending, or longer than a minute.
+    #[error("solicit delays must be ascending and at most 60 s each")]
+    SolicitDelays,
+    /// Reply jitter longer than a minute.
+    #[error("reply jitter {0:?} is longer than 60 s")]
+    ReplyJitter(Duration),
+    /// Announcement chunk size out of range.
+    #[error("announcement chunk of {0} bytes is outside {MIN_CHUNK}..={MAX_CHUNK}")]
+    Chunk(usize),
 }

@@ -29,6 +29,14 @@ use crate::wire::{
 
 /// Longest topic name accepted, in bytes.
 pub const MAX_TOPIC_LEN: usize = 256;
+/// Most remote nodes remembered; datagrams from further new nodes are dropped as invalid.
+pub const MAX_NODES: usize = 4096;
+/// Most answers to solicitations waiting for their jitter delay.
+pub const MAX_PENDING_REPLIES: usize = 1024;
+/// Longest lease accepted from a remote node; longer ones are shortened to this.
+pub const MAX_LEASE: Duration = Duration::from_secs(3600);
+/// Withdrawn guids carried per announcement datagram.
+const WITHDRAWN_PER_DATAGRAM: usize = 1024;
 
 /// A remote node as this engine knows it.
 #[derive(Clone, Debug)]
@@ -214,11 +222,15 @@ impl Engine {
         }
         match message {
             Message::Solicit(solicit) => {
-                self.touch_node(now, header.sender, from, solicit.node.clone());
-                let delay = self.jitter(self.config.reply_jitter);
-                self.replies.push((now + delay, solicit.node.unicast));
+                check_node(&solicit.node)?;
+                let unicast = solicit.node.unicast;
+                self.touch_node(now, header.sender, from, solicit.node)?;
+                self.schedule_reply(now, unicast);
             }
-            Message::Announce(announce) => self.on_announce(now, header, from, announce),
+            Message::Announce(announce) => {
+                check_node(&announce.node)?;
+                self.on_announce(now, header, from, announce)?;
+            }
             Message::Withdraw(withdraw) => {
                 for guid in &withdraw.endpoints {
                     self.remove_remote(header.sender, guid);
@@ -230,15 +242,20 @@ impl Engine {
         Ok(())
     }
 
-    fn on_announce(&mut self, now: Instant, header: Header, from: SocketAddr, announce: Announce) {
+    fn on_announce(
+        &mut self,
+        now: Instant,
+        header: Header,
+        from: SocketAddr,
+        announce: Announce,
+    ) -> Result<(), DropReason> {
         let node = header.sender;
-        let lease = Duration::from_millis(u64::from(announce.node.lease_ms));
+        let lease = lease_of(&announce.node);
         let unicast = announce.node.unicast;
-        if self.touch_node(now, node, from, announce.node) {
+        if self.touch_node(now, node, from, announce.node)? {
             // A node we did not know: answer with everything we have so it need not wait for
             // our next refresh (its Solicit may have been lost).
-            let delay = self.jitter(self.config.reply_jitter);
-            self.replies.push((now + delay, unicast));
+            self.schedule_reply(now, unicast);
         }
         for guid in &announce.withdrawn {
             self.remove_remote(node, guid);
@@ -246,18 +263,40 @@ impl Engine {
         for info in announce.endpoints {
             self.upsert_remote(node, now + lease, info);
         }
+        Ok(())
+    }
+
+    /// Queues a unicast full announcement to `to` after a random delay, once per destination.
+    fn schedule_reply(&mut self, now: Instant, to: Locator) {
+        if self.replies.len() >= MAX_PENDING_REPLIES || self.replies.iter().any(|(_, d)| *d == to)
+        {
+            return;
+        }
+        let delay = self.jitter(self.config.reply_jitter);
+        self.replies.push((now + delay, to));
     }
 
     /// Records that `node` spoke; returns true when it was not known before.
-    fn touch_node(&mut self, now: Instant, node: u64, from: SocketAddr, info: NodeInfo) -> bool {
-        let lease = Duration::from_millis(u64::from(info.lease_ms));
+    fn touch_node(
+        &mut self,
+        now: Instant,
+        node: u64,
+        from: SocketAddr,
+        info: NodeInfo,
+    ) -> Result<bool, DropReason> {
+        let lease = lease_of(&info);
+        let full = self.nodes.len() >= MAX_NODES;
         match self.nodes.get_mut(&node) {
             Some(known) => {
                 known.info = info;
                 known.last_from = from;
                 known.last_seen = now;
                 known.expires = now + lease;
-                false
+                Ok(false)
+            }
+            None if full => {
+                tracing::warn!(limit = MAX_NODES, "too many nodes; ignoring a new one");
+                Err(DropReason::Invalid)
             }
             None => {
                 self.events.push_back(Event::NodeDiscovered {
@@ -273,21 +312,30 @@ impl Engine {
                         expires: now + lease,
                     },
                 );
-                true
+                Ok(true)
             }
         }
     }
 
     fn upsert_remote(&mut self, node: u64, expires: Instant, info: EndpointInfo) {
         if let Some(existing) = self.table.get(&info.guid) {
-            if existing.origin != Origin::Remote(node) {
-                // A guid owned by another node (or by us): never let one node replace another's.
-                self.stats.invalid_endpoints += 1;
-                return;
-            }
-            if existing.info == info {
-                self.table.refresh(&info.guid, expires);
-                return;
+            match existing.origin {
+                // Nobody may announce one of our own endpoints.
+                Origin::Local => {
+                    self.stats.invalid_endpoints += 1;
+                    return;
+                }
+                // The owning client moved to another daemon (its daemon restarted, with a new
+                // node id): the newest announcement wins, without a flap if nothing changed.
+                Origin::Remote(owner) if owner != node && existing.info == info => {
+                    self.table.move_to(&info.guid, Origin::Remote(node), expires);
+                    return;
+                }
+                Origin::Remote(_) if existing.info == info => {
+                    self.table.refresh(&info.guid, expires);
+                    return;
+                }
+                Origin::Remote(_) => {}
             }
         }
         if let Err(reason) = check_endpoint(&info) {
@@ -345,6 +393,8 @@ impl Engine {
         {
             return Err(LocalError::TooLarge { size });
         }
+        // A guid declared again must no longer be listed as withdrawn.
+        self.withdrawn.retain(|(guid, _)| *guid != info.guid);
         let entry = Entry {
             info,
             origin: Origin::Local,
@@ -507,15 +557,18 @@ impl Engine {
                 chunk.push(info.clone());
             }
         }
-        for (i, endpoints) in chunks.into_iter().enumerate() {
+        let mut withdrawn_chunks = withdrawn.chunks(WITHDRAWN_PER_DATAGRAM);
+        let mut endpoint_chunks = chunks.into_iter();
+        loop {
+            let endpoints = endpoint_chunks.next();
+            let withdrawn = withdrawn_chunks.next();
+            if endpoints.is_none() && withdrawn.is_none() {
+                break;
+            }
             let message = Message::Announce(Announce {
                 node: self.node_info(),
-                endpoints,
-                withdrawn: if i == 0 {
-                    withdrawn.clone()
-                } else {
-                    Vec::new()
-                },
+                endpoints: endpoints.unwrap_or_default(),
+                withdrawn: withdrawn.map(<[Guid]>::to_vec).unwrap_or_default(),
             });
             self.encode_and_push(destination, &message);
         }
@@ -554,6 +607,19 @@ impl Engine {
         let spread = self.config.period_jitter * (2.0 * self.rng.f64() - 1.0);
         self.config.announce_period.mul_f64(1.0 + spread)
     }
+}
+
+/// The rules a node's self-description must satisfy.
+fn check_node(info: &NodeInfo) -> Result<(), DropReason> {
+    if info.announce_period_ms == 0 || info.lease_ms <= info.announce_period_ms {
+        return Err(DropReason::Invalid);
+    }
+    Ok(())
+}
+
+/// The lease a node asked for, capped at [`MAX_LEASE`].
+fn lease_of(info: &NodeInfo) -> Duration {
+    Duration::from_millis(u64::from(info.lease_ms)).min(MAX_LEASE)
 }
 
 /// The rules every endpoint declaration must satisfy, local or announced.

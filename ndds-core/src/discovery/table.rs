@@ -52,6 +52,15 @@ impl Table {
         }
     }
 
+    /// Gives an existing entry a new owner and expiry, without match events (the endpoint
+    /// itself did not change).
+    pub fn move_to(&mut self, guid: &Guid, origin: Origin, expires: Instant) {
+        if let Some(entry) = self.entries.get_mut(guid) {
+            entry.origin = origin;
+            entry.expires = Some(expires);
+        }
+    }
+
     /// All entries.
     pub fn iter(&self) -> impl Iterator<Item = &Entry> {
         self.entries.values()

@@ -128,13 +128,18 @@ fn write_list(layout: &TypeLayout, items: &[u32], out: &mut String) {
     }
 }
 
-/// Recursion here follows format children only, whose depth `validate` bounds; containers are
-/// written by name, so recursive types terminate.
+/// Recursion here follows format children only, and only children that precede their parent
+/// (as `validate` requires), so even an unvalidated layout cannot recurse forever; containers
+/// are written by name, so recursive types terminate.
 fn write_format(layout: &TypeLayout, index: u32, out: &mut String) {
     let Some(format) = layout.format(index) else {
         out.push('?');
         return;
     };
+    if format.children().any(|child| child >= index) {
+        out.push('?');
+        return;
+    }
     let simple = match format {
         Format::Unit => "unit",
         Format::Bool => "bool",

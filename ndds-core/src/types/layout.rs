@@ -16,6 +16,10 @@ pub const MAX_FORMAT_DEPTH: usize = 32;
 pub const MAX_FORMATS: usize = 4096;
 /// Largest fixed-size array length accepted.
 pub const MAX_ARRAY_LEN: u32 = 1 << 16;
+/// Most format nodes the layout may stand for once shared children are written out (the
+/// size of its canonical text is proportional to this). Sharing children lets a short
+/// layout describe an exponentially large type; this bound keeps every walk linear.
+pub const MAX_EXPANDED_FORMATS: u64 = 1 << 16;
 
 /// A validated-on-receipt type layout. See the module docs.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -181,6 +185,9 @@ pub enum LayoutError {
     /// Enum variant indices are not strictly increasing.
     #[error("enum {0:?} has variants out of order or repeated")]
     UnsortedVariants(String),
+    /// The layout expands to more than [`MAX_EXPANDED_FORMATS`] formats.
+    #[error("layout expands to {0} formats (limit {MAX_EXPANDED_FORMATS})")]
+    TooLarge(u64),
 }
 
 impl Format {
@@ -205,14 +212,17 @@ impl TypeLayout {
             return Err(LayoutError::TooManyFormats(self.formats.len()));
         }
         let mut depth = vec![0usize; self.formats.len()];
+        let mut expanded = vec![0u64; self.formats.len()];
         for (node, format) in self.formats.iter().enumerate() {
             let mut deepest = 0;
+            let mut size = 1u64;
             let mut check = |child: u32| -> Result<(), LayoutError> {
                 let child_index = child as usize;
                 if child_index >= node {
                     return Err(LayoutError::BadChild { node, child });
                 }
                 deepest = deepest.max(depth[child_index]);
+                size = size.saturating_add(expanded[child_index]);
                 Ok(())
             };
             match format {
@@ -228,11 +238,44 @@ impl TypeLayout {
             if depth[node] > MAX_FORMAT_DEPTH {
                 return Err(LayoutError::TooDeep);
             }
+            if size > MAX_EXPANDED_FORMATS {
+                return Err(LayoutError::TooLarge(size));
+            }
+            expanded[node] = size;
         }
         if self.root as usize >= self.formats.len() {
             return Err(LayoutError::BadRoot(self.root));
         }
-        self.validate_containers()
+        self.validate_containers()?;
+        let total = self.container_refs().fold(expanded[self.root as usize], |total, index| {
+            total.saturating_add(expanded[index as usize])
+        });
+        if total > MAX_EXPANDED_FORMATS {
+            return Err(LayoutError::TooLarge(total));
+        }
+        Ok(())
+    }
+
+    /// Every format index the containers refer to (after `validate_containers`).
+    fn container_refs(&self) -> impl Iterator<Item = u32> + '_ {
+        self.containers.iter().flat_map(|container| {
+            let refs: Vec<u32> = match &container.shape {
+                ContainerShape::UnitStruct => Vec::new(),
+                ContainerShape::NewType(f) => vec![*f],
+                ContainerShape::TupleStruct(items) => items.clone(),
+                ContainerShape::Struct(fields) => fields.iter().map(|f| f.format).collect(),
+                ContainerShape::Enum(variants) => variants
+                    .iter()
+                    .flat_map(|v| match &v.shape {
+                        VariantShape::Unit => Vec::new(),
+                        VariantShape::NewType(f) => vec![*f],
+                        VariantShape::Tuple(items) => items.clone(),
+                        VariantShape::Struct(fields) => fields.iter().map(|f| f.format).collect(),
+                    })
+                    .collect(),
+            };
+            refs
+        })
     }
 
     fn validate_containers(&self) -> Result<(), LayoutError> {
