@@ -18,7 +18,7 @@ use ndds_core::ipc::{
     ClientMessage, DaemonMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome,
 };
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::EndpointQos;
+use ndds_core::wire::{EndpointInfo, EndpointQos};
 use ndds_daemon::{DaemonConfig, DaemonError, EmbedError, EmbeddedDaemon};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -26,6 +26,7 @@ use serde::de::DeserializeOwned;
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
 use crate::data::{ConsumerSlot, DataPlane};
 use crate::error::{ConnectError, DeclareError, QueryError};
+use crate::peers::Peers;
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
 use crate::session::{self, Session};
@@ -217,6 +218,23 @@ enum Endpoint {
     Consumer(Arc<ConsumerState>),
 }
 
+impl Endpoint {
+    fn peers(&self) -> &Peers {
+        match self {
+            Endpoint::Producer(state) => &state.peers,
+            Endpoint::Consumer(state) => &state.peers,
+        }
+    }
+
+    /// Topic, type description and fingerprint.
+    fn identity(&self) -> (&str, &TypeDescription, u64) {
+        match self {
+            Endpoint::Producer(s) => (&s.topic, &s.type_desc, s.fingerprint),
+            Endpoint::Consumer(s) => (&s.topic, &s.type_desc, s.fingerprint),
+        }
+    }
+}
+
 impl Router {
     fn route(&self, message: DaemonMessage) {
         let entity = match &message {
@@ -231,35 +249,20 @@ impl Router {
         let Some(endpoint) = read(&self.endpoints).get(&entity).cloned() else {
             return;
         };
-        match endpoint {
-            Endpoint::Producer(state) => match message {
-                DaemonMessage::Matched { remote, .. } => {
-                    state.set_matched(&state.peers.matched(remote))
-                }
-                DaemonMessage::Unmatched { remote, .. } => {
-                    state.set_matched(&state.peers.unmatched(&remote))
-                }
-                DaemonMessage::Incompatible { remote, .. } => state.peers.incompatible(
-                    &state.topic,
-                    (&state.type_desc.name, state.fingerprint),
-                    remote,
-                ),
-                _ => {}
-            },
-            Endpoint::Consumer(state) => match message {
-                DaemonMessage::Matched { remote, .. } => {
-                    state.peers.matched(remote);
-                }
-                DaemonMessage::Unmatched { remote, .. } => {
-                    state.peers.unmatched(&remote);
-                }
-                DaemonMessage::Incompatible { remote, .. } => state.peers.incompatible(
-                    &state.topic,
-                    (&state.type_desc.name, state.fingerprint),
-                    remote,
-                ),
-                _ => {}
-            },
+        let peers = endpoint.peers();
+        let on_change = |all: &[EndpointInfo]| {
+            if let Endpoint::Producer(state) = &endpoint {
+                state.set_matched(all);
+            }
+        };
+        match message {
+            DaemonMessage::Matched { remote, .. } => peers.matched(remote, on_change),
+            DaemonMessage::Unmatched { remote, .. } => peers.unmatched(&remote, on_change),
+            DaemonMessage::Incompatible { remote, .. } => {
+                let (topic, type_desc, fingerprint) = endpoint.identity();
+                peers.incompatible(topic, (&type_desc.name, fingerprint), remote);
+            }
+            _ => {}
         }
     }
 }
@@ -436,6 +439,29 @@ impl Participant {
             .map(Producer::new)
     }
 
+    /// Declares a producer of `T` announced with an explicit description, for types that
+    /// [`TypeDescription::of`] cannot trace completely (see [`TypeDescription::describer`]).
+    /// The description must be that of `T`.
+    pub fn producer_with_type<T: Serialize>(
+        &self,
+        topic: &str,
+        type_desc: TypeDescription,
+        qos: ProducerQos,
+    ) -> Result<Producer<T>, DeclareError> {
+        self.raw_producer(topic, type_desc, qos).map(Producer::new)
+    }
+
+    /// Declares a consumer of `T` announced with an explicit description (see
+    /// [`Participant::producer_with_type`]).
+    pub fn consumer_with_type<T: DeserializeOwned>(
+        &self,
+        topic: &str,
+        type_desc: TypeDescription,
+        qos: ConsumerQos,
+    ) -> Result<Consumer<T>, DeclareError> {
+        self.raw_consumer(topic, type_desc, qos).map(Consumer::new)
+    }
+
     /// Declares a producer of already-encoded samples of the described type.
     pub fn raw_producer(
         &self,
@@ -494,10 +520,8 @@ impl Participant {
         endpoint: Endpoint,
         qos: EndpointQos,
     ) -> Result<EndpointHandle, DeclareError> {
-        let (topic, type_desc, fingerprint) = match &endpoint {
-            Endpoint::Producer(s) => (s.topic.clone(), s.type_desc.clone(), s.fingerprint),
-            Endpoint::Consumer(s) => (s.topic.clone(), s.type_desc.clone(), s.fingerprint),
-        };
+        let (topic, type_desc, fingerprint) = endpoint.identity();
+        let (topic, type_desc) = (topic.to_owned(), type_desc.clone());
         write(&self.inner.router.endpoints).insert(entity, endpoint);
         // From here on, dropping the handle undoes the local registration.
         let handle = EndpointHandle {

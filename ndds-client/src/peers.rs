@@ -24,13 +24,19 @@ pub(crate) struct Peers {
 }
 
 impl Peers {
-    /// Records a match; returns the matched endpoints after the change.
-    pub(crate) fn matched(&self, remote: EndpointInfo) -> Vec<EndpointInfo> {
+    /// Records a match. `apply` sees the matched endpoints after the change and runs before
+    /// anyone waiting for matches is woken, so a woken writer finds its destinations set.
+    pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(&[EndpointInfo])) {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(&remote.guid);
         maps.matched.insert(remote.guid, remote);
+        self.apply(&maps, apply);
+    }
+
+    fn apply(&self, maps: &Maps, apply: impl FnOnce(&[EndpointInfo])) {
+        let all: Vec<EndpointInfo> = maps.matched.values().cloned().collect();
+        apply(&all);
         self.changed.notify_all();
-        maps.matched.values().cloned().collect()
     }
 
     /// Records an incompatible peer and logs it.
@@ -51,13 +57,12 @@ impl Peers {
         self.changed.notify_all();
     }
 
-    /// Forgets a peer; returns the matched endpoints after the change.
-    pub(crate) fn unmatched(&self, remote: &Guid) -> Vec<EndpointInfo> {
+    /// Forgets a peer; `apply` as in [`Peers::matched`].
+    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(&[EndpointInfo])) {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(remote);
         maps.matched.remove(remote);
-        self.changed.notify_all();
-        maps.matched.values().cloned().collect()
+        self.apply(&maps, apply);
     }
 
     /// The matched endpoints.

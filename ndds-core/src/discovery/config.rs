@@ -78,8 +78,7 @@ impl DiscoveryConfig {
         if u32::try_from(self.lease.as_millis()).is_err() {
             return Err(ConfigError::LeaseTooLong(self.lease));
         }
-        if !self.solicit_delays.is_sorted() || self.solicit_delays.iter().any(|d| *d > MAX_DELAY)
-        {
+        if !self.solicit_delays.is_sorted() || self.solicit_delays.iter().any(|d| *d > MAX_DELAY) {
             return Err(ConfigError::SolicitDelays);
         }
         if self.reply_jitter > MAX_DELAY {

@@ -268,8 +268,7 @@ impl Engine {
 
     /// Queues a unicast full announcement to `to` after a random delay, once per destination.
     fn schedule_reply(&mut self, now: Instant, to: Locator) {
-        if self.replies.len() >= MAX_PENDING_REPLIES || self.replies.iter().any(|(_, d)| *d == to)
-        {
+        if self.replies.len() >= MAX_PENDING_REPLIES || self.replies.iter().any(|(_, d)| *d == to) {
             return;
         }
         let delay = self.jitter(self.config.reply_jitter);
@@ -328,7 +327,8 @@ impl Engine {
                 // The owning client moved to another daemon (its daemon restarted, with a new
                 // node id): the newest announcement wins, without a flap if nothing changed.
                 Origin::Remote(owner) if owner != node && existing.info == info => {
-                    self.table.move_to(&info.guid, Origin::Remote(node), expires);
+                    self.table
+                        .move_to(&info.guid, Origin::Remote(node), expires);
                     return;
                 }
                 Origin::Remote(_) if existing.info == info => {

@@ -28,6 +28,20 @@ pub enum DescribeError {
         /// serde-reflection's message.
         reason: String,
     },
+    /// Enums reachable only through a sequence, option or map: serde-reflection explores such
+    /// a position once, so it cannot see all their variants.
+    #[error(
+        "enum(s) {enums} inside {type_name} sit behind a Vec, Option or map, where serde-reflection \
+         cannot see all their variants; describe the type with \
+         `TypeDescription::describer().with::<TheEnum>().describe::<{type_name}>()` and declare it \
+         with `producer_with_type` / `consumer_with_type`"
+    )]
+    IncompleteEnum {
+        /// The Rust type.
+        type_name: &'static str,
+        /// The incomplete enums, comma-separated.
+        enums: String,
+    },
     /// The traced layout breaks a limit of the protocol (too deep, too many nodes, ...).
     #[error("the layout of {type_name} is not representable: {source}")]
     Layout {
@@ -40,12 +54,95 @@ pub enum DescribeError {
 
 /// Traces `T` and builds its description.
 pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, DescribeError> {
-    let type_name = std::any::type_name::<T>();
-    let trace_err = |err: serde_reflection::Error| DescribeError::Trace {
-        type_name,
-        reason: err.to_string(),
-    };
-    let (root, registry) = trace::<T>().map_err(trace_err)?;
+    Describer::new().describe::<T>()
+}
+
+/// A tracing step run before the described type, on the same tracer.
+type PreTrace = fn(&mut Tracer, &'static Samples) -> serde_reflection::Result<()>;
+
+fn pre_trace<U: DeserializeOwned>(
+    tracer: &mut Tracer,
+    samples: &'static Samples,
+) -> serde_reflection::Result<()> {
+    tracer.trace_type::<U>(samples).map(|_| ())
+}
+
+/// Describes a type whose nested enums serde-reflection cannot reach on its own.
+///
+/// An enum that appears only inside a `Vec`, `Option` or map is explored once, so only one of
+/// its variants would be known. Tracing the enum by itself first completes it:
+///
+/// ```
+/// use ndds_core::types::TypeDescription;
+/// use serde::{Deserialize, Serialize};
+///
+/// #[derive(Serialize, Deserialize)]
+/// enum Shape { Empty, Circle(f64), Box { w: f64, h: f64 } }
+/// #[derive(Serialize, Deserialize)]
+/// struct Scene { shapes: Vec<Shape> }
+///
+/// assert!(TypeDescription::try_of::<Scene>().is_err());
+/// let desc = TypeDescription::describer().with::<Shape>().describe::<Scene>()?;
+/// assert!(desc.canonical_text().contains("\"Box\":struct"));
+/// # Ok::<(), ndds_core::types::DescribeError>(())
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct Describer {
+    pre: Vec<PreTrace>,
+}
+
+impl Describer {
+    /// A describer with nothing pre-traced.
+    pub fn new() -> Self {
+        Describer::default()
+    }
+
+    /// Traces `U` (typically a nested enum) before the described type.
+    pub fn with<U: DeserializeOwned>(mut self) -> Self {
+        self.pre.push(pre_trace::<U>);
+        self
+    }
+
+    /// Traces `T` and builds its description.
+    pub fn describe<T: Serialize + DeserializeOwned>(
+        &self,
+    ) -> Result<TypeDescription, DescribeError> {
+        let type_name = std::any::type_name::<T>();
+        let trace_err = |err: serde_reflection::Error| DescribeError::Trace {
+            type_name,
+            reason: err.to_string(),
+        };
+        let (root, registry) = trace::<T>(&self.pre).map_err(trace_err)?;
+        let incomplete = incomplete_enums(&registry);
+        if !incomplete.is_empty() {
+            return Err(DescribeError::IncompleteEnum {
+                type_name,
+                enums: incomplete.join(", "),
+            });
+        }
+        build(type_name, &root, &registry)
+    }
+}
+
+/// serde-reflection gives variants it saw by name only provisional indices just below
+/// `u32::MAX`; a registry that still has one is incomplete.
+fn incomplete_enums(registry: &Registry) -> Vec<String> {
+    const PROVISIONAL: u32 = u32::MAX - (1 << 20);
+    registry
+        .iter()
+        .filter(|(_, container)| {
+            matches!(container, ContainerFormat::Enum(variants)
+                if variants.keys().any(|index| *index >= PROVISIONAL))
+        })
+        .map(|(name, _)| name.clone())
+        .collect()
+}
+
+fn build(
+    type_name: &'static str,
+    root: &SrFormat,
+    registry: &Registry,
+) -> Result<TypeDescription, DescribeError> {
     let names: HashMap<&str, u32> = registry
         .keys()
         .enumerate()
@@ -60,9 +157,9 @@ pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, De
         type_name,
         reason: format!("incomplete trace ({what})"),
     };
-    let root = builder.add(&root).ok_or_else(|| unsupported("root"))?;
+    let root = builder.add(root).ok_or_else(|| unsupported("root"))?;
     let mut containers = Vec::with_capacity(registry.len());
-    for (name, container) in &registry {
+    for (name, container) in registry {
         let shape = builder
             .container(container)
             .ok_or_else(|| unsupported(name))?;
@@ -90,12 +187,17 @@ pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, De
 /// serde-reflection explores one level of enum variants per pass and only repeats passes for a
 /// top-level enum by itself. Nested enums are named by the `MissingVariants` error of a first
 /// attempt; later attempts repeat passes until none of the named enums is incomplete.
-fn trace<T: DeserializeOwned>() -> Result<(SrFormat, Registry), serde_reflection::Error> {
+fn trace<T: DeserializeOwned>(
+    pre: &[PreTrace],
+) -> Result<(SrFormat, Registry), serde_reflection::Error> {
     static SAMPLES: OnceLock<Samples> = OnceLock::new();
     let samples = SAMPLES.get_or_init(Samples::new);
     let mut enums: BTreeSet<String> = BTreeSet::new();
     for _attempt in 0..MAX_TRACE_ATTEMPTS {
         let mut tracer = Tracer::new(TracerConfig::default());
+        for step in pre {
+            step(&mut tracer, samples)?;
+        }
         let mut root = SrFormat::Unit;
         for _pass in 0..MAX_TRACE_PASSES {
             let (format, _value) = tracer.trace_type_once::<T>(samples)?;

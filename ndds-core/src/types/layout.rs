@@ -247,9 +247,11 @@ impl TypeLayout {
             return Err(LayoutError::BadRoot(self.root));
         }
         self.validate_containers()?;
-        let total = self.container_refs().fold(expanded[self.root as usize], |total, index| {
-            total.saturating_add(expanded[index as usize])
-        });
+        let total = self
+            .container_refs()
+            .fold(expanded[self.root as usize], |total, index| {
+                total.saturating_add(expanded[index as usize])
+            });
         if total > MAX_EXPANDED_FORMATS {
             return Err(LayoutError::TooLarge(total));
         }

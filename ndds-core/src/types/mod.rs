@@ -13,7 +13,7 @@ pub mod layout;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-pub use describe::DescribeError;
+pub use describe::{DescribeError, Describer};
 pub use layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
@@ -34,7 +34,7 @@ impl TypeDescription {
         match describe::describe::<T>() {
             Ok(desc) => desc,
             Err(err) => {
-                tracing::debug!(error = %err, "type is opaque to ndds tools");
+                tracing::warn!(error = %err, "type is opaque: it still matches by name, but tools cannot decode it");
                 Self::opaque(std::any::type_name::<T>())
             }
         }
@@ -43,6 +43,11 @@ impl TypeDescription {
     /// Describes `T` by tracing it, failing if it cannot be traced.
     pub fn try_of<T: Serialize + DeserializeOwned>() -> Result<Self, DescribeError> {
         describe::describe::<T>()
+    }
+
+    /// A [`Describer`], for types with enums nested in sequences, options or maps.
+    pub fn describer() -> Describer {
+        Describer::new()
     }
 
     /// A description carrying only a name.
@@ -130,6 +135,44 @@ mod tests {
             )
         );
         desc.validate().unwrap();
+    }
+
+    #[derive(Serialize, Deserialize)]
+    enum Shape {
+        Empty,
+        Circle(f64),
+        Rect { w: f64, h: f64 },
+    }
+
+    #[derive(Serialize, Deserialize)]
+    struct Scene {
+        shapes: Vec<Shape>,
+        focus: Option<Mode>,
+    }
+
+    #[test]
+    fn enums_behind_sequences_are_reported_and_can_be_pre_traced() {
+        let err = TypeDescription::try_of::<Scene>().unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("Shape") && text.contains("Mode"), "{text}");
+        assert!(
+            TypeDescription::of::<Scene>().layout.is_none(),
+            "falls back to opaque"
+        );
+        let desc = TypeDescription::describer()
+            .with::<Shape>()
+            .with::<Mode>()
+            .describe::<Scene>()
+            .unwrap();
+        assert_eq!(
+            desc.canonical_text(),
+            concat!(
+                r#"root="Scene";"#,
+                r#""Mode"=enum{0:"Idle":unit,1:"Move":struct{"speed":f32},2:"Hold":tuple(u8,u8)};"#,
+                r#""Scene"=struct{"shapes":seq<"Shape">,"focus":option<"Mode">};"#,
+                r#""Shape"=enum{0:"Empty":unit,1:"Circle":newtype(f64),2:"Rect":struct{"w":f64,"h":f64}};"#
+            )
+        );
     }
 
     #[test]
