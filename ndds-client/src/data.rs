@@ -76,6 +76,31 @@ pub(crate) struct DataStats {
     pub(crate) unknown_reader: AtomicU64,
 }
 
+/// A snapshot of a participant's data-socket counters.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ParticipantStats {
+    /// Datagrams received on the data socket.
+    pub received: u64,
+    /// Samples handed to consumer queues.
+    pub delivered: u64,
+    /// Datagrams addressed to another participant.
+    pub misaddressed: u64,
+    /// Samples addressed to a consumer that no longer exists.
+    pub unknown_reader: u64,
+    /// Dropped datagrams by reason name (see `DropReason::name`).
+    pub dropped: Vec<(&'static str, u64)>,
+}
+
+impl ParticipantStats {
+    /// The drop count for one reason name (`"malformed"`, `"other_domain"`, ...).
+    pub fn dropped(&self, reason: &str) -> u64 {
+        self.dropped
+            .iter()
+            .find(|(name, _)| *name == reason)
+            .map_or(0, |(_, count)| *count)
+    }
+}
+
 /// The participant's data socket and consumer table.
 #[derive(Debug)]
 pub(crate) struct DataPlane {
@@ -107,6 +132,20 @@ impl DataPlane {
             stats: DataStats::default(),
             closed: AtomicBool::new(false),
         })
+    }
+
+    pub(crate) fn snapshot(&self) -> ParticipantStats {
+        let load = |counter: &AtomicU64| counter.load(Ordering::Relaxed);
+        ParticipantStats {
+            received: load(&self.stats.received),
+            delivered: load(&self.stats.delivered),
+            misaddressed: load(&self.stats.misaddressed),
+            unknown_reader: load(&self.stats.unknown_reader),
+            dropped: DropReason::ALL
+                .iter()
+                .map(|reason| (reason.name(), load(&self.stats.dropped[reason.index()])))
+                .collect(),
+        }
     }
 
     pub(crate) fn add_consumer(&self, entity: u32, slot: Arc<ConsumerSlot>) {

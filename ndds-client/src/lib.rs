@@ -45,6 +45,7 @@ mod session;
 mod sync;
 
 pub use consumer::{CallbackConsumer, Consumer, ConsumerStats, RawConsumer, SampleStream};
+pub use data::ParticipantStats;
 pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
 pub use ndds_core::ipc::Graph;
 pub use ndds_core::types::TypeDescription;

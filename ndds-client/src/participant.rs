@@ -24,7 +24,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
-use crate::data::{ConsumerSlot, DataPlane};
+use crate::data::{ConsumerSlot, DataPlane, ParticipantStats};
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::peers::Peers;
 use crate::producer::{Producer, ProducerState, RawProducer};
@@ -422,6 +422,11 @@ impl Participant {
     /// True while the session with the daemon is open.
     pub fn is_connected(&self) -> bool {
         self.inner.session.is_open()
+    }
+
+    /// Counters of this participant's data socket.
+    pub fn stats(&self) -> ParticipantStats {
+        self.inner.data.snapshot()
     }
 
     /// The daemon's current view of the domain (what `ndds topics` and `ndds nodes` show).

@@ -1,0 +1,156 @@
+//! # interop-tests
+//!
+//! A harness for tests that run the real programs: `ndds-daemon` processes standing for hosts,
+//! the `ndds` CLI, and the test client `ndds-test-node`. Every [`TestDomain`] gets its own
+//! domain id, discovery port, multicast group and socket directory, so tests running in
+//! parallel never see each other, and every daemon binds to loopback: no traffic leaves the
+//! machine. Processes are killed when their handles drop, even when a test panics.
+//!
+//! The binaries are taken from the cargo target directory of the running test; `cargo test
+//! --workspace` builds them (`ndds-daemon` and `ndds` have integration tests of their own,
+//! which makes cargo build them for any workspace test run).
+#![warn(missing_docs)]
+
+pub mod process;
+
+use std::net::Ipv4Addr;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use ndds_client::{EmbeddedPolicy, Graph, Participant};
+
+pub use process::{ClientProcess, DaemonProcess};
+
+/// Announce period used by test daemons.
+pub const PERIOD: Duration = Duration::from_millis(200);
+/// Lease used by test daemons.
+pub const LEASE: Duration = Duration::from_millis(1000);
+
+/// Path of a binary built in this workspace's target directory.
+pub fn binary(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test>-<hash>  →  target/<profile>/<name>
+    let profile_dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test executable lives in target/<profile>/deps");
+    let path = profile_dir.join(name);
+    assert!(
+        path.exists(),
+        "{} is missing: build the workspace binaries first (`cargo build --workspace --bins`, \
+         or run the README's test command)",
+        path.display()
+    );
+    path
+}
+
+/// One isolated domain on loopback: unique domain id, ports, group and socket directory.
+#[derive(Debug)]
+pub struct TestDomain {
+    /// Domain id.
+    pub domain: u16,
+    /// Discovery multicast port.
+    pub port: u16,
+    /// Discovery multicast group.
+    pub group: Ipv4Addr,
+    dir: tempfile::TempDir,
+}
+
+impl TestDomain {
+    /// A new isolated domain.
+    pub fn new() -> Self {
+        let mut rng = fastrand::Rng::new();
+        TestDomain {
+            domain: rng.u16(1..=232),
+            port: rng.u16(20_000..60_000),
+            group: Ipv4Addr::new(239, 255, rng.u8(100..=254), rng.u8(1..=254)),
+            dir: tempfile::tempdir().expect("temporary directory"),
+        }
+    }
+
+    /// The socket path of the daemon called `name`.
+    pub fn socket(&self, name: &str) -> PathBuf {
+        self.dir.path().join(format!("{name}.sock"))
+    }
+
+    /// A file in the domain's temporary directory.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// The flags that put a daemon in this domain, on loopback, with the test timers.
+    pub fn daemon_args(&self, name: &str) -> Vec<String> {
+        vec![
+            "--domain".into(),
+            self.domain.to_string(),
+            "--socket".into(),
+            self.socket(name).display().to_string(),
+            "--interface".into(),
+            "127.0.0.1".into(),
+            "--multicast-group".into(),
+            self.group.to_string(),
+            "--discovery-port".into(),
+            self.port.to_string(),
+            "--announce-period-ms".into(),
+            PERIOD.as_millis().to_string(),
+            "--lease-ms".into(),
+            LEASE.as_millis().to_string(),
+        ]
+    }
+
+    /// Starts a daemon called `name` and waits until it accepts clients.
+    pub fn daemon(&self, name: &str) -> DaemonProcess {
+        DaemonProcess::start(self, name)
+    }
+
+    /// A tool session with the daemon called `name`, for reading its graph.
+    pub fn tool(&self, name: &str) -> Participant {
+        Participant::builder()
+            .socket(self.socket(name))
+            .embedded(EmbeddedPolicy::Never)
+            .tool()
+            .name("interop-test")
+            .connect()
+            .expect("tool session with the test daemon")
+    }
+
+    /// Runs `ndds` with `args` against the daemon called `name`; returns (status, stdout,
+    /// stderr). Killed after `timeout`.
+    pub fn ndds(&self, name: &str, args: &[&str], timeout: Duration) -> process::Output {
+        let mut full = vec![
+            "--socket".to_owned(),
+            self.socket(name).display().to_string(),
+        ];
+        full.extend(args.iter().map(|a| (*a).to_owned()));
+        process::run(&binary("ndds"), &full, timeout)
+    }
+}
+
+impl Default for TestDomain {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Polls `check` every 5 ms until it holds; returns how long that took, or `None` at the
+/// timeout.
+pub fn wait_until(timeout: Duration, mut check: impl FnMut() -> bool) -> Option<Duration> {
+    let start = Instant::now();
+    loop {
+        if check() {
+            return Some(start.elapsed());
+        }
+        if start.elapsed() >= timeout {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// True when `graph` lists an endpoint on `topic` owned by process `pid`.
+pub fn has_endpoint(graph: &Graph, topic: &str, pid: u32) -> bool {
+    graph
+        .endpoints
+        .iter()
+        .any(|e| e.info.topic == topic && e.info.pid == pid)
+}

@@ -1,0 +1,181 @@
+//! Bad input against real processes: malformed, truncated and foreign datagrams to a daemon
+//! and to a client's data socket, and garbage on the daemon's Unix socket. Everything is
+//! counted or logged; nothing crashes; service continues.
+
+use std::io::{Read, Write};
+use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
+use std::os::unix::net::UnixStream;
+use std::time::Duration;
+
+use interop_tests::{TestDomain, wait_until};
+use ndds_client::{ConsumerQos, EmbeddedPolicy, Graph, Participant, ProducerQos};
+use ndds_core::wire::{self, Bye, Header, Message, MessageKind};
+
+const WAIT: Duration = Duration::from_secs(10);
+
+fn counter(graph: &Graph, name: &str) -> u64 {
+    graph
+        .counters
+        .iter()
+        .find(|(n, _)| n == name)
+        .map_or_else(|| panic!("no counter {name}"), |(_, v)| *v)
+}
+
+fn header(kind: u8, domain: u16) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    Header {
+        kind: MessageKind::Bye,
+        domain,
+        sender: 0x5eed,
+    }
+    .emit(&mut bytes);
+    bytes[5] = kind;
+    bytes
+}
+
+/// One datagram for each drop reason a discovery receiver distinguishes.
+fn hostile_datagrams(domain: u16) -> Vec<(&'static str, Vec<u8>)> {
+    let mut other_version = header(MessageKind::Bye as u8, domain);
+    other_version[4] = 99;
+    let mut malformed = header(MessageKind::Announce as u8, domain);
+    malformed.extend_from_slice(&[0xff; 40]);
+    let mut trailing = Vec::new();
+    wire::encode(domain, 0x5eed, &Message::Bye(Bye), &mut trailing).unwrap();
+    trailing.push(0);
+    vec![
+        ("dropped_truncated", b"NDD".to_vec()),
+        (
+            "dropped_foreign_magic",
+            b"RTPS\x02\x01\x01\x0f garbage".to_vec(),
+        ),
+        ("dropped_unsupported_version", other_version),
+        ("dropped_unknown_kind", header(200, domain)),
+        (
+            "dropped_other_domain",
+            header(MessageKind::Bye as u8, domain.wrapping_add(1)),
+        ),
+        ("dropped_malformed", malformed),
+        ("dropped_malformed", trailing),
+    ]
+}
+
+fn loopback_sender() -> UdpSocket {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    // Multicast from tests must leave through loopback, never the machine's uplink.
+    socket2::SockRef::from(&socket)
+        .set_multicast_if_v4(&Ipv4Addr::LOCALHOST)
+        .unwrap();
+    socket
+}
+
+#[test]
+fn hostile_discovery_datagrams_are_counted_and_dropped() {
+    let domain = TestDomain::new();
+    let daemon = domain.daemon("a");
+    let tool = domain.tool("a");
+    let before = tool.graph().unwrap();
+    let unicast = SocketAddrV4::from(before.local.info.unicast);
+    let group = SocketAddrV4::new(domain.group, domain.port);
+    let sender = loopback_sender();
+    let datagrams = hostile_datagrams(domain.domain);
+    for (_, bytes) in &datagrams {
+        sender.send_to(bytes, unicast).unwrap();
+        sender.send_to(bytes, group).unwrap();
+    }
+    let expect = |name: &str| 2 * datagrams.iter().filter(|(n, _)| *n == name).count() as u64;
+    let counted = wait_until(WAIT, || {
+        let graph = tool.graph().unwrap();
+        datagrams
+            .iter()
+            .all(|(name, _)| counter(&graph, name) >= counter(&before, name) + expect(name))
+    });
+    let after = tool.graph().unwrap();
+    assert!(counted.is_some(), "counters: {:?}", after.counters);
+    assert_eq!(
+        counter(&after, "datagrams_accepted"),
+        counter(&before, "datagrams_accepted"),
+        "none of them was accepted"
+    );
+    assert!(
+        after.nodes.is_empty(),
+        "no phantom node from the hostile sender"
+    );
+
+    // The daemon still works: a second daemon is discovered.
+    let _b = domain.daemon("b");
+    assert!(wait_until(WAIT, || tool.graph().unwrap().nodes.len() == 1).is_some());
+    drop(daemon);
+}
+
+#[test]
+fn garbage_on_the_unix_socket_disconnects_that_client_only() {
+    let domain = TestDomain::new();
+    let daemon = domain.daemon("a");
+    let tool = domain.tool("a");
+    let cases: [&[u8]; 3] = [
+        // A length prefix claiming 4 GiB.
+        &[0xff, 0xff, 0xff, 0xff, 1, 2, 3],
+        // A well-framed body that is not a message.
+        &[0, 0, 0, 4, 0xde, 0xad, 0xbe, 0xef],
+        // A valid `Undeclare` before `Hello`.
+        &[0, 0, 0, 2, 2, 7],
+    ];
+    for bytes in cases {
+        let mut stream = UnixStream::connect(domain.socket("a")).unwrap();
+        stream.set_read_timeout(Some(WAIT)).unwrap();
+        stream.write_all(bytes).unwrap();
+        // The daemon closes the connection (possibly after a `Refused` frame).
+        let mut rest = Vec::new();
+        let closed = stream.read_to_end(&mut rest);
+        assert!(closed.is_ok(), "daemon closed the connection: {closed:?}");
+    }
+    let graph = tool.graph().unwrap();
+    assert_eq!(counter(&graph, "protocol_errors"), 2);
+    assert_eq!(counter(&graph, "sessions_refused"), 1);
+    assert!(tool.is_connected(), "other sessions are unaffected");
+    let log = daemon.log_text();
+    assert!(
+        log.contains("framing error") || log.contains("bad frame"),
+        "{log}"
+    );
+    assert!(log.contains("undecodable frame"), "{log}");
+    assert!(log.contains("the first frame must be Hello"), "{log}");
+}
+
+#[test]
+fn hostile_datagrams_to_a_data_socket_are_counted_and_samples_still_flow() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let participant = Participant::builder()
+        .socket(domain.socket("a"))
+        .embedded(EmbeddedPolicy::Never)
+        .connect()
+        .unwrap();
+    let consumer = participant
+        .consumer::<u32>("data", ConsumerQos::default())
+        .unwrap();
+    let producer = participant
+        .producer::<u32>("data", ProducerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    let data_socket = SocketAddrV4::from(producer.matched()[0].locator);
+    let sender = loopback_sender();
+    let datagrams = hostile_datagrams(domain.domain);
+    for (_, bytes) in &datagrams {
+        sender.send_to(bytes, data_socket).unwrap();
+    }
+    // A discovery message on a data socket is well-formed but unexpected.
+    let mut bye = Vec::new();
+    wire::encode(domain.domain, 1, &Message::Bye(Bye), &mut bye).unwrap();
+    sender.send_to(&bye, data_socket).unwrap();
+
+    producer.write(&41).unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, 41);
+    let stats = participant.stats();
+    assert_eq!(stats.delivered, 1);
+    for (name, _) in &datagrams {
+        let reason = name.trim_start_matches("dropped_");
+        assert!(stats.dropped(reason) >= 1, "{reason}: {stats:?}");
+    }
+    assert_eq!(stats.dropped("unexpected"), 1);
+}
