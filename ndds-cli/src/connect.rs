@@ -2,8 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context as _;
-use ndds_client::{EmbeddedPolicy, Participant};
+use ndds_client::{ConnectError, EmbeddedPolicy, Participant};
 
 /// Where the daemon is: flags first, then `NDDS_DOMAIN` / `NDDS_SOCKET` (read by the SDK).
 #[derive(Clone, Debug, Default, clap::Args)]
@@ -11,7 +10,7 @@ pub struct DaemonArgs {
     /// Domain id (0-232) [env: NDDS_DOMAIN] [default: 0].
     #[arg(long, global = true)]
     pub domain: Option<u16>,
-    /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-<domain>.sock].
+    /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-DOMAIN.sock].
     #[arg(long, global = true)]
     pub socket: Option<PathBuf>,
 }
@@ -28,7 +27,12 @@ pub fn connect(args: &DaemonArgs) -> anyhow::Result<Participant> {
     if let Some(socket) = &args.socket {
         builder = builder.socket(socket);
     }
-    builder
-        .connect()
-        .context("is a daemon running? (`ndds-daemon`, or a program using an embedded one)")
+    builder.connect().map_err(|err| match err {
+        ConnectError::NoDaemon { path, reason } => anyhow::anyhow!(
+            "no ndds daemon is running at {} ({reason}); start `ndds-daemon` (or a program \
+             that embeds one), or name the daemon's socket with --socket or NDDS_SOCKET",
+            path.display()
+        ),
+        other => other.into(),
+    })
 }

@@ -267,6 +267,12 @@ impl Router {
     }
 }
 
+/// An opened session, and the embedded daemon it runs on (if one was started for it).
+type Reached = (
+    Option<Arc<EmbeddedDaemon>>,
+    (std::os::unix::net::UnixStream, Welcome),
+);
+
 /// Shared by the participant and every endpoint handle; dropped with the last of them.
 #[derive(Debug)]
 pub(crate) struct Inner {
@@ -380,16 +386,7 @@ impl Participant {
     }
 
     /// Connects to the daemon at the socket, starting an embedded one as the policy allows.
-    fn reach_daemon(
-        settings: &Settings,
-        hello: Hello,
-    ) -> Result<
-        (
-            Option<Arc<EmbeddedDaemon>>,
-            (std::os::unix::net::UnixStream, Welcome),
-        ),
-        ConnectError,
-    > {
+    fn reach_daemon(settings: &Settings, hello: Hello) -> Result<Reached, ConnectError> {
         if settings.embedded != EmbeddedPolicy::Always {
             match session::handshake(&settings.socket, hello.clone()) {
                 Ok(session) => return Ok((None, session)),

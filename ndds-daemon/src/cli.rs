@@ -21,7 +21,7 @@ pub struct Args {
     /// Domain id (0-232).
     #[arg(long, env = "NDDS_DOMAIN")]
     pub domain: Option<u32>,
-    /// Unix socket path [default: /tmp/ndds-<domain>.sock].
+    /// Unix socket path [default: /tmp/ndds-DOMAIN.sock].
     #[arg(long, env = "NDDS_SOCKET")]
     pub socket: Option<PathBuf>,
     /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
@@ -30,10 +30,10 @@ pub struct Args {
     /// TOML config file; flags and environment override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Discovery multicast group [default: 239.255.76.<domain>].
+    /// Discovery multicast group [default: 239.255.76.DOMAIN].
     #[arg(long)]
     pub multicast_group: Option<Ipv4Addr>,
-    /// Discovery multicast port [default: 7600 + domain].
+    /// Discovery multicast port [default: 7600 + DOMAIN].
     #[arg(long)]
     pub discovery_port: Option<u16>,
     /// Unicast discovery port [default: any free port].

@@ -2,7 +2,7 @@
 //!
 //! serde's `Vec<T>` implementation pre-allocates from the length prefix (capped at 1 MiB), so a
 //! 20-byte datagram claiming four billion elements would allocate a megabyte before failing.
-//! Every `Vec` field of a wire message therefore deserializes through [`vec`], which grows the
+//! Every `Vec` field of a wire message therefore deserializes through [`vec()`], which grows the
 //! vector only as elements are actually decoded. postcard encodes every element we use in at
 //! least one byte, so the allocation stays proportional to the datagram's length.
 
@@ -25,7 +25,7 @@ where
     deserializer.deserialize_seq(BoundedVecVisitor(PhantomData))
 }
 
-/// Like [`vec`], for `Cow<'_, [T]>` fields (always decoded as owned).
+/// Like [`vec()`], for `Cow<'_, [T]>` fields (always decoded as owned).
 pub fn cow_vec<'de, 'a, D, T>(deserializer: D) -> Result<std::borrow::Cow<'a, [T]>, D::Error>
 where
     D: Deserializer<'de>,
