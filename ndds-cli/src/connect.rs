@@ -6,9 +6,10 @@ use ndds_client::{ConnectError, EmbeddedPolicy, Participant};
 
 /// Where the daemon is: flags first, then `NDDS_DOMAIN` / `NDDS_SOCKET` (read by the SDK).
 #[derive(Clone, Debug, Default, clap::Args)]
+#[command(next_help_heading = "Daemon")]
 pub struct DaemonArgs {
     /// Domain id (0-232) [env: NDDS_DOMAIN] [default: 0].
-    #[arg(long, global = true)]
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(0..=232))]
     pub domain: Option<u16>,
     /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-DOMAIN.sock].
     #[arg(long, global = true)]

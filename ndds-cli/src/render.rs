@@ -75,17 +75,18 @@ pub fn topic_type(
         Some(hex) => candidates
             .iter()
             .find(|e| fingerprint_hex(e.info.fingerprint) == hex.to_ascii_lowercase())
-            .ok_or_else(|| anyhow::anyhow!("no endpoint of {name:?} has fingerprint {hex}"))?,
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "no endpoint of {name:?} has fingerprint {hex} (types on the topic: {})",
+                    type_list(topic)
+                )
+            })?,
         None => {
             let types = topic.types();
             if types.len() > 1 {
-                let listed: Vec<String> = types
-                    .iter()
-                    .map(|(t, f)| format!("{t} ({})", fingerprint_hex(*f)))
-                    .collect();
                 anyhow::bail!(
                     "topic {name:?} carries incompatible types: {}; choose one with --fingerprint",
-                    listed.join(", ")
+                    type_list(topic)
                 );
             }
             candidates
@@ -94,6 +95,16 @@ pub fn topic_type(
         }
     };
     Ok(chosen.info.type_desc.clone())
+}
+
+/// `name (fingerprint), ...` of the types on a topic.
+fn type_list(topic: &Topic<'_>) -> String {
+    topic
+        .types()
+        .iter()
+        .map(|(t, f)| format!("{t} ({})", fingerprint_hex(*f)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// An endpoint as the JSON listings show it.

@@ -24,6 +24,7 @@ use crate::error::RecvError;
 use crate::participant::EndpointHandle;
 use crate::peers::Peers;
 use crate::sample::{RawSample, Sample};
+use crate::sync::deadline;
 
 /// State of one consumer shared with the participant's event router.
 #[derive(Debug)]
@@ -95,7 +96,10 @@ impl RawConsumer {
 
     /// Blocks until a sample arrives or `timeout` passes.
     pub fn recv_raw_timeout(&self, timeout: Duration) -> Result<RawSample, RecvError> {
-        self.rx.recv_timeout(timeout).map_err(|err| match err {
+        let Some(deadline) = deadline(timeout) else {
+            return self.recv_raw();
+        };
+        self.rx.recv_deadline(deadline).map_err(|err| match err {
             flume::RecvTimeoutError::Timeout => RecvError::Timeout,
             flume::RecvTimeoutError::Disconnected => RecvError::Closed,
         })
@@ -181,7 +185,9 @@ impl<T: DeserializeOwned> Consumer<T> {
 
     /// Blocks until a sample arrives or `timeout` passes.
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Sample<T>, RecvError> {
-        let deadline = std::time::Instant::now() + timeout;
+        let Some(deadline) = deadline(timeout) else {
+            return self.recv();
+        };
         loop {
             let left = deadline.saturating_duration_since(std::time::Instant::now());
             let raw = self.raw.recv_raw_timeout(left)?;

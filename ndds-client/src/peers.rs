@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use ndds_core::types::fingerprint_hex;
 use ndds_core::wire::{EndpointInfo, Guid};
 
-use crate::sync::lock;
+use crate::sync::{deadline, lock};
 
 #[derive(Debug, Default)]
 struct Maps {
@@ -77,16 +77,19 @@ impl Peers {
 
     /// Waits until at least `count` endpoints are matched; false at the timeout.
     pub(crate) fn wait_matched(&self, count: usize, timeout: Duration) -> bool {
-        let deadline = Instant::now() + timeout;
+        let deadline = deadline(timeout);
         let mut maps = lock(&self.maps);
         while maps.matched.len() < count {
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = deadline.map_or(Duration::MAX, |d| {
+                d.saturating_duration_since(Instant::now())
+            });
             if left.is_zero() {
                 return false;
             }
+            // Wake at least hourly so an unbounded wait never hands the OS an absurd timeout.
             maps = self
                 .changed
-                .wait_timeout(maps, left)
+                .wait_timeout(maps, left.min(Duration::from_secs(3600)))
                 .map(|(guard, _)| guard)
                 .unwrap_or_else(|poison| poison.into_inner().0);
         }

@@ -1,6 +1,6 @@
 //! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
 
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, SystemTime};
 
 use ndds_client::{ConsumerQos, RawSample, TypeDescription};
 use ndds_core::dynamic;
@@ -8,6 +8,7 @@ use serde_json::{Value, json};
 
 use crate::connect::{DaemonArgs, connect};
 use crate::render;
+use crate::seconds;
 
 /// Options of `ndds echo`.
 #[derive(Debug, clap::Args)]
@@ -23,9 +24,9 @@ pub struct Args {
     /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
     fingerprint: Option<String>,
-    /// Seconds to wait for the topic to appear [default: 0, fail at once].
-    #[arg(long, default_value_t = 0.0)]
-    wait: f64,
+    /// Seconds to wait for the topic to appear (`inf`: no limit) [default: 0, fail at once].
+    #[arg(long, value_parser = seconds::parse, default_value = "0")]
+    wait: Duration,
 }
 
 /// Runs `ndds echo`.
@@ -55,26 +56,28 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
 pub fn wait_for_type(
     topic: &str,
     fingerprint: Option<&str>,
-    wait: f64,
+    wait: Duration,
     mut graph: impl FnMut() -> anyhow::Result<ndds_client::Graph>,
 ) -> anyhow::Result<TypeDescription> {
-    let deadline = Instant::now() + Duration::from_secs_f64(wait.max(0.0));
+    let deadline = seconds::deadline(wait);
     loop {
         match render::topic_type(&graph()?, topic, fingerprint) {
             Ok(desc) => return Ok(desc),
-            Err(err) if Instant::now() >= deadline => return Err(err),
+            Err(err) if seconds::passed(deadline) => return Err(err),
             Err(_) => std::thread::sleep(Duration::from_millis(50)),
         }
     }
 }
 
-/// The sample's value as JSON (hex for opaque types).
+/// The sample's value as JSON; for an opaque type, `{"opaque_hex": "..."}` so it cannot be
+/// mistaken for a string value.
 pub fn decode(desc: &TypeDescription, sample: &RawSample) -> anyhow::Result<Value> {
     match &desc.layout {
         Some(layout) => Ok(dynamic::decode_json(layout, &sample.payload)?),
-        None => Ok(Value::String(
-            sample.payload.iter().map(|b| format!("{b:02x}")).collect(),
-        )),
+        None => {
+            let hex: String = sample.payload.iter().map(|b| format!("{b:02x}")).collect();
+            Ok(json!({ "opaque_hex": hex }))
+        }
     }
 }
 

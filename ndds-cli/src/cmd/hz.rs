@@ -8,6 +8,7 @@ use serde_json::json;
 
 use crate::cmd::echo::wait_for_type;
 use crate::connect::{DaemonArgs, connect};
+use crate::seconds;
 
 /// Options of `ndds hz`.
 #[derive(Debug, clap::Args)]
@@ -17,15 +18,18 @@ pub struct Args {
     /// Number of most recent intervals the statistics cover.
     #[arg(long, default_value_t = 100)]
     window: usize,
-    /// Seconds between reports.
-    #[arg(long, default_value_t = 1.0)]
-    every: f64,
-    /// Stop after this many seconds [default: run until interrupted].
+    /// Seconds between reports (at least 0.01).
+    #[arg(long, value_parser = seconds::parse_interval, default_value = "1")]
+    every: Duration,
+    /// Stop after this many seconds, with a final report [default: run until interrupted].
+    #[arg(long, value_parser = seconds::parse)]
+    duration: Option<Duration>,
+    /// Seconds to wait for the topic to appear (`inf`: no limit).
+    #[arg(long, value_parser = seconds::parse, default_value = "0")]
+    wait: Duration,
+    /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
-    duration: Option<f64>,
-    /// Seconds to wait for the topic to appear.
-    #[arg(long, default_value_t = 0.0)]
-    wait: f64,
+    fingerprint: Option<String>,
     /// One JSON object per report.
     #[arg(long)]
     json: bool,
@@ -34,28 +38,33 @@ pub struct Args {
 /// Runs `ndds hz`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let participant = connect(daemon)?;
-    let desc = wait_for_type(&args.topic, None, args.wait, || Ok(participant.graph()?))?;
+    let desc = wait_for_type(&args.topic, args.fingerprint.as_deref(), args.wait, || {
+        Ok(participant.graph()?)
+    })?;
     let consumer = participant.raw_consumer(&args.topic, desc, ConsumerQos { depth: 4096 })?;
-    let every = Duration::from_secs_f64(args.every.max(0.01));
-    let end = args
-        .duration
-        .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    let end = args.duration.and_then(seconds::deadline);
     let mut window = Window::new(args.window.max(2));
-    let mut next_report = Instant::now() + every;
-    while end.is_none_or(|end| Instant::now() < end) {
-        let wait = next_report.saturating_duration_since(Instant::now());
-        if consumer.recv_raw_timeout(wait).is_ok() {
+    let mut next_report = Instant::now() + args.every;
+    loop {
+        let until = end.map_or(next_report, |end| end.min(next_report));
+        if consumer
+            .recv_raw_timeout(until.saturating_duration_since(Instant::now()))
+            .is_ok()
+        {
             window.push(Instant::now());
             while consumer.try_recv_raw().is_ok() {
                 window.push(Instant::now());
             }
         }
+        if seconds::passed(end) {
+            report(&window, args.json);
+            return Ok(());
+        }
         if Instant::now() >= next_report {
             report(&window, args.json);
-            next_report += every;
+            next_report += args.every;
         }
     }
-    Ok(())
 }
 
 fn report(window: &Window, as_json: bool) {

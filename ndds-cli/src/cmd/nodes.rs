@@ -103,6 +103,7 @@ fn views(graph: &Graph) -> Vec<NodeView> {
                 endpoints: c.endpoints,
             })
             .collect();
+        local.processes.sort();
     }
     for remote in &graph.nodes {
         let mut view = node_view(remote, false);

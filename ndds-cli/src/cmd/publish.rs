@@ -3,12 +3,14 @@
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use ndds_client::{ProducerQos, TypeDescription};
+use ndds_client::{ProducerQos, RawProducer, TypeDescription};
 use ndds_core::dynamic;
+use ndds_core::types::fingerprint_hex;
 
 use crate::builtin;
 use crate::cmd::echo::wait_for_type;
 use crate::connect::{DaemonArgs, connect};
+use crate::seconds;
 
 /// Options of `ndds pub`.
 #[derive(Debug, clap::Args)]
@@ -18,8 +20,8 @@ pub struct Args {
     /// The value, as JSON (the format `ndds echo` prints).
     value: String,
     /// Publish at this rate in Hz (default: once, unless --count is given).
-    #[arg(long)]
-    rate: Option<f64>,
+    #[arg(long, value_parser = seconds::parse_rate, value_name = "HZ")]
+    rate: Option<Duration>,
     /// Number of samples [default: 1 without --rate, unlimited with it].
     #[arg(long)]
     count: Option<u64>,
@@ -29,30 +31,43 @@ pub struct Args {
     /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
     fingerprint: Option<String>,
-    /// Seconds to wait for a matching consumer before the first sample.
-    #[arg(long, default_value_t = 2.0)]
-    wait: f64,
+    /// Seconds to wait for a matching consumer before the first sample (`inf`: no limit).
+    #[arg(long, value_parser = seconds::parse, default_value = "2")]
+    wait: Duration,
     /// Producer strength.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     strength: i32,
 }
 
 /// Runs `ndds pub`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    // Everything that can be checked without the daemon is checked first.
     let value: serde_json::Value =
         serde_json::from_str(&args.value).context("the value is not valid JSON")?;
-    let participant = connect(daemon)?;
-    let desc = match &args.type_name {
-        Some(name) => builtin::describe(name).with_context(|| {
+    let builtin = match &args.type_name {
+        Some(name) => Some(builtin::describe(name).with_context(|| {
             format!(
                 "unknown built-in type {name:?} (built-in: {})",
                 builtin::list()
             )
+        })?),
+        None => None,
+    };
+    if let Some(desc) = &builtin {
+        encode(desc, &value)?;
+    }
+    let participant = connect(daemon)?;
+    let desc = match builtin {
+        Some(desc) => desc,
+        None => wait_for_type(
+            &args.topic,
+            args.fingerprint.as_deref(),
+            Duration::ZERO,
+            || Ok(participant.graph()?),
+        )
+        .map_err(|err| {
+            anyhow::anyhow!("{err}; pass --type to publish a built-in type on a new topic")
         })?,
-        None => wait_for_type(&args.topic, args.fingerprint.as_deref(), 0.0, || {
-            Ok(participant.graph()?)
-        })
-        .context("pass --type to publish a built-in type on a new topic")?,
     };
     let payload = encode(&desc, &value)?;
     let qos = ProducerQos {
@@ -60,25 +75,21 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         ..ProducerQos::default()
     };
     let producer = participant.raw_producer(&args.topic, desc, qos)?;
-    if !producer.wait_for_consumers(1, Duration::from_secs_f64(args.wait.max(0.0))) {
-        eprintln!(
-            "ndds: no consumer of {:?} matched yet; publishing anyway",
-            args.topic
-        );
+    if !producer.wait_for_consumers(1, args.wait) {
+        warn_unmatched(&producer, &args.topic, !args.wait.is_zero());
     }
     let count = args
         .count
         .unwrap_or(if args.rate.is_some() { u64::MAX } else { 1 });
-    let period = match args.rate {
-        Some(hz) if hz > 0.0 && hz.is_finite() => Duration::from_secs_f64(1.0 / hz),
-        Some(hz) => anyhow::bail!("--rate must be a positive number of Hz, got {hz}"),
-        None => Duration::ZERO,
-    };
+    let period = args.rate.unwrap_or(Duration::ZERO);
     let start = Instant::now();
     for i in 0..count {
         if i > 0 {
-            let due = start + period.mul_f64(i as f64);
-            std::thread::sleep(due.saturating_duration_since(Instant::now()));
+            let due =
+                start.checked_add(period.saturating_mul(u32::try_from(i).unwrap_or(u32::MAX)));
+            if let Some(due) = due {
+                std::thread::sleep(due.saturating_duration_since(Instant::now()));
+            }
         }
         producer.write_bytes(&payload)?;
     }
@@ -88,6 +99,24 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         args.topic
     );
     Ok(())
+}
+
+/// Says why nothing matched: consumers of another type, or none (when a wait was asked for).
+fn warn_unmatched(producer: &RawProducer, topic: &str, waited: bool) {
+    let ours = producer.type_description();
+    let others = producer.incompatible();
+    if let Some(other) = others.first() {
+        eprintln!(
+            "ndds: consumers of {topic:?} expect type {} ({}), not {} ({}): they will not \
+             receive these samples",
+            other.type_desc.name,
+            fingerprint_hex(other.fingerprint),
+            ours.name,
+            fingerprint_hex(ours.fingerprint()),
+        );
+    } else if waited {
+        eprintln!("ndds: no consumer of {topic:?} matched yet; publishing anyway");
+    }
 }
 
 fn encode(desc: &TypeDescription, value: &serde_json::Value) -> anyhow::Result<Vec<u8>> {
