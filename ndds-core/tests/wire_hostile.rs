@@ -778,3 +778,31 @@ fn a_header_alone_is_parsed_without_a_body() {
     );
     assert!(body.is_empty());
 }
+
+#[test]
+fn a_node_cannot_flood_the_engine_with_endpoints() {
+    use ndds_core::discovery::engine::MAX_ENDPOINTS_PER_NODE;
+    let now = Instant::now();
+    let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
+    let mut template = endpoint_with(layout(vec![Format::U8], 0, vec![]));
+    template.fingerprint = template.type_desc.fingerprint();
+    let flood = MAX_ENDPOINTS_PER_NODE + 100;
+    for chunk in (0..flood).collect::<Vec<_>>().chunks(500) {
+        let endpoints = chunk
+            .iter()
+            .map(|i| {
+                let mut info = template.clone();
+                info.guid.participant = 1000 + *i as u64;
+                info
+            })
+            .collect();
+        let Message::Announce(mut announce) = announce_one(layout(vec![Format::U8], 0, vec![]))
+        else {
+            unreachable!()
+        };
+        announce.endpoints = endpoints;
+        engine.handle_datagram(now, from(), &encode(&Message::Announce(announce)));
+    }
+    assert_eq!(engine.endpoints().count(), MAX_ENDPOINTS_PER_NODE);
+    assert_eq!(engine.stats().invalid_endpoints, 100);
+}

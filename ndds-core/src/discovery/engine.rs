@@ -31,6 +31,8 @@ use crate::wire::{
 pub const MAX_TOPIC_LEN: usize = 256;
 /// Most remote nodes remembered; datagrams from further new nodes are dropped as invalid.
 pub const MAX_NODES: usize = 4096;
+/// Most endpoints remembered per remote node; further new ones are ignored and counted.
+pub const MAX_ENDPOINTS_PER_NODE: usize = 16_384;
 /// Most answers to solicitations waiting for their jitter delay.
 pub const MAX_PENDING_REPLIES: usize = 1024;
 /// Longest lease accepted from a remote node; longer ones are shortened to this.
@@ -337,6 +339,15 @@ impl Engine {
                 }
                 Origin::Remote(_) => {}
             }
+        }
+        let known = self.table.get(&info.guid).is_some();
+        if !known && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE {
+            self.stats.invalid_endpoints += 1;
+            tracing::debug!(
+                limit = MAX_ENDPOINTS_PER_NODE,
+                "node announces too many endpoints"
+            );
+            return;
         }
         if let Err(reason) = check_endpoint(&info) {
             self.stats.invalid_endpoints += 1;

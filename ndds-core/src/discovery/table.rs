@@ -10,10 +10,10 @@ use std::collections::{BTreeSet, HashMap};
 use std::time::Instant;
 
 use super::event::Event;
-use crate::wire::{EndpointInfo, Guid};
+use crate::wire::{EndpointInfo, EndpointKind, Guid};
 
 /// Who owns an endpoint.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Origin {
     /// A client of this node.
     Local,
@@ -32,11 +32,39 @@ pub struct Entry {
     pub expires: Option<Instant>,
 }
 
+/// The endpoints of one topic, by kind, so matching visits only the opposite kind.
+#[derive(Debug, Default)]
+struct TopicEntry {
+    producers: BTreeSet<Guid>,
+    consumers: BTreeSet<Guid>,
+}
+
+impl TopicEntry {
+    fn side(&mut self, kind: EndpointKind) -> &mut BTreeSet<Guid> {
+        match kind {
+            EndpointKind::Producer => &mut self.producers,
+            EndpointKind::Consumer => &mut self.consumers,
+        }
+    }
+
+    fn opposite(&self, kind: EndpointKind) -> &BTreeSet<Guid> {
+        match kind {
+            EndpointKind::Producer => &self.consumers,
+            EndpointKind::Consumer => &self.producers,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.producers.is_empty() && self.consumers.is_empty()
+    }
+}
+
 /// All endpoints, with a topic index.
 #[derive(Debug, Default)]
 pub struct Table {
     entries: HashMap<Guid, Entry>,
-    by_topic: HashMap<String, BTreeSet<Guid>>,
+    by_topic: HashMap<String, TopicEntry>,
+    per_origin: HashMap<Origin, usize>,
 }
 
 impl Table {
@@ -56,6 +84,8 @@ impl Table {
     /// itself did not change).
     pub fn move_to(&mut self, guid: &Guid, origin: Origin, expires: Instant) {
         if let Some(entry) = self.entries.get_mut(guid) {
+            uncount(&mut self.per_origin, entry.origin);
+            *self.per_origin.entry(origin).or_default() += 1;
             entry.origin = origin;
             entry.expires = Some(expires);
         }
@@ -80,14 +110,12 @@ impl Table {
     /// pushes the match events it causes.
     pub fn insert(&mut self, entry: Entry, events: &mut impl Extend<Event>) {
         let guid = entry.info.guid;
-        let peers = self.by_topic.entry(entry.info.topic.clone()).or_default();
-        for other_guid in peers.iter() {
+        let kind = entry.info.kind();
+        let topic = self.by_topic.entry(entry.info.topic.clone()).or_default();
+        for other_guid in topic.opposite(kind) {
             let Some(other) = self.entries.get(other_guid) else {
                 continue;
             };
-            if other.info.kind() == entry.info.kind() {
-                continue;
-            }
             if entry.origin == Origin::Local {
                 events.extend([pair_event(&entry.info, &other.info)]);
             }
@@ -95,7 +123,8 @@ impl Table {
                 events.extend([pair_event(&other.info, &entry.info)]);
             }
         }
-        peers.insert(guid);
+        topic.side(kind).insert(guid);
+        *self.per_origin.entry(entry.origin).or_default() += 1;
         self.entries.insert(guid, entry);
     }
 
@@ -103,15 +132,14 @@ impl Table {
     /// paired with it (matched or incompatible).
     pub fn remove(&mut self, guid: &Guid, events: &mut impl Extend<Event>) -> Option<Entry> {
         let entry = self.entries.remove(guid)?;
-        if let Some(peers) = self.by_topic.get_mut(&entry.info.topic) {
-            peers.remove(guid);
-            for other_guid in peers.iter() {
+        uncount(&mut self.per_origin, entry.origin);
+        let kind = entry.info.kind();
+        if let Some(topic) = self.by_topic.get_mut(&entry.info.topic) {
+            topic.side(kind).remove(guid);
+            for other_guid in topic.opposite(kind) {
                 let Some(other) = self.entries.get(other_guid) else {
                     continue;
                 };
-                if other.info.kind() == entry.info.kind() {
-                    continue;
-                }
                 if entry.origin == Origin::Local {
                     events.extend([Event::Unmatched {
                         local: *guid,
@@ -125,11 +153,16 @@ impl Table {
                     }]);
                 }
             }
-            if peers.is_empty() {
+            if topic.is_empty() {
                 self.by_topic.remove(&entry.info.topic);
             }
         }
         Some(entry)
+    }
+
+    /// Number of entries owned by `origin`.
+    pub fn count_owned(&self, origin: Origin) -> usize {
+        self.per_origin.get(&origin).copied().unwrap_or(0)
     }
 
     /// Guids of the entries owned by `origin`.
@@ -156,6 +189,15 @@ impl Table {
             .filter(|e| e.expires.is_some_and(|t| t <= now))
             .map(|e| e.info.guid)
             .collect()
+    }
+}
+
+fn uncount(counts: &mut HashMap<Origin, usize>, origin: Origin) {
+    if let Some(count) = counts.get_mut(&origin) {
+        *count -= 1;
+        if *count == 0 {
+            counts.remove(&origin);
+        }
     }
 }
 
