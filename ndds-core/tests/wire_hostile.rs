@@ -759,10 +759,10 @@ proptest! {
     ) {
         let (decoded, usage) = measure(|| postcard::from_bytes::<TypeLayout>(&bytes));
         prop_assert!(usage.peak <= budget(bytes.len()), "{:?}", usage);
-        if let Ok(layout) = decoded {
-            if layout.validate().is_ok() {
-                check_validated(&layout)?;
-            }
+        if let Ok(layout) = decoded
+            && layout.validate().is_ok()
+        {
+            check_validated(&layout)?;
         }
     }
 }
