@@ -46,12 +46,11 @@ impl ConsumerSlot {
 
     /// Queues a sample, dropping the oldest one when full.
     fn push(&self, mut sample: RawSample) {
+        // Counted before the sample becomes visible, so a woken reader sees the count.
+        self.received.fetch_add(1, Ordering::Relaxed);
         loop {
             match self.tx.try_send(sample) {
-                Ok(()) => {
-                    self.received.fetch_add(1, Ordering::Relaxed);
-                    return;
-                }
+                Ok(()) => return,
                 Err(flume::TrySendError::Full(back)) => {
                     sample = back;
                     if self.oldest.try_recv().is_ok() {
@@ -218,11 +217,12 @@ impl DataPlane {
         for reader in data.readers.iter() {
             match consumers.get(reader) {
                 Some(slot) => {
+                    // Counted first: a reader woken by the push sees the count.
+                    self.stats.delivered.fetch_add(1, Ordering::Relaxed);
                     slot.push(RawSample {
                         payload: data.payload.to_vec(),
                         info,
                     });
-                    self.stats.delivered.fetch_add(1, Ordering::Relaxed);
                 }
                 None => {
                     self.stats.unknown_reader.fetch_add(1, Ordering::Relaxed);
