@@ -19,6 +19,10 @@ use crate::participant::{EndpointHandle, Inner};
 use crate::peers::Peers;
 use crate::sync::{lock, read, write};
 
+/// Bytes a `Data` datagram adds to its payload: the header, and the body's fields at their
+/// largest with up to 64 reader entities (the exact size is checked when encoding).
+const DATA_OVERHEAD: usize = wire::HEADER_LEN + 5 + 10 + 1 + 64 * 5 + 10 + 10 + 5 + 10 + 3;
+
 /// One consuming process: where to send, and which of its consumers to address.
 #[derive(Clone, Debug, PartialEq, Eq)]
 struct Destination {
@@ -70,13 +74,14 @@ impl ProducerState {
         }
     }
 
-    /// Rebuilds the destination list from the matched consumers.
+    /// Rebuilds the destination list from the matched consumers: one datagram per consuming
+    /// participant (a stale entry may share an address with a live one).
     pub(crate) fn set_matched(&self, matched: &[EndpointInfo]) {
-        let mut by_locator: BTreeMap<SocketAddrV4, Destination> = BTreeMap::new();
+        let mut by_locator: BTreeMap<(SocketAddrV4, u64), Destination> = BTreeMap::new();
         for consumer in matched {
             let addr = SocketAddrV4::from(consumer.locator);
             by_locator
-                .entry(addr)
+                .entry((addr, consumer.guid.participant))
                 .or_insert_with(|| Destination {
                     addr,
                     participant: consumer.guid.participant,
@@ -106,6 +111,14 @@ impl ProducerState {
         payload: &[u8],
         datagram: &mut Vec<u8>,
     ) -> Result<(), WriteError> {
+        // Refused whether or not a consumer is matched, so the error never depends on timing.
+        let size = payload.len() + DATA_OVERHEAD;
+        if size > MAX_DATAGRAM {
+            return Err(WriteError::TooLarge {
+                size,
+                max: MAX_DATAGRAM,
+            });
+        }
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
         let timestamp_ns = SystemTime::now()
             .duration_since(SystemTime::UNIX_EPOCH)

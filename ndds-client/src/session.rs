@@ -31,11 +31,18 @@ pub(crate) fn write_frame(stream: &mut impl Write, message: &ClientMessage) -> i
 /// Reads one frame; `Ok(None)` when the daemon closed the connection between frames.
 pub(crate) fn read_frame(stream: &mut impl Read) -> io::Result<Option<DaemonMessage>> {
     let mut prefix = [0u8; FRAME_PREFIX];
-    match stream.read_exact(&mut prefix) {
-        Ok(()) => {}
-        Err(err) if err.kind() == io::ErrorKind::UnexpectedEof => return Ok(None),
-        Err(err) => return Err(err),
+    // End of stream before a frame starts is a clean close; inside a frame it is an error.
+    let first = loop {
+        match stream.read(&mut prefix[..1]) {
+            Ok(n) => break n,
+            Err(err) if err.kind() == io::ErrorKind::Interrupted => {}
+            Err(err) => return Err(err),
+        }
+    };
+    if first == 0 {
+        return Ok(None);
     }
+    stream.read_exact(&mut prefix[1..])?;
     let len = u32::from_be_bytes(prefix) as usize;
     if len > MAX_FRAME {
         return Err(io::Error::new(

@@ -266,3 +266,31 @@ fn participants_share_one_embedded_daemon_and_it_stops_with_them() {
     drop(second);
     assert!(eventually(WAIT, || !config.socket.exists()));
 }
+
+#[test]
+fn a_sample_too_large_for_a_datagram_is_refused_with_or_without_consumers() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let producer = p
+        .producer::<Vec<u8>>("big", ProducerQos::default())
+        .unwrap();
+    let big = vec![7u8; 70_000];
+    let err = producer.write(&big).unwrap_err();
+    assert!(
+        matches!(err, ndds_client::WriteError::TooLarge { .. }),
+        "{err}"
+    );
+    let consumer = p
+        .consumer::<Vec<u8>>("big", ConsumerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    assert!(matches!(
+        producer.write(&big),
+        Err(ndds_client::WriteError::TooLarge { .. })
+    ));
+    // Nothing half-sent: the next sample that fits is the first the consumer sees.
+    producer.write(&vec![1, 2, 3]).unwrap();
+    let sample = consumer.recv_timeout(WAIT).unwrap();
+    assert_eq!(sample.value, vec![1, 2, 3]);
+}

@@ -862,3 +862,60 @@ fn a_burst_of_withdrawals_does_not_silence_announcements() {
         "node 1 lost the producer"
     );
 }
+
+#[test]
+fn a_near_datagram_sized_endpoint_and_pending_withdrawals_still_refresh() {
+    use ndds_core::types::{Container, ContainerShape, Field, Format, TypeLayout};
+    // A struct of 2300 fields: one endpoint of about 62 kB, close to the datagram limit.
+    let fields = (0..2300)
+        .map(|i| Field {
+            name: format!("field_{i:05}_padding_bytes"),
+            format: 0,
+        })
+        .collect();
+    let layout = TypeLayout {
+        formats: vec![Format::U8, Format::Named(0)],
+        root: 1,
+        containers: vec![Container {
+            name: "Wide".to_owned(),
+            shape: ContainerShape::Struct(fields),
+        }],
+    };
+    let mut wide = producer::<Pose>(guid(0, 1), "wide");
+    wide.type_desc = TypeDescription {
+        name: "Wide".to_owned(),
+        layout: Some(layout),
+    };
+    wide.fingerprint = wide.type_desc.fingerprint();
+    assert!(postcard::to_allocvec(&wide).unwrap().len() > 60_000);
+
+    let lease = 3 * PERIOD;
+    let mut net = SimNet::new(16);
+    for n in 0..2 {
+        net.add_node(config(n, 1600 + n as u64, PERIOD, lease));
+    }
+    net.add_local(0, wide.clone());
+    let reader = consumer::<Pose>(guid(1, 1), "wide");
+    let mut reader = reader;
+    reader.type_desc = wide.type_desc.clone();
+    reader.fingerprint = wide.fingerprint;
+    net.add_local(1, reader.clone());
+    // 1000 short-lived endpoints leave 1000 guids on the withdrawal list (about 11 kB).
+    let bulk: Vec<Guid> = (0..1000u64)
+        .map(|i| Guid {
+            participant: u64::MAX - i,
+            entity: 1,
+        })
+        .collect();
+    for g in &bulk {
+        net.add_local(0, consumer::<Scan>(*g, "bulk"));
+    }
+    net.run_for(Duration::from_millis(300));
+    let t = net.elapsed();
+    net.remove_locals(0, &bulk);
+    net.run_for(4 * lease);
+    // Refreshes kept arriving: the wide producer never decayed at node 1.
+    assert_eq!(count(&net, 1, t, unmatched(reader.guid, wide.guid)), 0);
+    assert!(net.knows(1, wide.guid));
+    assert!(bulk.iter().all(|g| !net.knows(1, *g)));
+}

@@ -806,3 +806,36 @@ fn a_node_cannot_flood_the_engine_with_endpoints() {
     assert_eq!(engine.endpoints().count(), MAX_ENDPOINTS_PER_NODE);
     assert_eq!(engine.stats().invalid_endpoints, 100);
 }
+
+#[test]
+fn nodes_with_unusable_unicast_locators_or_timers_are_invalid() {
+    let now = Instant::now();
+    let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
+    let Message::Announce(valid) = announce_one(layout(vec![Format::U8], 0, vec![])) else {
+        unreachable!()
+    };
+    let mut broken = Vec::new();
+    for edit in [
+        |n: &mut NodeInfo| n.unicast.addr = [0; 4],
+        |n: &mut NodeInfo| n.unicast.port = 0,
+        |n: &mut NodeInfo| n.announce_period_ms = 0,
+        |n: &mut NodeInfo| n.lease_ms = n.announce_period_ms,
+        |n: &mut NodeInfo| {
+            n.announce_period_ms = 3_000_000;
+            n.lease_ms = 4_000_000;
+        },
+    ] {
+        let mut announce = valid.clone();
+        edit(&mut announce.node);
+        broken.push(encode(&Message::Announce(announce)));
+    }
+    for bytes in &broken {
+        engine.handle_datagram(now, from(), bytes);
+    }
+    assert_eq!(
+        engine.stats().dropped(DropReason::Invalid),
+        broken.len() as u64
+    );
+    assert_eq!(engine.nodes().count(), 0);
+    assert_eq!(engine.endpoints().count(), 0);
+}

@@ -75,7 +75,7 @@ impl DiscoveryConfig {
         if !(0.0..0.5).contains(&self.period_jitter) {
             return Err(ConfigError::Jitter(self.period_jitter));
         }
-        if u32::try_from(self.lease.as_millis()).is_err() {
+        if self.lease > super::engine::MAX_LEASE {
             return Err(ConfigError::LeaseTooLong(self.lease));
         }
         if !self.solicit_delays.is_sorted() || self.solicit_delays.iter().any(|d| *d > MAX_DELAY) {
@@ -112,8 +112,8 @@ pub enum ConfigError {
         /// Configured period.
         period: Duration,
     },
-    /// The lease does not fit the wire field.
-    #[error("lease {0:?} is too long (at most u32::MAX ms)")]
+    /// The lease is longer than other nodes accept (`MAX_LEASE`, one hour).
+    #[error("lease {0:?} is too long (at most one hour)")]
     LeaseTooLong(Duration),
     /// Jitter outside `0.0..0.5`.
     #[error("period jitter {0} must be in 0.0..0.5")]

@@ -64,8 +64,9 @@ pub struct Stats {
     pub sent: u64,
     /// Dropped datagrams by reason, indexed by [`DropReason::index`].
     pub dropped: [u64; DropReason::ALL.len()],
-    /// Announced endpoints ignored because they broke a rule (bad layout, wrong fingerprint,
-    /// foreign guid).
+    /// Announced endpoints ignored because they broke a rule: bad layout or topic, wrong
+    /// fingerprint, a guid of one of our own endpoints, or more than
+    /// [`MAX_ENDPOINTS_PER_NODE`] endpoints for one node.
     pub invalid_endpoints: u64,
 }
 
@@ -319,34 +320,20 @@ impl Engine {
     }
 
     fn upsert_remote(&mut self, node: u64, expires: Instant, info: EndpointInfo) {
-        if let Some(existing) = self.table.get(&info.guid) {
-            match existing.origin {
-                // Nobody may announce one of our own endpoints.
-                Origin::Local => {
-                    self.stats.invalid_endpoints += 1;
-                    return;
-                }
-                // The owning client moved to another daemon (its daemon restarted, with a new
-                // node id): the newest announcement wins, without a flap if nothing changed.
-                Origin::Remote(owner) if owner != node && existing.info == info => {
-                    self.table
-                        .move_to(&info.guid, Origin::Remote(node), expires);
-                    return;
-                }
-                Origin::Remote(_) if existing.info == info => {
-                    self.table.refresh(&info.guid, expires);
-                    return;
-                }
-                Origin::Remote(_) => {}
-            }
-        }
-        let known = self.table.get(&info.guid).is_some();
-        if !known && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE {
+        let owner = self.table.get(&info.guid).map(|e| e.origin);
+        // Nobody may announce one of our own endpoints, and no node more than its share.
+        let over_cap = owner != Some(Origin::Remote(node))
+            && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE;
+        if owner == Some(Origin::Local) || over_cap {
             self.stats.invalid_endpoints += 1;
-            tracing::debug!(
-                limit = MAX_ENDPOINTS_PER_NODE,
-                "node announces too many endpoints"
-            );
+            return;
+        }
+        if self.table.get(&info.guid).is_some_and(|e| e.info == info) {
+            // Unchanged: a refresh. If another node owned it, the owning client moved to this
+            // node (its daemon restarted with a new node id): the newest announcement wins,
+            // without a flap.
+            self.table
+                .move_to(&info.guid, Origin::Remote(node), expires);
             return;
         }
         if let Err(reason) = check_endpoint(&info) {
@@ -554,35 +541,50 @@ impl Engine {
             .map(|e| &e.info)
             .collect();
         locals.sort_by_key(|info| info.guid);
-        let mut chunks: Vec<Vec<EndpointInfo>> = vec![Vec::new()];
-        let mut size = 0;
-        for info in locals {
-            let info_size = postcard::to_allocvec(info).map_or(0, |v| v.len());
-            let current = chunks.last().map_or(0, Vec::len);
-            if current > 0 && size + info_size > self.config.announce_chunk {
-                chunks.push(Vec::new());
-                size = 0;
-            }
-            size += info_size;
-            if let Some(chunk) = chunks.last_mut() {
-                chunk.push(info.clone());
+        let mut chunks = self.chunk_endpoints(&locals);
+        // A withdrawal list rides along in an endpoint datagram while both fit in one chunk;
+        // otherwise it gets a datagram of its own. A guid takes at most 15 bytes.
+        for (i, guids) in withdrawn.chunks(WITHDRAWN_PER_DATAGRAM).enumerate() {
+            let fits = chunks
+                .get(i)
+                .is_some_and(|(_, size, _)| size + 15 * guids.len() <= self.config.announce_chunk);
+            if fits {
+                chunks[i].2 = guids.to_vec();
+            } else {
+                chunks.push((Vec::new(), 0, guids.to_vec()));
             }
         }
-        let mut withdrawn_chunks = withdrawn.chunks(WITHDRAWN_PER_DATAGRAM);
-        let mut endpoint_chunks = chunks.into_iter();
-        loop {
-            let endpoints = endpoint_chunks.next();
-            let withdrawn = withdrawn_chunks.next();
-            if endpoints.is_none() && withdrawn.is_none() {
-                break;
-            }
+        for (endpoints, _, withdrawn) in chunks {
             let message = Message::Announce(Announce {
                 node: self.node_info(),
-                endpoints: endpoints.unwrap_or_default(),
-                withdrawn: withdrawn.map(<[Guid]>::to_vec).unwrap_or_default(),
+                endpoints,
+                withdrawn,
             });
             self.encode_and_push(destination, &message);
         }
+    }
+
+    /// Splits endpoints into groups of at most `announce_chunk` encoded bytes (an endpoint
+    /// larger than that travels alone), with each group's size. Always at least one group, so
+    /// a node without endpoints still refreshes its own entry.
+    fn chunk_endpoints(
+        &self,
+        locals: &[&EndpointInfo],
+    ) -> Vec<(Vec<EndpointInfo>, usize, Vec<Guid>)> {
+        let mut chunks = vec![(Vec::new(), 0, Vec::new())];
+        for info in locals {
+            let info_size = postcard::to_allocvec(info).map_or(0, |v| v.len());
+            let Some(last) = chunks.last_mut() else {
+                continue;
+            };
+            if !last.0.is_empty() && last.1 + info_size > self.config.announce_chunk {
+                chunks.push((vec![(*info).clone()], info_size, Vec::new()));
+            } else {
+                last.0.push((*info).clone());
+                last.1 += info_size;
+            }
+        }
+        chunks
     }
 
     fn encode_and_push(&mut self, destination: Destination, message: &Message<'_>) {
@@ -622,10 +624,18 @@ impl Engine {
 
 /// The rules a node's self-description must satisfy.
 fn check_node(info: &NodeInfo) -> Result<(), DropReason> {
-    if info.announce_period_ms == 0 || info.lease_ms <= info.announce_period_ms {
+    let period = u64::from(info.announce_period_ms);
+    if period == 0 || info.lease_ms <= info.announce_period_ms || period * 2 > max_lease_ms() {
+        return Err(DropReason::Invalid);
+    }
+    if info.unicast.addr == [0; 4] || info.unicast.port == 0 {
         return Err(DropReason::Invalid);
     }
     Ok(())
+}
+
+fn max_lease_ms() -> u64 {
+    MAX_LEASE.as_millis() as u64
 }
 
 /// The lease a node asked for, capped at [`MAX_LEASE`].

@@ -73,15 +73,8 @@ impl Table {
         self.entries.get(guid)
     }
 
-    /// Refreshes the expiry of an existing entry.
-    pub fn refresh(&mut self, guid: &Guid, expires: Instant) {
-        if let Some(entry) = self.entries.get_mut(guid) {
-            entry.expires = Some(expires);
-        }
-    }
-
-    /// Gives an existing entry a new owner and expiry, without match events (the endpoint
-    /// itself did not change).
+    /// Gives an existing entry its (possibly new) owner and expiry, without match events: the
+    /// endpoint itself did not change.
     pub fn move_to(&mut self, guid: &Guid, origin: Origin, expires: Instant) {
         if let Some(entry) = self.entries.get_mut(guid) {
             uncount(&mut self.per_origin, entry.origin);

@@ -3,7 +3,8 @@
 //! Each frame is a 4-byte big-endian length followed by that many bytes of postcard: a
 //! [`ClientMessage`] from client to daemon, a [`DaemonMessage`] from daemon to client. The
 //! first frame of a connection is [`ClientMessage::Hello`]; the daemon answers
-//! [`DaemonMessage::Welcome`] or [`DaemonMessage::Refused`] and then closes. A frame longer than
+//! [`DaemonMessage::Welcome`] and the session is open, or [`DaemonMessage::Refused`] and closes
+//! the connection. A frame longer than
 //! [`MAX_FRAME`], or one that does not decode, ends the connection with a logged reason.
 
 pub mod client;

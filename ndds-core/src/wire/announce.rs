@@ -5,7 +5,7 @@
 //! ```
 //!
 //! Every endpoint listed is created or refreshed at the receiver with a lease of
-//! `node.lease_ms`; every guid in `withdrawn` is removed at once. A full announcement
+//! `node.lease_ms` (capped at one hour); every guid in `withdrawn` is removed at once. A full announcement
 //! (periodic refresh, or the answer to a `Solicit`) may be split over several datagrams, each a
 //! complete `Announce`; receivers treat every datagram on its own.
 

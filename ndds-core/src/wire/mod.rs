@@ -59,7 +59,8 @@ pub enum DropReason {
     /// Our own datagram, looped back by multicast.
     #[error("own datagram")]
     Own,
-    /// A message kind this receiver does not handle (e.g. `Data` on a discovery socket).
+    /// A well-formed message this receiver does not handle: `Data` on a discovery socket,
+    /// discovery messages on a data socket, anything reaching an engine after `close`.
     #[error("message kind not handled by this receiver")]
     Unexpected,
 }

@@ -4,8 +4,8 @@
 //! header(kind = 1) | NodeInfo
 //! ```
 //!
-//! Sent by a daemon to the discovery multicast group (and to each static peer) when it starts,
-//! and again after a short back-off in case the first one was lost. Every daemon that receives
+//! Sent by a daemon to the discovery multicast group when it starts, and again after a short
+//! back-off in case the first one was lost. Every daemon that receives
 //! it answers with a full `Announce` sent by unicast to `node.unicast`, and records the
 //! soliciting node as if it had announced itself.
 
