@@ -29,9 +29,6 @@ use crate::sync::deadline;
 /// State of one consumer shared with the participant's event router.
 #[derive(Debug)]
 pub(crate) struct ConsumerState {
-    pub(crate) topic: String,
-    pub(crate) type_desc: TypeDescription,
-    pub(crate) fingerprint: u64,
     pub(crate) peers: Peers,
     pub(crate) slot: Arc<ConsumerSlot>,
     decoder: Arc<Decoder>,
@@ -47,10 +44,7 @@ struct Decoder {
 impl ConsumerState {
     pub(crate) fn new(topic: &str, type_desc: TypeDescription, slot: Arc<ConsumerSlot>) -> Self {
         ConsumerState {
-            topic: topic.to_owned(),
-            fingerprint: type_desc.fingerprint(),
-            type_desc,
-            peers: Peers::default(),
+            peers: Peers::new(topic, type_desc),
             slot,
             decoder: Arc::new(Decoder {
                 topic: topic.to_owned(),
@@ -107,12 +101,12 @@ impl RawConsumer {
 
     /// The topic name.
     pub fn topic(&self) -> &str {
-        &self.state.topic
+        &self.state.peers.topic
     }
 
     /// The type description announced with this consumer.
     pub fn type_description(&self) -> &TypeDescription {
-        &self.state.type_desc
+        &self.state.peers.type_desc
     }
 
     /// The producers currently matched.

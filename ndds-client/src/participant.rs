@@ -225,14 +225,6 @@ impl Endpoint {
             Endpoint::Consumer(state) => &state.peers,
         }
     }
-
-    /// Topic, type description and fingerprint.
-    fn identity(&self) -> (&str, &TypeDescription, u64) {
-        match self {
-            Endpoint::Producer(s) => (&s.topic, &s.type_desc, s.fingerprint),
-            Endpoint::Consumer(s) => (&s.topic, &s.type_desc, s.fingerprint),
-        }
-    }
 }
 
 impl Router {
@@ -258,10 +250,7 @@ impl Router {
         match message {
             DaemonMessage::Matched { remote, .. } => peers.matched(remote, on_change),
             DaemonMessage::Unmatched { remote, .. } => peers.unmatched(&remote, on_change),
-            DaemonMessage::Incompatible { remote, .. } => {
-                let (topic, type_desc, fingerprint) = endpoint.identity();
-                peers.incompatible(topic, (&type_desc.name, fingerprint), remote);
-            }
+            DaemonMessage::Incompatible { remote, .. } => peers.incompatible(remote),
             _ => {}
         }
     }
@@ -522,8 +511,12 @@ impl Participant {
         endpoint: Endpoint,
         qos: EndpointQos,
     ) -> Result<EndpointHandle, DeclareError> {
-        let (topic, type_desc, fingerprint) = endpoint.identity();
-        let (topic, type_desc) = (topic.to_owned(), type_desc.clone());
+        let peers = endpoint.peers();
+        let (topic, type_desc, fingerprint) = (
+            peers.topic.clone(),
+            peers.type_desc.clone(),
+            peers.fingerprint,
+        );
         write(&self.inner.router.endpoints).insert(entity, endpoint);
         // From here on, dropping the handle undoes the local registration.
         let handle = EndpointHandle {

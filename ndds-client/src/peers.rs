@@ -1,11 +1,12 @@
-//! The endpoints a local producer or consumer is matched with (or incompatible with), kept
-//! current by the daemon's match events.
+//! What a local producer and a local consumer have in common: their topic and type, and the
+//! endpoints they are matched with (or incompatible with), kept current by the daemon's match
+//! events.
 
 use std::collections::BTreeMap;
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use ndds_core::types::fingerprint_hex;
+use ndds_core::types::{TypeDescription, fingerprint_hex};
 use ndds_core::wire::{EndpointInfo, Guid};
 
 use crate::sync::{deadline, lock};
@@ -16,14 +17,27 @@ struct Maps {
     incompatible: BTreeMap<Guid, EndpointInfo>,
 }
 
-/// Matched and incompatible peers of one local endpoint.
-#[derive(Debug, Default)]
+/// Topic, type, and matched and incompatible peers of one local endpoint.
+#[derive(Debug)]
 pub(crate) struct Peers {
+    pub(crate) topic: String,
+    pub(crate) type_desc: TypeDescription,
+    pub(crate) fingerprint: u64,
     maps: Mutex<Maps>,
     changed: Condvar,
 }
 
 impl Peers {
+    pub(crate) fn new(topic: &str, type_desc: TypeDescription) -> Self {
+        Peers {
+            topic: topic.to_owned(),
+            fingerprint: type_desc.fingerprint(),
+            type_desc,
+            maps: Mutex::default(),
+            changed: Condvar::new(),
+        }
+    }
+
     /// Records a match. `apply` sees the matched endpoints after the change and runs before
     /// anyone waiting for matches is woken, so a woken writer finds its destinations set.
     pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(&[EndpointInfo])) {
@@ -40,11 +54,11 @@ impl Peers {
     }
 
     /// Records an incompatible peer and logs it.
-    pub(crate) fn incompatible(&self, topic: &str, local_type: (&str, u64), remote: EndpointInfo) {
+    pub(crate) fn incompatible(&self, remote: EndpointInfo) {
         tracing::warn!(
-            topic,
-            local_type = local_type.0,
-            local_fingerprint = fingerprint_hex(local_type.1),
+            topic = self.topic,
+            local_type = self.type_desc.name,
+            local_fingerprint = fingerprint_hex(self.fingerprint),
             remote_type = remote.type_desc.name,
             remote_fingerprint = fingerprint_hex(remote.fingerprint),
             remote_pid = remote.pid,

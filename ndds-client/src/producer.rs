@@ -42,9 +42,6 @@ struct Scratch {
 #[derive(Debug)]
 pub(crate) struct ProducerState {
     pub(crate) entity: u32,
-    pub(crate) topic: String,
-    pub(crate) type_desc: TypeDescription,
-    pub(crate) fingerprint: u64,
     qos: ProducerQosWire,
     pub(crate) peers: Peers,
     destinations: RwLock<Vec<Destination>>,
@@ -62,11 +59,8 @@ impl ProducerState {
     ) -> Self {
         ProducerState {
             entity,
-            topic: topic.to_owned(),
-            fingerprint: type_desc.fingerprint(),
-            type_desc,
             qos,
-            peers: Peers::default(),
+            peers: Peers::new(topic, type_desc),
             destinations: RwLock::new(Vec::new()),
             seq: AtomicU64::new(0),
             scratch: Mutex::new(Scratch::default()),
@@ -225,12 +219,12 @@ impl RawProducer {
 
     /// The topic name.
     pub fn topic(&self) -> &str {
-        &self.state.topic
+        &self.state.peers.topic
     }
 
     /// The type description announced with this producer.
     pub fn type_description(&self) -> &TypeDescription {
-        &self.state.type_desc
+        &self.state.peers.type_desc
     }
 
     /// The consumers currently matched.
