@@ -179,3 +179,112 @@ fn hostile_datagrams_to_a_data_socket_are_counted_and_samples_still_flow() {
     }
     assert_eq!(stats.dropped("unexpected"), 1);
 }
+
+#[test]
+fn a_flood_of_junk_does_not_silence_a_daemon() {
+    let domain = TestDomain::new();
+    let a = domain.daemon("a");
+    let _b = domain.daemon("b");
+    let (tool_a, tool_b) = (domain.tool("a"), domain.tool("b"));
+    let a_node = tool_a.graph().unwrap().local.node;
+    assert!(
+        wait_until(WAIT, || tool_b
+            .graph()
+            .unwrap()
+            .nodes
+            .iter()
+            .any(|n| n.node == a_node))
+        .is_some()
+    );
+    let target = SocketAddrV4::from(tool_a.graph().unwrap().local.info.unicast);
+
+    // Junk at A's unicast port for twice the lease, bounded in time and count.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flood = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let sender = loopback_sender();
+            let junk = [0xAB_u8; 64];
+            let mut sent = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) && sent < 20_000_000 {
+                let _ = sender.send_to(&junk, target);
+                sent += 1;
+            }
+            sent
+        })
+    };
+    let started = std::time::Instant::now();
+    let mut lost = false;
+    while started.elapsed() < interop_tests::LEASE * 2 {
+        lost |= !tool_b
+            .graph()
+            .unwrap()
+            .nodes
+            .iter()
+            .any(|n| n.node == a_node);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let sent = flood.join().unwrap();
+    let graph = tool_a.graph().unwrap();
+    eprintln!(
+        "sent {sent} junk datagrams; A dropped {} as foreign, {} overflowed its queue",
+        counter(&graph, "dropped_foreign_magic"),
+        counter(&graph, "input_overflow")
+    );
+    assert!(counter(&graph, "dropped_foreign_magic") > 0);
+    assert!(
+        !lost,
+        "B lost A during the flood: A's refreshes were starved"
+    );
+    drop(a);
+}
+
+#[test]
+fn a_frozen_client_neither_blocks_the_daemon_nor_delays_its_shutdown() {
+    let domain = TestDomain::new();
+    let mut daemon = domain.daemon("a");
+    let frozen = interop_tests::ClientProcess::test_node(
+        &domain.socket("a"),
+        &["produce", "--topic", "busy", "--rate", "10"],
+    );
+    frozen.event("ready", WAIT).expect("producer ready");
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(frozen.pid() as i32),
+        nix::sys::signal::Signal::SIGSTOP,
+    )
+    .unwrap();
+    // Every consumer created and dropped sends the frozen producer two events it never reads.
+    let participant = Participant::builder()
+        .socket(domain.socket("a"))
+        .embedded(EmbeddedPolicy::Never)
+        .connect()
+        .unwrap();
+    let tool = domain.tool("a");
+    let dropped = wait_until(Duration::from_secs(60), || {
+        for _ in 0..100 {
+            drop(
+                participant
+                    .consumer::<u32>("busy", ConsumerQos::default())
+                    .unwrap(),
+            );
+        }
+        counter(&tool.graph().unwrap(), "slow_clients") >= 1
+    });
+    assert!(
+        dropped.is_some(),
+        "the daemon never gave up on the frozen client"
+    );
+    assert!(
+        !interop_tests::has_endpoint(&tool.graph().unwrap(), "busy", frozen.pid()),
+        "the frozen client's endpoints are withdrawn"
+    );
+    let stopping = std::time::Instant::now();
+    assert_eq!(daemon.terminate(WAIT), Some(0));
+    assert!(
+        stopping.elapsed() < Duration::from_secs(1),
+        "shutdown took {:?}",
+        stopping.elapsed()
+    );
+    assert!(!daemon.log_text().contains("did not stop in time"));
+}

@@ -19,6 +19,8 @@ use crate::driver::{ClientId, Counters, Input};
 
 /// Frames the driver may queue for one client before the client counts as not reading.
 pub const OUTBOX: usize = 4096;
+/// How long the frames left after a session ends may take to write.
+const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// The codec of the Unix-socket protocol: 4-byte big-endian length, then the body.
 pub fn codec() -> LengthDelimitedCodec {
@@ -83,18 +85,30 @@ pub async fn serve(
             message = pending.recv() => match message {
                 None => break "session ended by the daemon".to_owned(),
                 Some(message) => {
-                    if let Err(reason) = write_frame(&mut writer, &message).await {
+                    // A client that stops reading must not hold this task: the daemon's
+                    // cancellation interrupts a blocked write.
+                    let written = tokio::select! {
+                        () = cancel.cancelled() => Err("dropped by the daemon".to_owned()),
+                        written = write_frame(&mut writer, &message) => written,
+                    };
+                    if let Err(reason) = written {
                         break reason;
                     }
                 }
             },
         }
     };
-    // Whatever the daemon queued before ending the session (e.g. `Refused`) is still sent.
-    while let Ok(message) = pending.try_recv() {
-        if write_frame(&mut writer, &message).await.is_err() {
-            break;
-        }
+    // Whatever the daemon queued before ending the session normally (e.g. `Refused`) is still
+    // sent, briefly; a dropped client gets nothing more.
+    if !cancel.is_cancelled() {
+        let drain = async {
+            while let Ok(message) = pending.try_recv() {
+                if write_frame(&mut writer, &message).await.is_err() {
+                    break;
+                }
+            }
+        };
+        let _ = tokio::time::timeout(DRAIN_TIMEOUT, drain).await;
     }
     tracing::debug!(client, %reason, "client connection ended");
     let _ = inputs.send(Input::Closed { client, reason }).await;

@@ -5,7 +5,7 @@
 //! is cancelled, says `Bye` to the domain, waits for its tasks and removes its socket file.
 
 use std::net::SocketAddr;
-use std::os::unix::fs::MetadataExt;
+use std::os::unix::fs::{FileTypeExt, MetadataExt};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -34,6 +34,12 @@ pub enum DaemonError {
     /// Another daemon answers on the socket path.
     #[error("a daemon is already serving {path} (stop it, or pick another --socket / --domain)")]
     AlreadyRunning {
+        /// The socket path.
+        path: PathBuf,
+    },
+    /// Something other than a socket exists at the socket path; it is left alone.
+    #[error("{path} exists and is not a socket: choose another --socket path")]
+    NotASocket {
         /// The socket path.
         path: PathBuf,
     },
@@ -79,6 +85,8 @@ impl Daemon {
         };
         let mut discovery = config.discovery();
         discovery.seed = config.seed.unwrap_or_else(|| fastrand::u64(..));
+        // Never from the seed: two hosts given one seed must still have distinct ids.
+        discovery.node_id = Some(fastrand::u64(1..));
         discovery.hostname = gethostname::gethostname().to_string_lossy().into_owned();
         discovery.pid = std::process::id();
         discovery.unicast = unicast;
@@ -151,14 +159,16 @@ impl Daemon {
         driver.flush().await;
         loop {
             let deadline = driver.deadline().map(tokio::time::Instant::from_std);
+            // The timer comes before the queue: a flood of datagrams must not starve our own
+            // announcements and expiry.
             tokio::select! {
                 biased;
                 () = shutdown.cancelled() => break,
+                () = sleep_until(deadline) => driver.on_timer(),
                 input = queue.recv() => match input {
                     Some(input) => driver.on_input(input),
                     None => break,
                 },
-                () = sleep_until(deadline) => driver.on_timer(),
             }
             driver.flush().await;
         }
@@ -264,9 +274,17 @@ fn listen(path: &Path) -> Result<UnixListener, DaemonError> {
             path: path.to_owned(),
         });
     }
-    if path.exists() {
-        tracing::info!(path = %path.display(), "removing stale daemon socket");
-        std::fs::remove_file(path).map_err(listen_err)?;
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.file_type().is_socket() => {
+            tracing::info!(path = %path.display(), "removing stale daemon socket");
+            std::fs::remove_file(path).map_err(listen_err)?;
+        }
+        Ok(_) => {
+            return Err(DaemonError::NotASocket {
+                path: path.to_owned(),
+            });
+        }
+        Err(_) => {}
     }
     UnixListener::bind(path).map_err(listen_err)
 }

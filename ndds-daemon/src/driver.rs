@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use ndds_core::discovery::{Destination, Engine, Event, Origin};
+use ndds_core::discovery::{Destination, Engine, Event, Origin, Transmit};
 use ndds_core::ipc::{
     ClientMessage, ClientSummary, DaemonMessage, EndpointDecl, EndpointSummary, Graph, Hello,
     IPC_VERSION, NodeSummary, Role, Welcome,
@@ -84,7 +84,6 @@ pub struct Driver {
     engine: Engine,
     socket: Arc<UdpSocket>,
     group: SocketAddrV4,
-    interface: [u8; 4],
     clients: HashMap<ClientId, Client>,
     by_participant: HashMap<u64, ClientId>,
     counters: Arc<Counters>,
@@ -98,12 +97,10 @@ impl Driver {
         group: SocketAddrV4,
         counters: Arc<Counters>,
     ) -> Self {
-        let interface = engine.config().unicast.addr;
         Driver {
             engine,
             socket,
             group,
-            interface,
             clients: HashMap::new(),
             by_participant: HashMap::new(),
             counters,
@@ -146,20 +143,33 @@ impl Driver {
         self.engine.close(Instant::now());
     }
 
-    /// Sends the engine's pending datagrams and routes its events.
+    /// Sends the engine's pending datagrams and routes its events, until neither is left
+    /// (routing an event can drop a slow client, whose withdrawal must go out now).
     pub async fn flush(&mut self) {
-        while let Some(transmit) = self.engine.poll_transmit() {
-            let to = match transmit.destination {
-                Destination::Multicast => self.group,
-                Destination::Unicast(locator) => SocketAddrV4::from(locator),
-            };
-            if let Err(err) = self.socket.send_to(&transmit.payload, to).await {
-                self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(%to, %err, "discovery send failed");
+        loop {
+            let mut idle = true;
+            while let Some(transmit) = self.engine.poll_transmit() {
+                idle = false;
+                self.transmit(transmit).await;
+            }
+            while let Some(event) = self.engine.poll_event() {
+                idle = false;
+                self.route(event);
+            }
+            if idle {
+                return;
             }
         }
-        while let Some(event) = self.engine.poll_event() {
-            self.route(event);
+    }
+
+    async fn transmit(&mut self, transmit: Transmit) {
+        let to = match transmit.destination {
+            Destination::Multicast => self.group,
+            Destination::Unicast(locator) => SocketAddrV4::from(locator),
+        };
+        if let Err(err) = self.socket.send_to(&transmit.payload, to).await {
+            self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(%to, %err, "discovery send failed");
         }
     }
 
@@ -222,6 +232,10 @@ impl Driver {
     }
 
     fn on_frame(&mut self, client: ClientId, message: ClientMessage) {
+        // Frames still queued from a connection that was refused or dropped are ignored.
+        if !self.clients.contains_key(&client) {
+            return;
+        }
         let has_session = self.clients.get(&client).is_some_and(|c| c.hello.is_some());
         match message {
             ClientMessage::Hello(hello) if !has_session => self.on_hello(client, hello),
@@ -267,7 +281,7 @@ impl Driver {
             node: self.engine.node_id(),
             domain: config.domain,
             hostname: config.hostname.clone(),
-            interface: self.interface,
+            interface: config.unicast.addr,
             pid: config.pid,
             version: config.version.clone(),
         }

@@ -194,3 +194,54 @@ fn a_stale_socket_file_is_replaced_and_removed_on_exit() {
     assert!(log.contains("removing stale daemon socket"), "{log}");
     assert!(log.contains("SIGTERM"), "{log}");
 }
+
+#[test]
+fn a_socket_path_that_is_not_a_socket_is_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let notes = dir.path().join("d.sock");
+    std::fs::write(&notes, "precious").unwrap();
+    let out = Command::new(DAEMON)
+        .args(isolated(dir.path()))
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("is not a socket"), "{}", stderr(&out));
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "precious");
+}
+
+#[test]
+fn frames_queued_behind_a_refusal_open_no_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut daemon = spawn(&isolated(dir.path()));
+    let socket = dir.path().join("d.sock");
+    let hello = |participant| {
+        ipc::encode_frame(&ClientMessage::Hello(Hello {
+            ipc_version: IPC_VERSION,
+            participant,
+            pid: std::process::id(),
+            name: "refusal-test".into(),
+            role: Role::Client,
+        }))
+        .unwrap()
+    };
+    // A query before Hello is refused; the Hello written right behind it must not count.
+    let mut stream = connect(&socket);
+    stream.set_read_timeout(Some(WAIT)).unwrap();
+    let mut bytes = ipc::encode_frame(&ClientMessage::QueryGraph { request: 1 }).unwrap();
+    bytes.extend(hello(77));
+    stream.write_all(&bytes).unwrap();
+    assert!(matches!(
+        read_frame(&mut stream),
+        DaemonMessage::Refused { .. }
+    ));
+    // The same participant id is free for a proper session.
+    let mut again = connect(&socket);
+    again.set_read_timeout(Some(WAIT)).unwrap();
+    again.write_all(&hello(77)).unwrap();
+    assert!(
+        matches!(read_frame(&mut again), DaemonMessage::Welcome(_)),
+        "participant 77 was not left registered by the refused connection"
+    );
+    assert_eq!(terminate(&mut daemon), Some(0));
+}

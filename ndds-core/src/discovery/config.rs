@@ -9,8 +9,11 @@ use crate::wire::Locator;
 pub struct DiscoveryConfig {
     /// Domain id carried in every header; datagrams of other domains are dropped.
     pub domain: u16,
-    /// Seed of the engine's random numbers (node id, jitter). Same seed, same run.
+    /// Seed of the engine's random numbers (node id unless `node_id` is set, jitter). Same
+    /// seed, same run.
     pub seed: u64,
+    /// This node's id; drawn from `seed` when `None`. Every node of a domain needs its own.
+    pub node_id: Option<u64>,
     /// Host name announced to other nodes.
     pub hostname: String,
     /// Process id announced to other nodes.
@@ -43,6 +46,7 @@ impl DiscoveryConfig {
         DiscoveryConfig {
             domain,
             seed: 0,
+            node_id: None,
             hostname: String::new(),
             pid: 0,
             unicast,

@@ -15,7 +15,7 @@
 //! and repeated in the next announcements. Remote nodes and endpoints decay when not refreshed
 //! within the lease their node announced. [`Engine::close`] says `Bye`.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
@@ -33,6 +33,8 @@ pub const MAX_TOPIC_LEN: usize = 256;
 pub const MAX_NODES: usize = 4096;
 /// Most endpoints remembered per remote node; further new ones are ignored and counted.
 pub const MAX_ENDPOINTS_PER_NODE: usize = 16_384;
+/// Most remote endpoints remembered in all; further new ones are ignored and counted.
+pub const MAX_REMOTE_ENDPOINTS: usize = 262_144;
 /// Most answers to solicitations waiting for their jitter delay.
 pub const MAX_PENDING_REPLIES: usize = 1024;
 /// Longest lease accepted from a remote node; longer ones are shortened to this.
@@ -116,6 +118,7 @@ pub struct Engine {
     rng: fastrand::Rng,
     table: Table,
     nodes: HashMap<u64, RemoteNode>,
+    node_expiry: BTreeSet<(Instant, u64)>,
     withdrawn: VecDeque<(Guid, u8)>,
     solicits: VecDeque<Instant>,
     replies: Vec<(Instant, Locator)>,
@@ -125,6 +128,7 @@ pub struct Engine {
     events: VecDeque<Event>,
     stats: Stats,
     closed: bool,
+    id_clash_reported: bool,
 }
 
 impl Engine {
@@ -132,12 +136,13 @@ impl Engine {
     pub fn new(config: DiscoveryConfig, now: Instant) -> Result<Self, ConfigError> {
         config.validate()?;
         let mut rng = fastrand::Rng::with_seed(config.seed);
-        let node_id = loop {
+        let drawn = loop {
             let id = rng.u64(..);
             if id != 0 {
                 break id;
             }
         };
+        let node_id = config.node_id.filter(|id| *id != 0).unwrap_or(drawn);
         let solicits = config.solicit_delays.iter().map(|d| now + *d).collect();
         Ok(Engine {
             config,
@@ -145,6 +150,7 @@ impl Engine {
             rng,
             table: Table::default(),
             nodes: HashMap::new(),
+            node_expiry: BTreeSet::new(),
             withdrawn: VecDeque::new(),
             solicits,
             replies: Vec::new(),
@@ -154,6 +160,7 @@ impl Engine {
             events: VecDeque::new(),
             stats: Stats::default(),
             closed: false,
+            id_clash_reported: false,
         })
     }
 
@@ -221,6 +228,7 @@ impl Engine {
         }
         let (header, message) = wire::decode_for_domain(bytes, self.config.domain)?;
         if header.sender == self.node_id {
+            self.check_id_clash(from);
             return Err(DropReason::Own);
         }
         match message {
@@ -228,7 +236,7 @@ impl Engine {
                 check_node(&solicit.node)?;
                 let unicast = solicit.node.unicast;
                 self.touch_node(now, header.sender, from, solicit.node)?;
-                self.schedule_reply(now, unicast);
+                self.schedule_reply(now, unicast, from);
             }
             Message::Announce(announce) => {
                 check_node(&announce.node)?;
@@ -258,7 +266,7 @@ impl Engine {
         if self.touch_node(now, node, from, announce.node)? {
             // A node we did not know: answer with everything we have so it need not wait for
             // our next refresh (its Solicit may have been lost).
-            self.schedule_reply(now, unicast);
+            self.schedule_reply(now, unicast, from);
         }
         for guid in &announce.withdrawn {
             self.remove_remote(node, guid);
@@ -270,7 +278,13 @@ impl Engine {
     }
 
     /// Queues a unicast full announcement to `to` after a random delay, once per destination.
-    fn schedule_reply(&mut self, now: Instant, to: Locator) {
+    /// Only a locator that is also the datagram's source is answered: a datagram naming some
+    /// other address cannot turn this node into a reflector toward it.
+    fn schedule_reply(&mut self, now: Instant, to: Locator, from: SocketAddr) {
+        if from != SocketAddr::V4(to.into()) {
+            tracing::debug!(%from, announced = %to, "not answering: source is not the announced locator");
+            return;
+        }
         if self.replies.len() >= MAX_PENDING_REPLIES || self.replies.iter().any(|(_, d)| *d == to) {
             return;
         }
@@ -290,10 +304,12 @@ impl Engine {
         let full = self.nodes.len() >= MAX_NODES;
         match self.nodes.get_mut(&node) {
             Some(known) => {
+                self.node_expiry.remove(&(known.expires, node));
                 known.info = info;
                 known.last_from = from;
                 known.last_seen = now;
                 known.expires = now + lease;
+                self.node_expiry.insert((known.expires, node));
                 Ok(false)
             }
             None if full => {
@@ -314,6 +330,7 @@ impl Engine {
                         expires: now + lease,
                     },
                 );
+                self.node_expiry.insert((now + lease, node));
                 Ok(true)
             }
         }
@@ -323,7 +340,8 @@ impl Engine {
         let owner = self.table.get(&info.guid).map(|e| e.origin);
         // Nobody may announce one of our own endpoints, and no node more than its share.
         let over_cap = owner != Some(Origin::Remote(node))
-            && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE;
+            && (self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE
+                || (owner.is_none() && self.table.count_remote() >= MAX_REMOTE_ENDPOINTS));
         if owner == Some(Origin::Local) || over_cap {
             self.stats.invalid_endpoints += 1;
             return;
@@ -365,7 +383,8 @@ impl Engine {
         for guid in self.table.owned_by(Origin::Remote(node)) {
             self.table.remove(&guid, &mut self.events);
         }
-        if self.nodes.remove(&node).is_some() {
+        if let Some(known) = self.nodes.remove(&node) {
+            self.node_expiry.remove(&(known.expires, node));
             self.events.push_back(Event::NodeLost { node, reason });
         }
     }
@@ -477,10 +496,10 @@ impl Engine {
 
     fn expire(&mut self, now: Instant) {
         let expired_nodes: Vec<u64> = self
-            .nodes
+            .node_expiry
             .iter()
-            .filter(|(_, node)| node.expires <= now)
-            .map(|(id, _)| *id)
+            .take_while(|(at, _)| *at <= now)
+            .map(|(_, id)| *id)
             .collect();
         for node in expired_nodes {
             tracing::debug!(node = format_args!("{node:016x}"), "node lease expired");
@@ -604,12 +623,26 @@ impl Engine {
     }
 
     fn update_expiry(&mut self) {
-        let node_min = self.nodes.values().map(|n| n.expires).min();
+        let node_min = self.node_expiry.first().map(|(at, _)| *at);
         let entry_min = self.table.earliest_expiry();
         self.next_expiry = match (node_min, entry_min) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
+    }
+
+    /// Our node id arrived from an address that is not ours: another node uses the same id
+    /// (the same configured node id or seed on two hosts). The two cannot see each other.
+    fn check_id_clash(&mut self, from: SocketAddr) {
+        if from != SocketAddr::V4(self.config.unicast.into()) && !self.id_clash_reported {
+            self.id_clash_reported = true;
+            tracing::error!(
+                %from,
+                node = format_args!("{:016x}", self.node_id),
+                "another node uses this node's id: the two cannot discover each other (do not \
+                 give two daemons the same node id or seed)"
+            );
+        }
     }
 
     fn jitter(&mut self, max: Duration) -> Duration {

@@ -59,12 +59,14 @@ impl TopicEntry {
     }
 }
 
-/// All endpoints, with a topic index.
+/// All endpoints, indexed by topic (for matching), by owner (for forgetting a node) and by
+/// expiry (for decay), so no operation scans the whole table.
 #[derive(Debug, Default)]
 pub struct Table {
     entries: HashMap<Guid, Entry>,
     by_topic: HashMap<String, TopicEntry>,
-    per_origin: HashMap<Origin, usize>,
+    by_origin: HashMap<Origin, BTreeSet<Guid>>,
+    by_expiry: BTreeSet<(Instant, Guid)>,
 }
 
 impl Table {
@@ -77,10 +79,10 @@ impl Table {
     /// endpoint itself did not change.
     pub fn move_to(&mut self, guid: &Guid, origin: Origin, expires: Instant) {
         if let Some(entry) = self.entries.get_mut(guid) {
-            uncount(&mut self.per_origin, entry.origin);
-            *self.per_origin.entry(origin).or_default() += 1;
+            unindex(&mut self.by_origin, &mut self.by_expiry, entry);
             entry.origin = origin;
             entry.expires = Some(expires);
+            index(&mut self.by_origin, &mut self.by_expiry, entry);
         }
     }
 
@@ -117,7 +119,7 @@ impl Table {
             }
         }
         topic.side(kind).insert(guid);
-        *self.per_origin.entry(entry.origin).or_default() += 1;
+        index(&mut self.by_origin, &mut self.by_expiry, &entry);
         self.entries.insert(guid, entry);
     }
 
@@ -125,7 +127,7 @@ impl Table {
     /// paired with it (matched or incompatible).
     pub fn remove(&mut self, guid: &Guid, events: &mut impl Extend<Event>) -> Option<Entry> {
         let entry = self.entries.remove(guid)?;
-        uncount(&mut self.per_origin, entry.origin);
+        unindex(&mut self.by_origin, &mut self.by_expiry, &entry);
         let kind = entry.info.kind();
         if let Some(topic) = self.by_topic.get_mut(&entry.info.topic) {
             topic.side(kind).remove(guid);
@@ -155,42 +157,64 @@ impl Table {
 
     /// Number of entries owned by `origin`.
     pub fn count_owned(&self, origin: Origin) -> usize {
-        self.per_origin.get(&origin).copied().unwrap_or(0)
+        self.by_origin.get(&origin).map_or(0, BTreeSet::len)
     }
 
-    /// Guids of the entries owned by `origin`.
+    /// Number of entries owned by remote nodes.
+    pub fn count_remote(&self) -> usize {
+        self.entries.len() - self.count_owned(Origin::Local)
+    }
+
+    /// Guids of the entries owned by `origin`, in order.
     pub fn owned_by(&self, origin: Origin) -> Vec<Guid> {
-        let mut guids: Vec<Guid> = self
-            .entries
-            .values()
-            .filter(|e| e.origin == origin)
-            .map(|e| e.info.guid)
-            .collect();
-        guids.sort();
-        guids
+        self.by_origin
+            .get(&origin)
+            .map(|guids| guids.iter().copied().collect())
+            .unwrap_or_default()
     }
 
     /// Earliest expiry among remote entries.
     pub fn earliest_expiry(&self) -> Option<Instant> {
-        self.entries.values().filter_map(|e| e.expires).min()
+        self.by_expiry.first().map(|(at, _)| *at)
     }
 
     /// Guids of remote entries whose lease ended at or before `now`.
     pub fn expired(&self, now: Instant) -> Vec<Guid> {
-        self.entries
-            .values()
-            .filter(|e| e.expires.is_some_and(|t| t <= now))
-            .map(|e| e.info.guid)
+        self.by_expiry
+            .iter()
+            .take_while(|(at, _)| *at <= now)
+            .map(|(_, guid)| *guid)
             .collect()
     }
 }
 
-fn uncount(counts: &mut HashMap<Origin, usize>, origin: Origin) {
-    if let Some(count) = counts.get_mut(&origin) {
-        *count -= 1;
-        if *count == 0 {
-            counts.remove(&origin);
+fn index(
+    by_origin: &mut HashMap<Origin, BTreeSet<Guid>>,
+    by_expiry: &mut BTreeSet<(Instant, Guid)>,
+    entry: &Entry,
+) {
+    by_origin
+        .entry(entry.origin)
+        .or_default()
+        .insert(entry.info.guid);
+    if let Some(at) = entry.expires {
+        by_expiry.insert((at, entry.info.guid));
+    }
+}
+
+fn unindex(
+    by_origin: &mut HashMap<Origin, BTreeSet<Guid>>,
+    by_expiry: &mut BTreeSet<(Instant, Guid)>,
+    entry: &Entry,
+) {
+    if let Some(guids) = by_origin.get_mut(&entry.origin) {
+        guids.remove(&entry.info.guid);
+        if guids.is_empty() {
+            by_origin.remove(&entry.origin);
         }
+    }
+    if let Some(at) = entry.expires {
+        by_expiry.remove(&(at, entry.info.guid));
     }
 }
 
