@@ -288,3 +288,41 @@ fn a_frozen_client_neither_blocks_the_daemon_nor_delays_its_shutdown() {
     );
     assert!(!daemon.log_text().contains("did not stop in time"));
 }
+
+#[test]
+fn a_datagram_naming_one_reader_many_times_delivers_once() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let participant = Participant::builder()
+        .socket(domain.socket("a"))
+        .embedded(EmbeddedPolicy::Never)
+        .connect()
+        .unwrap();
+    let consumer = participant
+        .consumer::<u32>("dup", ConsumerQos { depth: 100_000 })
+        .unwrap();
+    let producer = participant
+        .producer::<u32>("dup", ProducerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    let reader = producer.matched()[0].clone();
+    let payload = postcard::to_allocvec(&5u32).unwrap();
+    let data = Message::Data(ndds_core::wire::Data {
+        writer: 1,
+        reader_participant: reader.guid.participant,
+        readers: vec![reader.guid.entity; 10_000].into(),
+        seq: 1,
+        timestamp_ns: 0,
+        strength: 0,
+        persistence_us: 0,
+        payload: &payload,
+    });
+    let mut bytes = Vec::new();
+    wire::encode(domain.domain, 0xfeed, &data, &mut bytes).unwrap();
+    loopback_sender()
+        .send_to(&bytes, SocketAddrV4::from(reader.locator))
+        .unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, 5);
+    assert!(consumer.recv_timeout(Duration::from_millis(200)).is_err());
+    assert_eq!(participant.stats().delivered, 1);
+}

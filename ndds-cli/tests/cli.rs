@@ -434,6 +434,18 @@ fn nodes_shows_the_daemon_and_its_clients() {
         })),
         "the ndds run itself is listed as a tool: {run}"
     );
+    // The daemon's counters come with it: every drop reason, even when zero.
+    let counters = node["counters"]
+        .as_object()
+        .expect("counters of the local daemon");
+    for name in [
+        "datagrams_received",
+        "dropped_malformed",
+        "dropped_other_domain",
+        "protocol_errors",
+    ] {
+        assert!(counters[name].is_u64(), "counter {name} missing: {run}");
+    }
 
     let run = world.ndds(&["nodes"]);
     let text = run.ok();

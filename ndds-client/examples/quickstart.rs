@@ -84,5 +84,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     drop(printer);
     println!("done: {} samples written", producer.written());
+    // Say goodbye to the domain now rather than leaving a stale socket behind.
+    ndds_client::stop_embedded_daemons();
     Ok(())
 }

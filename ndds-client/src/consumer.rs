@@ -191,7 +191,8 @@ impl<T: DeserializeOwned> Consumer<T> {
         }
     }
 
-    /// The samples as an async stream (runtime-agnostic). Ends when the consumer closes.
+    /// The samples as an async stream (runtime-agnostic). It borrows the consumer and does not
+    /// end on its own: stop polling it (or drop it) to stop receiving this way.
     pub fn stream(&self) -> SampleStream<'_, T> {
         SampleStream {
             inner: self.raw.rx.stream(),

@@ -213,14 +213,20 @@ impl DataPlane {
             reception_timestamp: SystemTime::now(),
             strength: data.strength,
         };
+        // Each reader once, however often the datagram names it; one copy of the payload for
+        // all of them.
+        let mut readers = data.readers.into_owned();
+        readers.sort_unstable();
+        readers.dedup();
+        let payload: Arc<[u8]> = Arc::from(data.payload);
         let consumers = read(&self.consumers);
-        for reader in data.readers.iter() {
+        for reader in &readers {
             match consumers.get(reader) {
                 Some(slot) => {
                     // Counted first: a reader woken by the push sees the count.
                     self.stats.delivered.fetch_add(1, Ordering::Relaxed);
                     slot.push(RawSample {
-                        payload: data.payload.to_vec(),
+                        payload: payload.clone(),
                         info,
                     });
                 }

@@ -75,12 +75,12 @@ pub enum WriteError {
     /// The value could not be serialized.
     #[error("cannot serialize the sample: {0}")]
     Serialize(#[from] postcard::Error),
-    /// The sample does not fit in one datagram.
-    #[error("sample datagram of {size} bytes exceeds the {max}-byte limit")]
+    /// The encoded sample does not fit in one datagram.
+    #[error("encoded sample of {size} bytes exceeds the {max}-byte limit of one datagram")]
     TooLarge {
-        /// Size of the datagram.
+        /// Size of the encoded sample.
         size: usize,
-        /// The limit.
+        /// The largest encoded sample that is accepted.
         max: usize,
     },
     /// Sending failed for every destination; the last OS error.
@@ -97,8 +97,11 @@ pub enum RecvError {
     /// `recv_timeout`: nothing arrived in time.
     #[error("timed out waiting for a sample")]
     Timeout,
-    /// The consumer or its participant is closed.
-    #[error("the consumer is closed")]
+    /// The consumer's queue lost its sender. A consumer keeps its own queue open, so this
+    /// is not produced while the consumer exists; it is the answer of a queue torn down
+    /// around a waiting reader. (A lost daemon does not close consumers: samples keep flowing
+    /// from the producers already known.)
+    #[error("the consumer's queue is closed")]
     Closed,
 }
 

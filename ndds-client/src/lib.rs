@@ -28,13 +28,15 @@
 //! `ndds echo` decode the topic without the Rust type.
 //!
 //! ## Layout
-//! - [`participant`]: connecting, the embedded-daemon fallback, declaring endpoints.
+//! - [`participant`]: connecting, the embedded-daemon fallback, declaring endpoints;
+//!   [`embedded`]: the daemons this process embeds, and stopping them.
 //! - [`producer`], [`consumer`]: the endpoint handles; [`sample`]: what consumers receive.
 //! - `session` (the daemon connection) and `data` (the UDP data plane) are internal.
 #![warn(missing_docs)]
 
 pub mod consumer;
 mod data;
+pub mod embedded;
 pub mod error;
 pub mod participant;
 mod peers;
@@ -46,6 +48,7 @@ mod sync;
 
 pub use consumer::{CallbackConsumer, Consumer, ConsumerStats, RawConsumer, SampleStream};
 pub use data::ParticipantStats;
+pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
 pub use ndds_core::ipc::Graph;
 pub use ndds_core::types::TypeDescription;

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Arc, Mutex, RwLock, Weak};
+use std::sync::{Arc, Mutex, RwLock};
 use std::thread::JoinHandle;
 
 use ndds_core::domain;
@@ -18,15 +18,16 @@ use ndds_core::ipc::{
     ClientMessage, DaemonMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome,
 };
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::{EndpointInfo, EndpointQos};
-use ndds_daemon::{DaemonConfig, DaemonError, EmbedError, EmbeddedDaemon};
+use ndds_core::wire::EndpointQos;
+use ndds_daemon::{DaemonConfig, DaemonError, EmbedError};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
 use crate::data::{ConsumerSlot, DataPlane, ParticipantStats};
+use crate::embedded;
 use crate::error::{ConnectError, DeclareError, QueryError};
-use crate::peers::Peers;
+use crate::peers::{Matched, Peers};
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
 use crate::session::{self, Session};
@@ -180,32 +181,6 @@ fn process_name() -> String {
         .unwrap_or_else(|| "ndds-client".to_owned())
 }
 
-/// Embedded daemons of this process, by socket path; shared by its participants.
-static EMBEDDED: Mutex<Vec<(PathBuf, Weak<EmbeddedDaemon>)>> = Mutex::new(Vec::new());
-
-fn embedded_daemon(config: &DaemonConfig) -> Result<Option<Arc<EmbeddedDaemon>>, ConnectError> {
-    let mut daemons = lock(&EMBEDDED);
-    daemons.retain(|(_, weak)| weak.strong_count() > 0);
-    if let Some(daemon) = daemons
-        .iter()
-        .find(|(path, _)| *path == config.socket)
-        .and_then(|(_, weak)| weak.upgrade())
-    {
-        return Ok(Some(daemon));
-    }
-    match EmbeddedDaemon::start(config.clone()) {
-        Ok(daemon) => {
-            tracing::info!(socket = %config.socket.display(), interface = %config.interface, "started an embedded ndds daemon");
-            let daemon = Arc::new(daemon);
-            daemons.push((config.socket.clone(), Arc::downgrade(&daemon)));
-            Ok(Some(daemon))
-        }
-        // Another process started a daemon in the meantime: use it.
-        Err(EmbedError::Daemon(DaemonError::AlreadyRunning { .. })) => Ok(None),
-        Err(err) => Err(err.into()),
-    }
-}
-
 /// Local endpoints by entity number, for routing the daemon's events.
 #[derive(Debug, Default)]
 pub(crate) struct Router {
@@ -242,7 +217,7 @@ impl Router {
             return;
         };
         let peers = endpoint.peers();
-        let on_change = |all: &[EndpointInfo]| {
+        let on_change = |all: Matched<'_>| {
             if let Endpoint::Producer(state) = &endpoint {
                 state.set_matched(all);
             }
@@ -256,11 +231,8 @@ impl Router {
     }
 }
 
-/// An opened session, and the embedded daemon it runs on (if one was started for it).
-type Reached = (
-    Option<Arc<EmbeddedDaemon>>,
-    (std::os::unix::net::UnixStream, Welcome),
-);
+/// An opened session.
+type Reached = (std::os::unix::net::UnixStream, Welcome);
 
 /// Shared by the participant and every endpoint handle; dropped with the last of them.
 #[derive(Debug)]
@@ -272,7 +244,6 @@ pub(crate) struct Inner {
     router: Arc<Router>,
     next_entity: AtomicU32,
     threads: Mutex<Vec<JoinHandle<()>>>,
-    _embedded: Option<Arc<EmbeddedDaemon>>,
 }
 
 impl Inner {
@@ -300,8 +271,10 @@ pub(crate) struct EndpointHandle {
 
 impl Drop for EndpointHandle {
     fn drop(&mut self) {
-        write(&self.inner.router.endpoints).remove(&self.entity);
-        self.inner.data.remove_consumer(self.entity);
+        let removed = write(&self.inner.router.endpoints).remove(&self.entity);
+        if matches!(removed, Some(Endpoint::Consumer(_))) {
+            self.inner.data.remove_consumer(self.entity);
+        }
         let _ = self.inner.session.send(&ClientMessage::Undeclare {
             entity: self.entity,
         });
@@ -354,7 +327,7 @@ impl Participant {
             name: settings.name.clone(),
             role: settings.role,
         };
-        let (embedded, (stream, welcome)) = Self::reach_daemon(&settings, hello)?;
+        let (stream, welcome) = Self::reach_daemon(&settings, hello)?;
         let interface = Ipv4Addr::from(welcome.interface);
         let data = DataPlane::open(interface, welcome.domain, participant)
             .map_err(|source| ConnectError::DataSocket { interface, source })?;
@@ -367,7 +340,6 @@ impl Participant {
             router: Arc::new(Router::default()),
             next_entity: AtomicU32::new(1),
             threads: Mutex::new(Vec::new()),
-            _embedded: embedded,
         });
         inner.spawn_threads(reader)?;
         tracing::debug!(participant = format_args!("{participant:016x}"), socket = %settings.socket.display(), "participant connected");
@@ -378,21 +350,21 @@ impl Participant {
     fn reach_daemon(settings: &Settings, hello: Hello) -> Result<Reached, ConnectError> {
         if settings.embedded != EmbeddedPolicy::Always {
             match session::handshake(&settings.socket, hello.clone()) {
-                Ok(session) => return Ok((None, session)),
+                Ok(session) => return Ok(session),
                 Err(ConnectError::NoDaemon { .. }) if settings.embedded == EmbeddedPolicy::Auto => {
                 }
                 Err(err) => return Err(err),
             }
         }
-        let embedded = embedded_daemon(&settings.embedded_config)?;
-        if embedded.is_none() && settings.embedded == EmbeddedPolicy::Always {
+        let ours = embedded::ensure(&settings.embedded_config)?;
+        if !ours && settings.embedded == EmbeddedPolicy::Always {
             return Err(ConnectError::Embedded(EmbedError::Daemon(
                 DaemonError::AlreadyRunning {
                     path: settings.socket.clone(),
                 },
             )));
         }
-        Ok((embedded, session::handshake(&settings.socket, hello)?))
+        session::handshake(&settings.socket, hello)
     }
 
     /// This participant's id (the sender id of its data datagrams).

@@ -11,6 +11,9 @@ use ndds_core::wire::{EndpointInfo, Guid};
 
 use crate::sync::{deadline, lock};
 
+/// The matched endpoints, as [`Peers::matched`] hands them to its `apply` step.
+pub(crate) type Matched<'a> = std::collections::btree_map::Values<'a, Guid, EndpointInfo>;
+
 #[derive(Debug, Default)]
 struct Maps {
     matched: BTreeMap<Guid, EndpointInfo>,
@@ -40,16 +43,15 @@ impl Peers {
 
     /// Records a match. `apply` sees the matched endpoints after the change and runs before
     /// anyone waiting for matches is woken, so a woken writer finds its destinations set.
-    pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(&[EndpointInfo])) {
+    pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(Matched<'_>)) {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(&remote.guid);
         maps.matched.insert(remote.guid, remote);
         self.apply(&maps, apply);
     }
 
-    fn apply(&self, maps: &Maps, apply: impl FnOnce(&[EndpointInfo])) {
-        let all: Vec<EndpointInfo> = maps.matched.values().cloned().collect();
-        apply(&all);
+    fn apply(&self, maps: &Maps, apply: impl FnOnce(Matched<'_>)) {
+        apply(maps.matched.values());
         self.changed.notify_all();
     }
 
@@ -72,7 +74,7 @@ impl Peers {
     }
 
     /// Forgets a peer; `apply` as in [`Peers::matched`].
-    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(&[EndpointInfo])) {
+    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(Matched<'_>)) {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(remote);
         maps.matched.remove(remote);

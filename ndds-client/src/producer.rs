@@ -16,12 +16,15 @@ use serde::Serialize;
 
 use crate::error::WriteError;
 use crate::participant::{EndpointHandle, Inner};
-use crate::peers::Peers;
+use crate::peers::{Matched, Peers};
 use crate::sync::{lock, read, write};
 
 /// Bytes a `Data` datagram adds to its payload: the header, and the body's fields at their
 /// largest with up to 64 reader entities (the exact size is checked when encoding).
 const DATA_OVERHEAD: usize = wire::HEADER_LEN + 5 + 10 + 1 + 64 * 5 + 10 + 10 + 5 + 10 + 3;
+
+/// The largest encoded sample a producer accepts (no fragmentation yet).
+pub const MAX_PAYLOAD: usize = MAX_DATAGRAM - DATA_OVERHEAD;
 
 /// One consuming process: where to send, and which of its consumers to address.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -47,7 +50,6 @@ pub(crate) struct ProducerState {
     destinations: RwLock<Vec<Destination>>,
     seq: AtomicU64,
     scratch: Mutex<Scratch>,
-    sent: AtomicU64,
 }
 
 impl ProducerState {
@@ -64,13 +66,12 @@ impl ProducerState {
             destinations: RwLock::new(Vec::new()),
             seq: AtomicU64::new(0),
             scratch: Mutex::new(Scratch::default()),
-            sent: AtomicU64::new(0),
         }
     }
 
     /// Rebuilds the destination list from the matched consumers: one datagram per consuming
     /// participant (a stale entry may share an address with a live one).
-    pub(crate) fn set_matched(&self, matched: &[EndpointInfo]) {
+    pub(crate) fn set_matched(&self, matched: Matched<'_>) {
         let mut by_locator: BTreeMap<(SocketAddrV4, u64), Destination> = BTreeMap::new();
         for consumer in matched {
             let addr = SocketAddrV4::from(consumer.locator);
@@ -106,11 +107,10 @@ impl ProducerState {
         datagram: &mut Vec<u8>,
     ) -> Result<(), WriteError> {
         // Refused whether or not a consumer is matched, so the error never depends on timing.
-        let size = payload.len() + DATA_OVERHEAD;
-        if size > MAX_DATAGRAM {
+        if payload.len() > MAX_PAYLOAD {
             return Err(WriteError::TooLarge {
-                size,
-                max: MAX_DATAGRAM,
+                size: payload.len(),
+                max: MAX_PAYLOAD,
             });
         }
         let seq = self.seq.fetch_add(1, Ordering::Relaxed) + 1;
@@ -134,19 +134,17 @@ impl ProducerState {
             });
             match wire::encode(inner.domain(), inner.participant, &message, datagram) {
                 Ok(()) => {}
+                // Only with more readers in one process than the overhead allows for.
                 Err(EncodeError::TooLarge { size }) => {
                     return Err(WriteError::TooLarge {
-                        size,
-                        max: MAX_DATAGRAM,
+                        size: payload.len(),
+                        max: MAX_DATAGRAM - (size - payload.len()),
                     });
                 }
                 Err(EncodeError::Postcard(err)) => return Err(WriteError::Serialize(err)),
             }
             match inner.data.socket.send_to(datagram, destination.addr) {
-                Ok(_) => {
-                    delivered += 1;
-                    self.sent.fetch_add(1, Ordering::Relaxed);
-                }
+                Ok(_) => delivered += 1,
                 Err(err) => {
                     tracing::debug!(to = %destination.addr, %err, "data send failed");
                     last_error = Some(err);

@@ -1,5 +1,6 @@
 //! Samples as the application receives them.
 
+use std::sync::Arc;
 use std::time::SystemTime;
 
 use ndds_core::wire::Guid;
@@ -31,8 +32,9 @@ pub struct Sample<T> {
 /// An undecoded sample: the postcard bytes of the value.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RawSample {
-    /// postcard encoding of the value.
-    pub payload: Vec<u8>,
+    /// postcard encoding of the value; shared by every consumer of this process that received
+    /// the same datagram.
+    pub payload: Arc<[u8]>,
     /// Its metadata.
     pub info: SampleInfo,
 }

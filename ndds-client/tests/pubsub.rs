@@ -255,16 +255,23 @@ fn no_daemon_and_no_embedding_is_a_clear_error() {
 }
 
 #[test]
-fn participants_share_one_embedded_daemon_and_it_stops_with_them() {
+fn participants_share_one_embedded_daemon_which_lives_until_stopped() {
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
     let first = participant(&config);
     let second = participant(&config);
     assert_eq!(first.daemon().node, second.daemon().node);
-    assert!(config.socket.exists());
+    let node = first.daemon().node;
     drop(first);
     drop(second);
-    assert!(eventually(WAIT, || !config.socket.exists()));
+    // Still serving (other processes may use it): a new participant finds the same daemon.
+    assert!(config.socket.exists());
+    let third = participant(&config);
+    assert_eq!(third.daemon().node, node);
+    assert!(ndds_client::stop_embedded_daemon(&config.socket));
+    assert!(!config.socket.exists(), "socket removed on stop");
+    assert!(eventually(WAIT, || !third.is_connected()));
+    assert!(!ndds_client::stop_embedded_daemon(&config.socket));
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //!
 //! `ndds-client` uses this when no daemon answers on the socket path, so a single program
 //! works with no set-up. The embedded daemon is a complete daemon: other processes on the host
-//! can connect to it through its socket while the hosting process lives.
+//! can connect to it through its socket until it is stopped (or dropped).
 
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -84,6 +84,13 @@ impl EmbeddedDaemon {
     /// The configuration it runs with.
     pub fn config(&self) -> &DaemonConfig {
         &self.config
+    }
+
+    /// True while its thread runs (false after `stop`, or if it failed).
+    pub fn is_running(&self) -> bool {
+        self.thread
+            .as_ref()
+            .is_some_and(|thread| !thread.is_finished())
     }
 
     /// Its node id.

@@ -31,6 +31,10 @@ struct NodeView {
     last_seen_ms: u64,
     version: String,
     processes: Vec<ProcessView>,
+    /// The answering daemon's counters (datagrams, drops by reason, sessions); empty for
+    /// remote nodes.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    counters: BTreeMap<String, u64>,
 }
 
 #[derive(Serialize, PartialEq, Eq, PartialOrd, Ord)]
@@ -83,6 +87,15 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
                 p.role, p.pid, p.name, p.endpoints
             );
         }
+        let nonzero: Vec<String> = node
+            .counters
+            .iter()
+            .filter(|(_, value)| **value > 0)
+            .map(|(name, value)| format!("{name} {value}"))
+            .collect();
+        if !nonzero.is_empty() {
+            println!("    counters: {}", nonzero.join(", "));
+        }
     }
     Ok(())
 }
@@ -104,6 +117,7 @@ fn views(graph: &Graph) -> Vec<NodeView> {
             })
             .collect();
         local.processes.sort();
+        local.counters = graph.counters.iter().cloned().collect();
     }
     for remote in &graph.nodes {
         let mut view = node_view(remote, false);
@@ -142,5 +156,6 @@ fn node_view(node: &NodeSummary, local: bool) -> NodeView {
         last_seen_ms: node.last_seen_ms,
         version: node.info.version.clone(),
         processes: Vec::new(),
+        counters: BTreeMap::new(),
     }
 }
