@@ -8,7 +8,7 @@ use std::net::Ipv4Addr;
 use std::time::{Duration, Instant};
 
 use ndds_core::discovery::engine::{
-    MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES,
+    MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES, MAX_REMOTE_ENDPOINTS,
 };
 use ndds_core::discovery::{DiscoveryConfig, Engine, MAX_TOPIC_LEN};
 use ndds_core::types::TypeDescription;
@@ -45,6 +45,7 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("MAX_TOPIC_LEN", MAX_TOPIC_LEN.to_string()),
         ("MAX_NODES", MAX_NODES.to_string()),
         ("MAX_ENDPOINTS_PER_NODE", MAX_ENDPOINTS_PER_NODE.to_string()),
+        ("MAX_REMOTE_ENDPOINTS", MAX_REMOTE_ENDPOINTS.to_string()),
         ("MAX_PENDING_REPLIES", MAX_PENDING_REPLIES.to_string()),
         ("MAX_LEASE", duration(MAX_LEASE)),
         (
