@@ -1,6 +1,5 @@
 //! The command line of `ndds-daemon`.
 
-use std::net::Ipv4Addr;
 use std::path::PathBuf;
 
 use anyhow::Context as _;
@@ -18,56 +17,12 @@ use crate::daemon::Daemon;
 #[derive(Debug, Parser)]
 #[command(name = "ndds-daemon", version)]
 pub struct Args {
-    /// Domain id (0-232).
-    #[arg(long, env = "NDDS_DOMAIN")]
-    pub domain: Option<u32>,
-    /// Unix socket path [default: /tmp/ndds-DOMAIN.sock].
-    #[arg(long, env = "NDDS_SOCKET")]
-    pub socket: Option<PathBuf>,
-    /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
-    #[arg(long)]
-    pub interface: Option<String>,
-    /// TOML config file; flags and environment override it.
+    /// TOML config file with the settings below; flags and environment override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Discovery multicast group [default: 239.255.76.DOMAIN].
-    #[arg(long)]
-    pub multicast_group: Option<Ipv4Addr>,
-    /// Discovery multicast port [default: 7600 + DOMAIN].
-    #[arg(long)]
-    pub discovery_port: Option<u16>,
-    /// Unicast discovery port [default: any free port].
-    #[arg(long)]
-    pub unicast_port: Option<u16>,
-    /// Refresh period in milliseconds [default: 1000].
-    #[arg(long)]
-    pub announce_period_ms: Option<u64>,
-    /// Lease in milliseconds: how long others remember us without a refresh [default: 5000].
-    #[arg(long)]
-    pub lease_ms: Option<u64>,
-    /// Multicast TTL [default: 1].
-    #[arg(long)]
-    pub multicast_ttl: Option<u32>,
-    /// Random seed (node id, jitter) [default: random].
-    #[arg(long)]
-    pub seed: Option<u64>,
-}
-
-impl Args {
-    fn layer(&self) -> ConfigFile {
-        ConfigFile {
-            domain: self.domain,
-            socket: self.socket.clone(),
-            interface: self.interface.clone(),
-            multicast_group: self.multicast_group,
-            discovery_port: self.discovery_port,
-            unicast_port: self.unicast_port,
-            announce_period_ms: self.announce_period_ms,
-            lease_ms: self.lease_ms,
-            multicast_ttl: self.multicast_ttl,
-            seed: self.seed,
-        }
-    }
+    /// The settings, each also a key of the config file.
+    #[command(flatten)]
+    pub settings: ConfigFile,
 }
 
 /// Parses the command line, runs the daemon until SIGINT or SIGTERM, and returns.
@@ -78,7 +33,7 @@ pub fn main() -> anyhow::Result<()> {
         Some(path) => ConfigFile::load(path)?,
         None => ConfigFile::default(),
     };
-    let config = args.layer().or(file).resolve()?;
+    let config = args.settings.or(file).resolve()?;
     if config.interface.is_loopback() {
         tracing::info!(
             "discovery is limited to this host (loopback); use --interface to reach other hosts"

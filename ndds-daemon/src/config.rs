@@ -24,29 +24,41 @@ use serde::Deserialize;
 
 use crate::iface;
 
-/// The config file, every key optional. Unknown keys are an error.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Deserialize)]
+/// The daemon's settings as the config file and the command line give them, every one
+/// optional. Unknown keys in the file are an error.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Deserialize, clap::Args)]
 #[serde(deny_unknown_fields)]
 pub struct ConfigFile {
-    /// Domain id.
+    /// Domain id (0-232) [default: 0].
+    #[arg(long, env = "NDDS_DOMAIN")]
     pub domain: Option<u32>,
-    /// Unix socket path.
+    /// Unix socket path [default: /tmp/ndds-DOMAIN.sock].
+    #[arg(long, env = "NDDS_SOCKET")]
     pub socket: Option<PathBuf>,
-    /// Interface: an IPv4 address or an interface name.
+    /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
+    #[arg(long)]
     pub interface: Option<String>,
-    /// Discovery multicast group.
+    /// Discovery multicast group [default: 239.255.76.DOMAIN].
+    #[arg(long)]
     pub multicast_group: Option<Ipv4Addr>,
-    /// Discovery multicast port.
+    /// Discovery multicast port [default: 7600 + DOMAIN].
+    #[arg(long)]
     pub discovery_port: Option<u16>,
-    /// Unicast discovery port (0: any).
+    /// Unicast discovery port [default: any free port].
+    #[arg(long)]
     pub unicast_port: Option<u16>,
-    /// Refresh period.
+    /// Refresh period in milliseconds [default: 1000].
+    #[arg(long)]
     pub announce_period_ms: Option<u64>,
-    /// Lease announced to other nodes.
+    /// Lease in milliseconds: how long others remember this daemon without a refresh
+    /// [default: 5000].
+    #[arg(long)]
     pub lease_ms: Option<u64>,
-    /// Multicast time-to-live.
+    /// Multicast TTL [default: 1].
+    #[arg(long)]
     pub multicast_ttl: Option<u32>,
-    /// Random seed (node id, jitter); random when absent.
+    /// Random seed of announcement jitter [default: random].
+    #[arg(long)]
     pub seed: Option<u64>,
 }
 
