@@ -737,7 +737,7 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
     let start = std::time::Instant::now();
     let mut engine = Engine::new(config(0, 1, PERIOD, LEASE), start).unwrap();
     engine
-        .add_local(start, producer::<Pose>(guid(0, 1), "arm/pose"))
+        .add_local(producer::<Pose>(guid(0, 1), "arm/pose"))
         .unwrap();
     engine.handle_timeout(start);
     let own: Vec<Vec<u8>> = std::iter::from_fn(|| engine.poll_transmit())
@@ -754,7 +754,7 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
     let mut other =
         Engine::new(DiscoveryConfig::new(simnet::DOMAIN + 1, locator(1)), start).unwrap();
     other
-        .add_local(start, producer::<Pose>(guid(1, 1), "arm/pose"))
+        .add_local(producer::<Pose>(guid(1, 1), "arm/pose"))
         .unwrap();
     let foreign = other.poll_transmit().unwrap().payload;
     engine.handle_datagram(start, from, &foreign);

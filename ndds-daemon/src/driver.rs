@@ -140,7 +140,7 @@ impl Driver {
 
     /// Says `Bye` and stops discovery.
     pub fn close(&mut self) {
-        self.engine.close(Instant::now());
+        self.engine.close();
     }
 
     /// Sends the engine's pending datagrams and routes its events, until neither is left
@@ -329,10 +329,7 @@ impl Driver {
             pid: hello.pid,
             process: hello.name.clone(),
         };
-        let result = self
-            .engine
-            .add_local(Instant::now(), info)
-            .map_err(|err| err.to_string());
+        let result = self.engine.add_local(info).map_err(|err| err.to_string());
         if result.is_ok()
             && let Some(entry) = self.clients.get_mut(&client)
         {
@@ -354,7 +351,7 @@ impl Driver {
                 participant: hello.participant,
                 entity,
             };
-            self.engine.remove_locals(Instant::now(), &[guid]);
+            self.engine.remove_locals(&[guid]);
         }
     }
 
@@ -381,7 +378,7 @@ impl Driver {
                 entity: *entity,
             })
             .collect();
-        self.engine.remove_locals(Instant::now(), &guids);
+        self.engine.remove_locals(&guids);
     }
 
     /// The daemon's current view, as `ndds topics` and `ndds nodes` show it.

@@ -194,12 +194,10 @@ fn engine_limits() -> EngineLimits {
             pid: 1,
             process: "probe".to_owned(),
         };
-        engine
-            .add_local(now, info)
-            .expect("probe endpoint accepted");
+        engine.add_local(info).expect("probe endpoint accepted");
     }
     drain(&mut engine);
-    engine.remove_locals(now, &guids);
+    engine.remove_locals(&guids);
     let withdraws = drain(&mut engine);
     engine.handle_timeout(now);
     let announces = drain(&mut engine);

@@ -390,8 +390,7 @@ impl Engine {
     }
 
     /// Declares a local endpoint: matches it at once and announces it to the domain.
-    pub fn add_local(&mut self, now: Instant, info: EndpointInfo) -> Result<(), LocalError> {
-        let _ = now;
+    pub fn add_local(&mut self, info: EndpointInfo) -> Result<(), LocalError> {
         if self.closed {
             return Err(LocalError::Closed);
         }
@@ -424,8 +423,7 @@ impl Engine {
 
     /// Removes local endpoints (a client closed them or disconnected) and withdraws them.
     /// Unknown guids are ignored.
-    pub fn remove_locals(&mut self, now: Instant, guids: &[Guid]) {
-        let _ = now;
+    pub fn remove_locals(&mut self, guids: &[Guid]) {
         let mut removed = Vec::new();
         for guid in guids {
             if self
@@ -453,8 +451,7 @@ impl Engine {
     }
 
     /// Leaves the domain: says `Bye` and stops producing output.
-    pub fn close(&mut self, now: Instant) {
-        let _ = now;
+    pub fn close(&mut self) {
         if self.closed {
             return;
         }

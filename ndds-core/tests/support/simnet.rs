@@ -188,25 +188,22 @@ impl SimNet {
 
     /// Declares a local endpoint on node `n`.
     pub fn add_local(&mut self, n: usize, info: EndpointInfo) {
-        let now = self.now;
         self.nodes[n]
             .engine
-            .add_local(now, info)
+            .add_local(info)
             .expect("endpoint accepted");
         self.flush();
     }
 
     /// Removes local endpoints of node `n`.
     pub fn remove_locals(&mut self, n: usize, guids: &[Guid]) {
-        let now = self.now;
-        self.nodes[n].engine.remove_locals(now, guids);
+        self.nodes[n].engine.remove_locals(guids);
         self.flush();
     }
 
     /// Closes node `n` (it says `Bye`) and stops driving it.
     pub fn close(&mut self, n: usize) {
-        let now = self.now;
-        self.nodes[n].engine.close(now);
+        self.nodes[n].engine.close();
         self.flush();
         self.nodes[n].running = false;
     }
