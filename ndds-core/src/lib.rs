@@ -11,6 +11,7 @@
 //!
 //! ## Layout
 //! - [`wire`]: header and one file per datagram kind, encode/decode, drop reasons.
+//! - [`arbitration`]: a consumer's arbitration, minimum separation, deadline and statuses.
 //! - [`types`]: type descriptions, layouts, canonical text and fingerprints.
 //! - [`dynamic`]: decode a sample to JSON (and encode JSON to a sample) from its description.
 //! - [`discovery`]: the sans-IO discovery engine and its configuration.
@@ -18,6 +19,7 @@
 //! - [`domain`]: how a domain id maps to multicast group, port and socket path.
 #![warn(missing_docs)]
 
+pub mod arbitration;
 pub mod discovery;
 pub mod domain;
 pub mod dynamic;
