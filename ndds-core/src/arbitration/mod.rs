@@ -1,2 +1,12 @@
-//! Consumer-side NDDS semantics: arbitration between redundant producers, minimum separation,
-//! deadlines and the statuses they produce. (Being written.)
+//! Consumer-side NDDS semantics, without IO: arbitration between redundant producers by
+//! strength and persistence, minimum separation, deadlines, and the statuses and notifications
+//! they produce. See [`arbiter`] for the rules and the call order.
+
+pub mod arbiter;
+pub mod status;
+
+pub use arbiter::{Arbiter, ArbiterStats, Incoming, Output, Rules};
+pub use status::{Notification, SampleStatus};
+
+#[cfg(test)]
+mod tests;

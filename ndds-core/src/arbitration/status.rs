@@ -1,0 +1,71 @@
+//! What a consumer is told: the status that comes with each delivered sample, and the
+//! notifications that come without one.
+
+use std::time::Duration;
+
+use crate::wire::Guid;
+
+/// The status delivered with a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleStatus {
+    /// A fresh sample from the producer already in charge (or the very first sample).
+    Fresh,
+    /// A fresh sample from a producer that has just taken over from `previous`: it is stronger,
+    /// or the previous one fell silent past its persistence or was lost.
+    TookOver {
+        /// The producer in charge before.
+        previous: Guid,
+    },
+}
+
+/// A notification delivered without a sample.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Notification {
+    /// The deadline passed without a fresh sample; repeated each deadline while silent.
+    NoNewData {
+        /// Time since the last accepted sample.
+        silent_for: Duration,
+    },
+    /// The deadline passed and no sample was ever accepted; repeated each deadline.
+    NeverReceived {
+        /// Time since the consumer was created.
+        waited: Duration,
+    },
+    /// A sample whose source timestamp is not newer than the last one accepted from the same
+    /// producer (a duplicate or a reordered datagram); it was not delivered.
+    OldData {
+        /// Its producer.
+        writer: Guid,
+        /// Its sequence number.
+        seq: u64,
+    },
+    /// A matched producer went away (closed, crashed, or its host was lost).
+    ProducerLost {
+        /// The producer.
+        writer: Guid,
+        /// True if it was the producer in charge; any producer may take over at once.
+        was_current: bool,
+    },
+    /// A producer of this topic has another type: its samples never reach this consumer.
+    Incompatible {
+        /// The other endpoint.
+        writer: Guid,
+        /// Its type name.
+        type_name: String,
+        /// Its type fingerprint.
+        fingerprint: u64,
+        /// This consumer's type name.
+        local_type: String,
+        /// This consumer's fingerprint.
+        local_fingerprint: u64,
+    },
+    /// A sample did not decode as the consumer's type; it was not delivered.
+    DeserializationError {
+        /// Its producer.
+        writer: Guid,
+        /// Its sequence number.
+        seq: u64,
+        /// The decoder's message.
+        error: String,
+    },
+}

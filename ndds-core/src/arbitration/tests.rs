@@ -1,0 +1,276 @@
+//! The arbiter's rules, one scenario per test, in virtual time.
+
+use std::time::{Duration, Instant};
+
+use proptest::prelude::*;
+
+use super::*;
+use crate::wire::Guid;
+
+const MS: Duration = Duration::from_millis(1);
+
+fn writer(n: u64) -> Guid {
+    Guid {
+        participant: n,
+        entity: 1,
+    }
+}
+
+/// A sample from producer `n` with `strength`, persistence `persist_ms` and source time `t_ms`.
+fn incoming(n: u64, strength: i32, persist_ms: u64, t_ms: u64) -> Incoming {
+    Incoming {
+        writer: writer(n),
+        seq: t_ms,
+        strength,
+        persistence: MS * persist_ms as u32,
+        source_ns: t_ms * 1_000_000,
+    }
+}
+
+fn drain(arbiter: &mut Arbiter<u64>) -> Vec<Output<u64>> {
+    std::iter::from_fn(|| arbiter.poll_output()).collect()
+}
+
+fn delivered(outputs: &[Output<u64>]) -> Vec<u64> {
+    outputs
+        .iter()
+        .filter_map(|o| match o {
+            Output::Deliver { sample, .. } => Some(*sample),
+            Output::Notify(_) => None,
+        })
+        .collect()
+}
+
+#[test]
+fn the_stronger_producer_wins_and_the_weaker_takes_over_after_persistence() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    // A (strength 10, persistence 100 ms) and B (strength 5) both publish every 10 ms.
+    for i in 0..10u64 {
+        let now = t0 + MS * (10 * i as u32);
+        a.handle_sample(now, incoming(1, 10, 100, i * 10), 100 + i);
+        a.handle_sample(now, incoming(2, 5, 100, i * 10), 200 + i);
+    }
+    let out = drain(&mut a);
+    assert!(delivered(&out).iter().all(|s| *s < 200), "only A: {out:?}");
+    assert_eq!(a.stats().weaker, 10);
+    // A falls silent after t = 90 ms; B is refused until A's last sample is 100 ms old.
+    a.handle_sample(t0 + MS * 150, incoming(2, 5, 100, 150), 215);
+    assert!(delivered(&drain(&mut a)).is_empty());
+    a.handle_sample(t0 + MS * 190, incoming(2, 5, 100, 190), 219);
+    let out = drain(&mut a);
+    assert_eq!(
+        out,
+        vec![Output::Deliver {
+            sample: 219,
+            status: SampleStatus::TookOver {
+                previous: writer(1)
+            }
+        }]
+    );
+    assert_eq!(a.in_charge(), Some(writer(2)));
+    // A returns: stronger, so it wins at once.
+    a.handle_sample(t0 + MS * 200, incoming(1, 10, 100, 200), 120);
+    a.handle_sample(t0 + MS * 200, incoming(2, 5, 100, 200), 220);
+    assert_eq!(delivered(&drain(&mut a)), vec![120]);
+}
+
+#[test]
+fn equal_strengths_share_and_a_lost_producer_releases_at_once() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    a.handle_sample(t0, incoming(1, 5, 10_000, 0), 1);
+    a.handle_sample(t0 + MS, incoming(2, 5, 10_000, 1), 2);
+    assert_eq!(
+        delivered(&drain(&mut a)),
+        vec![1, 2],
+        "equal strength is accepted"
+    );
+    // 3 is stronger and in charge; 2 is weaker and its persistence is long.
+    a.handle_sample(t0 + MS * 2, incoming(3, 9, 10_000, 2), 3);
+    a.handle_sample(t0 + MS * 3, incoming(2, 5, 10_000, 3), 4);
+    assert_eq!(delivered(&drain(&mut a)), vec![3]);
+    a.handle_writer_lost(writer(3));
+    assert_eq!(
+        drain(&mut a),
+        vec![Output::Notify(Notification::ProducerLost {
+            writer: writer(3),
+            was_current: true
+        })]
+    );
+    a.handle_sample(t0 + MS * 4, incoming(2, 5, 10_000, 4), 5);
+    assert_eq!(
+        delivered(&drain(&mut a)),
+        vec![5],
+        "no wait for persistence"
+    );
+}
+
+#[test]
+fn old_and_duplicate_samples_of_the_producer_in_charge_are_refused() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    a.handle_sample(t0, incoming(1, 0, 0, 50), 1);
+    a.handle_sample(t0 + MS, incoming(1, 0, 0, 50), 2);
+    a.handle_sample(t0 + MS, incoming(1, 0, 0, 40), 3);
+    a.handle_sample(t0 + MS, incoming(1, 0, 0, 60), 4);
+    let out = drain(&mut a);
+    assert_eq!(delivered(&out), vec![1, 4]);
+    assert_eq!(a.stats().old_data, 2);
+    assert!(out.contains(&Output::Notify(Notification::OldData {
+        writer: writer(1),
+        seq: 40
+    })));
+    // Another producer's clock is not compared: an earlier timestamp from 2 is fine.
+    a.handle_sample(t0 + MS * 2, incoming(2, 0, 0, 10), 5);
+    assert_eq!(delivered(&drain(&mut a)), vec![5]);
+}
+
+#[test]
+fn minimum_separation_delivers_the_newest_at_the_end_of_each_window() {
+    let t0 = Instant::now();
+    let rules = Rules {
+        min_separation: MS * 100,
+        deadline: None,
+    };
+    let mut a = Arbiter::new(rules, t0);
+    for i in 0..25u64 {
+        let now = t0 + MS * (10 * i as u32);
+        if a.poll_timeout().is_some_and(|t| t <= now) {
+            a.handle_timeout(now);
+        }
+        a.handle_sample(now, incoming(1, 0, 0, i * 10 + 1), i);
+    }
+    a.handle_timeout(t0 + MS * 300);
+    // Deliveries at 0, 100, 200 ms (the newest held when each window ends: the sample of
+    // 90 ms, then of 190 ms) and at 300 ms (the last one held).
+    assert_eq!(delivered(&drain(&mut a)), vec![0, 9, 19, 24]);
+    assert_eq!(a.stats().superseded, 25 - 4);
+    assert_eq!(a.poll_timeout(), None, "nothing held, no deadline");
+}
+
+#[test]
+fn a_takeover_inside_a_window_keeps_its_status() {
+    let t0 = Instant::now();
+    let rules = Rules {
+        min_separation: MS * 100,
+        deadline: None,
+    };
+    let mut a = Arbiter::new(rules, t0);
+    a.handle_sample(t0, incoming(1, 1, 0, 0), 1);
+    a.handle_sample(t0 + MS * 10, incoming(2, 9, 0, 10), 2);
+    a.handle_sample(t0 + MS * 20, incoming(2, 9, 0, 20), 3);
+    a.handle_timeout(t0 + MS * 100);
+    let out = drain(&mut a);
+    assert_eq!(
+        out.last(),
+        Some(&Output::Deliver {
+            sample: 3,
+            status: SampleStatus::TookOver {
+                previous: writer(1)
+            }
+        })
+    );
+}
+
+#[test]
+fn deadlines_repeat_while_silent_and_say_never_received_before_the_first_sample() {
+    let t0 = Instant::now();
+    let rules = Rules {
+        min_separation: Duration::ZERO,
+        deadline: Some(MS * 50),
+    };
+    let mut a = Arbiter::new(rules, t0);
+    assert_eq!(a.poll_timeout(), Some(t0 + MS * 50));
+    a.handle_timeout(t0 + MS * 50);
+    a.handle_timeout(t0 + MS * 100);
+    assert_eq!(
+        drain(&mut a),
+        vec![
+            Output::Notify(Notification::NeverReceived { waited: MS * 50 }),
+            Output::Notify(Notification::NeverReceived { waited: MS * 100 }),
+        ]
+    );
+    a.handle_sample(t0 + MS * 120, incoming(1, 0, 0, 120), 1);
+    assert_eq!(
+        a.poll_timeout(),
+        Some(t0 + MS * 170),
+        "re-armed by the sample"
+    );
+    a.handle_timeout(t0 + MS * 169);
+    assert_eq!(delivered(&drain(&mut a)), vec![1]);
+    a.handle_timeout(t0 + MS * 170);
+    a.handle_timeout(t0 + MS * 220);
+    assert_eq!(
+        drain(&mut a),
+        vec![
+            Output::Notify(Notification::NoNewData {
+                silent_for: MS * 50
+            }),
+            Output::Notify(Notification::NoNewData {
+                silent_for: MS * 100
+            }),
+        ]
+    );
+    // A long stall gives one notification, not a burst.
+    a.handle_timeout(t0 + MS * 1000);
+    assert_eq!(drain(&mut a).len(), 1);
+    assert_eq!(a.poll_timeout(), Some(t0 + MS * 1050));
+    assert_eq!(a.stats().deadline_misses, 5);
+}
+
+proptest! {
+    /// Random traffic from three producers: never a panic, deliveries at least a window apart,
+    /// and every accepted sample delivered, superseded, or the one still held.
+    #[test]
+    fn random_traffic_keeps_the_invariants(
+        events in proptest::collection::vec((0u64..3, 0i32..3, 0u64..50, 0u64..40, any::<bool>()), 1..200),
+        separation_ms in 0u64..30,
+        deadline_ms in proptest::option::of(1u64..100),
+    ) {
+        let t0 = Instant::now();
+        let rules = Rules {
+            min_separation: MS * separation_ms as u32,
+            deadline: deadline_ms.map(|d| MS * d as u32),
+        };
+        let mut a = Arbiter::new(rules, t0);
+        let mut now = t0;
+        let mut last_delivery: Option<Instant> = None;
+        let mut clock = [0u64; 3];
+        for (n, strength, persist, step, lose) in events {
+            now += MS * step as u32;
+            while let Some(due) = a.poll_timeout() {
+                if due > now { break; }
+                a.handle_timeout(due);
+                check(&mut a, due, &mut last_delivery, rules)?;
+            }
+            clock[n as usize] += step % 7;
+            if lose {
+                a.handle_writer_lost(writer(n));
+            } else {
+                a.handle_sample(now, incoming(n, strength, persist, clock[n as usize]), n);
+            }
+            check(&mut a, now, &mut last_delivery, rules)?;
+        }
+        let s = a.stats();
+        prop_assert!(s.delivered + s.superseded <= s.accepted);
+        prop_assert!(s.accepted - s.delivered - s.superseded <= 1, "at most one held");
+    }
+}
+
+fn check(
+    a: &mut Arbiter<u64>,
+    now: Instant,
+    last_delivery: &mut Option<Instant>,
+    rules: Rules,
+) -> Result<(), TestCaseError> {
+    for output in drain(a) {
+        if let Output::Deliver { .. } = output {
+            if let Some(previous) = *last_delivery {
+                prop_assert!(now.duration_since(previous) >= rules.min_separation);
+            }
+            *last_delivery = Some(now);
+        }
+    }
+    Ok(())
+}
