@@ -299,7 +299,10 @@ fn a_datagram_naming_one_reader_many_times_delivers_once() {
         .connect()
         .unwrap();
     let consumer = participant
-        .consumer::<u32>("dup", ConsumerQos { depth: 100_000 })
+        .consumer::<u32>("dup", ConsumerQos {
+            depth: 100_000,
+            ..ConsumerQos::default()
+        })
         .unwrap();
     let producer = participant
         .producer::<u32>("dup", ProducerQos::default())

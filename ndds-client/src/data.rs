@@ -1,67 +1,26 @@
 //! The data plane of one participant: one UDP socket on the daemon's interface, through which
-//! producers send samples directly to consuming processes, and a receive thread that hands
-//! each arriving sample to the queues of the consumers it is addressed to.
+//! producers send samples directly to consuming processes; a receive thread that offers each
+//! arriving sample to the consumers it is addressed to; and a timer thread that runs the
+//! consumers' deadlines and minimum-separation windows.
 
 use std::collections::HashMap;
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, RwLock};
-use std::time::{Duration, SystemTime};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
+use std::time::{Duration, Instant, SystemTime};
 
+use ndds_core::arbitration::{Incoming, SampleStatus};
 use ndds_core::wire::{self, Data, DropReason, Guid, Locator, MAX_DATAGRAM, Message};
 
 use crate::sample::{RawSample, SampleInfo};
-use crate::sync::{read, write};
+use crate::slot::ConsumerSlot;
+use crate::sync::{lock, read, write};
 
 /// How often the receive thread checks for shutdown when no datagram arrives.
 const POLL_INTERVAL: Duration = Duration::from_millis(250);
 /// Socket buffer sizes requested.
 const SOCKET_BUFFER: usize = 4 * 1024 * 1024;
-
-/// Where a consumer's samples wait for the application.
-#[derive(Debug)]
-pub(crate) struct ConsumerSlot {
-    tx: flume::Sender<RawSample>,
-    /// A second receiver, used only to drop the oldest sample when the queue is full.
-    oldest: flume::Receiver<RawSample>,
-    /// Samples dropped because the application did not keep up.
-    pub(crate) overflow: AtomicU64,
-    /// Samples queued.
-    pub(crate) received: AtomicU64,
-}
-
-impl ConsumerSlot {
-    /// A slot with room for `depth` samples, and the application's receiver.
-    pub(crate) fn new(depth: usize) -> (Arc<Self>, flume::Receiver<RawSample>) {
-        let (tx, rx) = flume::bounded(depth.max(1));
-        let slot = ConsumerSlot {
-            tx,
-            oldest: rx.clone(),
-            overflow: AtomicU64::new(0),
-            received: AtomicU64::new(0),
-        };
-        (Arc::new(slot), rx)
-    }
-
-    /// Queues a sample, dropping the oldest one when full.
-    fn push(&self, mut sample: RawSample) {
-        // Counted before the sample becomes visible, so a woken reader sees the count.
-        self.received.fetch_add(1, Ordering::Relaxed);
-        loop {
-            match self.tx.try_send(sample) {
-                Ok(()) => return,
-                Err(flume::TrySendError::Full(back)) => {
-                    sample = back;
-                    if self.oldest.try_recv().is_ok() {
-                        self.overflow.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
-                Err(flume::TrySendError::Disconnected(_)) => return,
-            }
-        }
-    }
-}
 
 /// Counters of the receive path.
 #[derive(Debug, Default)]
@@ -110,6 +69,9 @@ pub(crate) struct DataPlane {
     consumers: RwLock<HashMap<u32, Arc<ConsumerSlot>>>,
     pub(crate) stats: DataStats,
     closed: AtomicBool,
+    /// When the timer thread must next run the consumers' timers.
+    timer: Mutex<Option<Instant>>,
+    timer_changed: Condvar,
 }
 
 impl DataPlane {
@@ -130,6 +92,8 @@ impl DataPlane {
             consumers: RwLock::new(HashMap::new()),
             stats: DataStats::default(),
             closed: AtomicBool::new(false),
+            timer: Mutex::new(None),
+            timer_changed: Condvar::new(),
         })
     }
 
@@ -176,9 +140,53 @@ impl DataPlane {
         }
     }
 
-    /// Stops the receive thread promptly by waking it with an empty datagram.
+    /// Runs the consumers' timers until [`DataPlane::close`]. Runs on its own thread.
+    pub(crate) fn run_timers(&self) {
+        let mut next = lock(&self.timer);
+        while !self.closed.load(Ordering::Acquire) {
+            let now = Instant::now();
+            match *next {
+                Some(at) if at <= now => {
+                    *next = None;
+                    drop(next);
+                    let earliest = read(&self.consumers)
+                        .values()
+                        .filter_map(|slot| slot.timeout(now))
+                        .min();
+                    next = lock(&self.timer);
+                    if let Some(at) = earliest
+                        && next.is_none_or(|n| at < n)
+                    {
+                        *next = Some(at);
+                    }
+                }
+                pending => {
+                    let wait =
+                        pending.map_or(POLL_INTERVAL, |at| at.saturating_duration_since(now));
+                    next = self
+                        .timer_changed
+                        .wait_timeout(next, wait.min(POLL_INTERVAL))
+                        .map(|(guard, _)| guard)
+                        .unwrap_or_else(|poison| poison.into_inner().0);
+                }
+            }
+        }
+    }
+
+    /// Makes the timer thread run no later than `at`.
+    pub(crate) fn schedule(&self, at: Instant) {
+        let mut next = lock(&self.timer);
+        if next.is_none_or(|n| at < n) {
+            *next = Some(at);
+            self.timer_changed.notify_one();
+        }
+    }
+
+    /// Stops the receive and timer threads promptly (the receive thread is woken with an
+    /// empty datagram).
     pub(crate) fn close(&self) {
         self.closed.store(true, Ordering::Release);
+        self.timer_changed.notify_all();
         let _ = self.socket.send_to(&[], SocketAddrV4::from(self.locator));
     }
 
@@ -203,15 +211,24 @@ impl DataPlane {
             self.stats.misaddressed.fetch_add(1, Ordering::Relaxed);
             return;
         }
+        let writer = Guid {
+            participant: sender,
+            entity: data.writer,
+        };
+        let meta = Incoming {
+            writer,
+            seq: data.seq,
+            strength: data.strength,
+            persistence: Duration::from_micros(data.persistence_us),
+            source_ns: data.timestamp_ns,
+        };
         let info = SampleInfo {
-            writer: Guid {
-                participant: sender,
-                entity: data.writer,
-            },
+            writer,
             seq: data.seq,
             source_timestamp: SystemTime::UNIX_EPOCH + Duration::from_nanos(data.timestamp_ns),
             reception_timestamp: SystemTime::now(),
             strength: data.strength,
+            status: SampleStatus::Fresh,
         };
         // Each reader once, however often the datagram names it; one copy of the payload for
         // all of them.
@@ -219,20 +236,20 @@ impl DataPlane {
         readers.sort_unstable();
         readers.dedup();
         let payload: Arc<[u8]> = Arc::from(data.payload);
+        let now = Instant::now();
         let consumers = read(&self.consumers);
         for reader in &readers {
-            match consumers.get(reader) {
-                Some(slot) => {
-                    // Counted first: a reader woken by the push sees the count.
-                    self.stats.delivered.fetch_add(1, Ordering::Relaxed);
-                    slot.push(RawSample {
-                        payload: payload.clone(),
-                        info,
-                    });
-                }
-                None => {
-                    self.stats.unknown_reader.fetch_add(1, Ordering::Relaxed);
-                }
+            let Some(slot) = consumers.get(reader) else {
+                self.stats.unknown_reader.fetch_add(1, Ordering::Relaxed);
+                continue;
+            };
+            self.stats.delivered.fetch_add(1, Ordering::Relaxed);
+            let sample = RawSample {
+                payload: payload.clone(),
+                info,
+            };
+            if let Some(at) = slot.offer(now, meta, sample) {
+                self.schedule(at);
             }
         }
     }

@@ -89,7 +89,7 @@ pub enum WriteError {
 }
 
 /// Receiving a sample failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RecvError {
     /// `try_recv`: nothing queued.
     #[error("no sample available")]
@@ -103,6 +103,13 @@ pub enum RecvError {
     /// from the producers already known.)
     #[error("the consumer's queue is closed")]
     Closed,
+    /// The operation belongs to the other consumer mode (`recv`, streams and callbacks are for
+    /// immediate consumers, `poll` for polled ones).
+    #[error("the consumer is in {0:?} mode")]
+    WrongMode(crate::qos::ConsumerMode),
+    /// A callback thread could not be started.
+    #[error("cannot start the callback thread: {0}")]
+    Thread(String),
 }
 
 /// A query to the daemon failed.

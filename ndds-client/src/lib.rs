@@ -44,9 +44,12 @@ pub mod producer;
 pub mod qos;
 pub mod sample;
 mod session;
+mod slot;
 mod sync;
 
-pub use consumer::{CallbackConsumer, Consumer, ConsumerStats, RawConsumer, SampleStream};
+pub use consumer::{
+    CallbackConsumer, Consumer, ConsumerStats, EventStream, RawConsumer, SampleStream,
+};
 pub use data::ParticipantStats;
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
@@ -56,5 +59,7 @@ pub use ndds_core::wire::{EndpointInfo, Guid};
 pub use ndds_daemon::DaemonConfig;
 pub use participant::{EmbeddedPolicy, Participant, ParticipantBuilder};
 pub use producer::{Producer, RawProducer};
-pub use qos::{ConsumerQos, ProducerQos};
-pub use sample::{RawSample, Sample, SampleInfo};
+pub use qos::{ConsumerMode, ConsumerQos, ProducerQos};
+pub use sample::{
+    Event, Notification, PollStatus, Polled, RawEvent, RawSample, Sample, SampleInfo, SampleStatus,
+};

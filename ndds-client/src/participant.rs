@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 use std::thread::JoinHandle;
 
+use ndds_core::arbitration::Notification;
 use ndds_core::domain;
 use ndds_core::ipc::{
     ClientMessage, DaemonMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome,
@@ -24,13 +25,14 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
-use crate::data::{ConsumerSlot, DataPlane, ParticipantStats};
+use crate::data::{DataPlane, ParticipantStats};
 use crate::embedded;
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::peers::{Matched, Peers};
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
 use crate::session::{self, Session};
+use crate::slot::ConsumerSlot;
 use crate::sync::{lock, read, write};
 
 /// Whether a participant may start a daemon inside its own process.
@@ -222,10 +224,31 @@ impl Router {
                 state.set_matched(all);
             }
         };
+        let slot = match &endpoint {
+            Endpoint::Consumer(state) => Some(&state.slot),
+            Endpoint::Producer(_) => None,
+        };
         match message {
             DaemonMessage::Matched { remote, .. } => peers.matched(remote, on_change),
-            DaemonMessage::Unmatched { remote, .. } => peers.unmatched(&remote, on_change),
-            DaemonMessage::Incompatible { remote, .. } => peers.incompatible(remote),
+            DaemonMessage::Unmatched { remote, .. } => {
+                if peers.unmatched(&remote, on_change)
+                    && let Some(slot) = slot
+                {
+                    slot.writer_lost(remote);
+                }
+            }
+            DaemonMessage::Incompatible { remote, .. } => {
+                if let Some(slot) = slot {
+                    slot.notify(Notification::Incompatible {
+                        writer: remote.guid,
+                        type_name: remote.type_desc.name.clone(),
+                        fingerprint: remote.fingerprint,
+                        local_type: peers.type_desc.name.clone(),
+                        local_fingerprint: peers.fingerprint,
+                    });
+                }
+                peers.incompatible(remote);
+            }
             _ => {}
         }
     }
@@ -461,7 +484,11 @@ impl Participant {
         qos: ConsumerQos,
     ) -> Result<RawConsumer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
-        let (slot, rx) = ConsumerSlot::new(qos.depth);
+        let (slot, rx) = ConsumerSlot::new(qos, std::time::Instant::now());
+        let slot = Arc::new(slot);
+        if let Some(at) = slot.timeout(std::time::Instant::now()) {
+            self.inner.data.schedule(at);
+        }
         let state = Arc::new(ConsumerState::new(topic, type_desc, slot.clone()));
         self.inner.data.add_consumer(entity, slot);
         let handle = self.declare(
@@ -517,12 +544,17 @@ impl Inner {
             .name("ndds-data".into())
             .spawn(move || data.run())
             .map_err(ConnectError::Thread)?;
+        let timers = self.data.clone();
+        let timer_thread = std::thread::Builder::new()
+            .name("ndds-timer".into())
+            .spawn(move || timers.run_timers())
+            .map_err(ConnectError::Thread)?;
         let (session, router) = (self.session.clone(), self.router.clone());
         let session_thread = std::thread::Builder::new()
             .name("ndds-session".into())
             .spawn(move || read_session(reader, &session, &router))
             .map_err(ConnectError::Thread)?;
-        lock(&self.threads).extend([data_thread, session_thread]);
+        lock(&self.threads).extend([data_thread, timer_thread, session_thread]);
         Ok(())
     }
 }

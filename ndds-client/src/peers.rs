@@ -73,12 +73,14 @@ impl Peers {
         self.changed.notify_all();
     }
 
-    /// Forgets a peer; `apply` as in [`Peers::matched`].
-    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(Matched<'_>)) {
+    /// Forgets a peer; `apply` as in [`Peers::matched`]. Returns whether it was matched (not
+    /// merely incompatible).
+    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(Matched<'_>)) -> bool {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(remote);
-        maps.matched.remove(remote);
+        let was_matched = maps.matched.remove(remote).is_some();
         self.apply(&maps, apply);
+        was_matched
     }
 
     /// The matched endpoints.

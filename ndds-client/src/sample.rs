@@ -1,11 +1,13 @@
-//! Samples as the application receives them.
+//! What consumers receive: samples with their status, and notifications.
 
 use std::sync::Arc;
 use std::time::SystemTime;
 
 use ndds_core::wire::Guid;
 
-/// Where a sample came from and when.
+pub use ndds_core::arbitration::{Notification, SampleStatus};
+
+/// Where a sample came from, when, and how it was accepted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SampleInfo {
     /// The producer that wrote it.
@@ -18,6 +20,8 @@ pub struct SampleInfo {
     pub reception_timestamp: SystemTime,
     /// The producer's strength.
     pub strength: i32,
+    /// Fresh, or the first sample of a producer that took over.
+    pub status: SampleStatus,
 }
 
 /// A typed sample.
@@ -37,4 +41,44 @@ pub struct RawSample {
     pub payload: Arc<[u8]>,
     /// Its metadata.
     pub info: SampleInfo,
+}
+
+/// What an immediate consumer receives: a sample, or a notification without one.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event<T> {
+    /// An accepted sample.
+    Sample(Sample<T>),
+    /// A status without a sample: deadline missed, producer lost, incompatible type, ...
+    Notification(Notification),
+}
+
+/// An [`Event`] before decoding.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RawEvent {
+    /// An accepted sample.
+    Sample(RawSample),
+    /// A status without a sample.
+    Notification(Notification),
+}
+
+/// What [`crate::Consumer::poll`] says about the latest accepted sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PollStatus {
+    /// Nothing was ever accepted.
+    NeverReceived,
+    /// A sample accepted since the previous poll.
+    Fresh,
+    /// The same sample as the previous poll, and the deadline (if any) has not passed.
+    Unchanged,
+    /// The deadline passed since the last accepted sample: the data is stale.
+    NoNewData,
+}
+
+/// The answer of [`crate::Consumer::poll`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Polled<T> {
+    /// The latest accepted sample, if any.
+    pub sample: Option<Sample<T>>,
+    /// What it is.
+    pub status: PollStatus,
 }

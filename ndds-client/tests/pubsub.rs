@@ -164,7 +164,15 @@ fn slow_consumer_keeps_the_newest_samples() {
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
     let p = participant(&config);
-    let consumer = p.consumer::<u32>("fast", ConsumerQos { depth: 4 }).unwrap();
+    let consumer = p
+        .consumer::<u32>(
+            "fast",
+            ConsumerQos {
+                depth: 4,
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
     let producer = p.producer::<u32>("fast", ProducerQos::default()).unwrap();
     assert!(producer.wait_for_consumers(1, WAIT));
     for i in 0..20 {
@@ -231,7 +239,13 @@ fn callback_and_stream_forms_deliver() {
         .unwrap();
     let values: Vec<u32> = runtime.block_on(async {
         use futures_util::StreamExt;
-        streamed.stream().take(5).map(|s| s.value).collect().await
+        streamed
+            .stream()
+            .unwrap()
+            .take(5)
+            .map(|s| s.value)
+            .collect()
+            .await
     });
     assert_eq!(values, vec![0, 1, 2, 3, 4]);
 

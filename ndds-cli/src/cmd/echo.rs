@@ -35,8 +35,14 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let desc = wait_for_type(&args.topic, args.fingerprint.as_deref(), args.wait, || {
         Ok(participant.graph()?)
     })?;
-    let consumer =
-        participant.raw_consumer(&args.topic, desc.clone(), ConsumerQos { depth: 1024 })?;
+    let consumer = participant.raw_consumer(
+        &args.topic,
+        desc.clone(),
+        ConsumerQos {
+            depth: 1024,
+            ..ConsumerQos::default()
+        },
+    )?;
     let mut printed = 0u64;
     while args.count.is_none_or(|count| printed < count) {
         let sample = consumer.recv_raw()?;

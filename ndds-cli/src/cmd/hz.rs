@@ -41,7 +41,14 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let desc = wait_for_type(&args.topic, args.fingerprint.as_deref(), args.wait, || {
         Ok(participant.graph()?)
     })?;
-    let consumer = participant.raw_consumer(&args.topic, desc, ConsumerQos { depth: 4096 })?;
+    let consumer = participant.raw_consumer(
+        &args.topic,
+        desc,
+        ConsumerQos {
+            depth: 4096,
+            ..ConsumerQos::default()
+        },
+    )?;
     let end = args.duration.and_then(seconds::deadline);
     let mut window = Window::new(args.window.max(2));
     let mut next_report = Instant::now() + args.every;

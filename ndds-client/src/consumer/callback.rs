@@ -1,0 +1,78 @@
+//! Delivering a consumer's samples or events to a callback on a thread of its own.
+
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use serde::de::DeserializeOwned;
+
+use super::raw::RawConsumer;
+use super::typed::{Consumer, decode_event};
+use crate::error::RecvError;
+use crate::sample::{Event, Sample};
+
+impl<T: DeserializeOwned> Consumer<T> {
+    /// Hands every sample to `callback` on a thread of its own until the returned handle is
+    /// dropped (notifications are skipped; see [`Consumer::on_event`]). A slow callback delays
+    /// only this consumer. Fails in polled mode.
+    pub fn on_sample<F>(self, mut callback: F) -> Result<CallbackConsumer, RecvError>
+    where
+        T: Send + 'static,
+        F: FnMut(Sample<T>) + Send + 'static,
+    {
+        self.on_event(move |event| {
+            if let Event::Sample(sample) = event {
+                callback(sample);
+            }
+        })
+    }
+
+    /// Hands every sample and notification to `callback` on a thread of its own until the
+    /// returned handle is dropped. Fails in polled mode.
+    pub fn on_event<F>(self, mut callback: F) -> Result<CallbackConsumer, RecvError>
+    where
+        T: Send + 'static,
+        F: FnMut(Event<T>) + Send + 'static,
+    {
+        let rx = self.raw.queue()?.clone();
+        let decoder = Arc::clone(&self.raw.state.decoder);
+        let thread = std::thread::Builder::new()
+            .name(format!("ndds-cb-{}", decoder.topic))
+            .spawn(move || {
+                while let Ok(event) = rx.recv() {
+                    callback(decode_event(&decoder, event));
+                }
+            })
+            .map_err(|err| RecvError::Thread(err.to_string()))?;
+        Ok(CallbackConsumer {
+            raw: Some(self.raw),
+            thread: Some(thread),
+        })
+    }
+}
+
+/// A consumer delivering to a callback; dropping it withdraws the consumer and stops the
+/// callback thread (a callback already running finishes first).
+#[derive(Debug)]
+pub struct CallbackConsumer {
+    raw: Option<RawConsumer>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl CallbackConsumer {
+    /// The consumer underneath (topic, matches, counters).
+    pub fn consumer(&self) -> Option<&RawConsumer> {
+        self.raw.as_ref()
+    }
+}
+
+impl Drop for CallbackConsumer {
+    fn drop(&mut self) {
+        // Withdrawing drops the queue's sender, which ends the callback thread's loop.
+        drop(self.raw.take());
+        if let Some(thread) = self.thread.take()
+            && thread.thread().id() != std::thread::current().id()
+        {
+            let _ = thread.join();
+        }
+    }
+}

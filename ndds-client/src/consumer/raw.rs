@@ -1,0 +1,205 @@
+//! The untyped consumer: its shared state, waiting for events, polling, counters.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use ndds_core::arbitration::Notification;
+use ndds_core::types::TypeDescription;
+use ndds_core::wire::EndpointInfo;
+
+use crate::error::RecvError;
+use crate::participant::EndpointHandle;
+use crate::peers::Peers;
+use crate::qos::ConsumerMode;
+use crate::sample::{PollStatus, RawEvent, RawSample};
+use crate::slot::ConsumerSlot;
+use crate::sync::{deadline, lock};
+
+/// State of one consumer shared with the participant's event router.
+#[derive(Debug)]
+pub(crate) struct ConsumerState {
+    pub(crate) peers: Peers,
+    pub(crate) slot: Arc<ConsumerSlot>,
+    pub(crate) decoder: Arc<Decoder>,
+}
+
+/// What decoding needs; shared with callback threads, which must not keep the queue alive.
+#[derive(Debug)]
+pub(crate) struct Decoder {
+    pub(crate) topic: String,
+    pub(crate) errors: AtomicU64,
+}
+
+impl ConsumerState {
+    pub(crate) fn new(topic: &str, type_desc: TypeDescription, slot: Arc<ConsumerSlot>) -> Self {
+        ConsumerState {
+            peers: Peers::new(topic, type_desc),
+            slot,
+            decoder: Arc::new(Decoder {
+                topic: topic.to_owned(),
+                errors: AtomicU64::new(0),
+            }),
+        }
+    }
+}
+
+/// Counters of one consumer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ConsumerStats {
+    /// Samples that arrived for this consumer (before arbitration).
+    pub received: u64,
+    /// Samples accepted by arbitration.
+    pub accepted: u64,
+    /// Samples handed over (queued or made the latest).
+    pub delivered: u64,
+    /// Samples refused because a stronger producer is in charge.
+    pub weaker: u64,
+    /// Samples refused as old data (not newer than the last one of their producer).
+    pub old_data: u64,
+    /// Accepted samples replaced by a newer one within a minimum-separation window.
+    pub superseded: u64,
+    /// Deadline notifications ("no new data", "never received").
+    pub deadline_misses: u64,
+    /// Events dropped because the application did not keep up.
+    pub overflow: u64,
+    /// Samples that did not decode as the consumer's type.
+    pub decode_errors: u64,
+}
+
+/// How long [`RawConsumer::next_event`] may wait.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Wait {
+    Block,
+    Try,
+    Until(Instant),
+}
+
+impl Wait {
+    pub(crate) fn at_most(timeout: Duration) -> Self {
+        deadline(timeout).map_or(Wait::Block, Wait::Until)
+    }
+}
+
+/// A consumer of already-encoded samples, as tools use it. Closing (dropping) it withdraws it.
+#[derive(Debug)]
+pub struct RawConsumer {
+    /// Withdraws the consumer when dropped.
+    pub(crate) _handle: EndpointHandle,
+    pub(crate) state: Arc<ConsumerState>,
+    /// The queue (immediate mode); `None` in polled mode.
+    pub(crate) rx: Option<flume::Receiver<RawEvent>>,
+}
+
+impl RawConsumer {
+    pub(crate) fn queue(&self) -> Result<&flume::Receiver<RawEvent>, RecvError> {
+        self.rx
+            .as_ref()
+            .ok_or(RecvError::WrongMode(ConsumerMode::Polled))
+    }
+
+    pub(crate) fn next_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
+        let rx = self.queue()?;
+        match wait {
+            Wait::Block => rx.recv().map_err(|_| RecvError::Closed),
+            Wait::Try => rx.try_recv().map_err(|err| match err {
+                flume::TryRecvError::Empty => RecvError::Empty,
+                flume::TryRecvError::Disconnected => RecvError::Closed,
+            }),
+            Wait::Until(at) => rx.recv_deadline(at).map_err(|err| match err {
+                flume::RecvTimeoutError::Timeout => RecvError::Timeout,
+                flume::RecvTimeoutError::Disconnected => RecvError::Closed,
+            }),
+        }
+    }
+
+    fn next_sample(&self, wait: Wait) -> Result<RawSample, RecvError> {
+        loop {
+            if let RawEvent::Sample(sample) = self.next_event(wait)? {
+                return Ok(sample);
+            }
+        }
+    }
+
+    /// Blocks until a sample arrives (notifications are skipped).
+    pub fn recv_raw(&self) -> Result<RawSample, RecvError> {
+        self.next_sample(Wait::Block)
+    }
+
+    /// Returns a queued sample without blocking.
+    pub fn try_recv_raw(&self) -> Result<RawSample, RecvError> {
+        self.next_sample(Wait::Try)
+    }
+
+    /// Blocks until a sample arrives or `timeout` passes.
+    pub fn recv_raw_timeout(&self, timeout: Duration) -> Result<RawSample, RecvError> {
+        self.next_sample(Wait::at_most(timeout))
+    }
+
+    /// Blocks until a sample or a notification arrives, or `timeout` passes.
+    pub fn recv_raw_event_timeout(&self, timeout: Duration) -> Result<RawEvent, RecvError> {
+        self.next_event(Wait::at_most(timeout))
+    }
+
+    /// Polled mode: the latest accepted sample and its status, without blocking.
+    pub fn poll_raw(&self) -> Result<(Option<RawSample>, PollStatus), RecvError> {
+        let latest = self
+            .state
+            .slot
+            .latest()
+            .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
+        Ok(lock(latest).take_view())
+    }
+
+    /// Polled mode: the notifications raised since the last call (at most the last 64).
+    pub fn take_notifications(&self) -> Result<Vec<Notification>, RecvError> {
+        let latest = self
+            .state
+            .slot
+            .latest()
+            .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
+        Ok(lock(latest).take_notifications())
+    }
+
+    /// The topic name.
+    pub fn topic(&self) -> &str {
+        &self.state.peers.topic
+    }
+
+    /// The type description announced with this consumer.
+    pub fn type_description(&self) -> &TypeDescription {
+        &self.state.peers.type_desc
+    }
+
+    /// The producers currently matched.
+    pub fn matched(&self) -> Vec<EndpointInfo> {
+        self.state.peers.matched_list()
+    }
+
+    /// Producers of this topic whose type differs.
+    pub fn incompatible(&self) -> Vec<EndpointInfo> {
+        self.state.peers.incompatible_list()
+    }
+
+    /// Waits until at least `count` producers are matched; false at the timeout.
+    pub fn wait_for_producers(&self, count: usize, timeout: Duration) -> bool {
+        self.state.peers.wait_matched(count, timeout)
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> ConsumerStats {
+        let slot = &self.state.slot;
+        let arbiter = slot.arbiter_stats();
+        ConsumerStats {
+            received: slot.arrived.load(Ordering::Relaxed),
+            accepted: arbiter.accepted,
+            delivered: arbiter.delivered,
+            weaker: arbiter.weaker,
+            old_data: arbiter.old_data,
+            superseded: arbiter.superseded,
+            deadline_misses: arbiter.deadline_misses,
+            overflow: slot.overflow.load(Ordering::Relaxed),
+            decode_errors: self.state.decoder.errors.load(Ordering::Relaxed),
+        }
+    }
+}
