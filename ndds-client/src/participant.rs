@@ -6,18 +6,14 @@
 //! alive: when the last handle ([`Participant`], producers, consumers) is dropped, the session
 //! is closed, the daemon withdraws every endpoint at once, and both threads end.
 
-use std::collections::HashMap;
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Arc, Mutex, RwLock};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-use ndds_core::arbitration::Notification;
 use ndds_core::domain;
-use ndds_core::ipc::{
-    ClientMessage, DaemonMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome,
-};
+use ndds_core::ipc::{ClientMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::EndpointQos;
 use ndds_daemon::{DaemonConfig, DaemonError, EmbedError};
@@ -28,12 +24,13 @@ use crate::consumer::{Consumer, ConsumerState, RawConsumer};
 use crate::data::{DataPlane, ParticipantStats};
 use crate::embedded;
 use crate::error::{ConnectError, DeclareError, QueryError};
-use crate::peers::{Matched, Peers};
+use crate::link;
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
+use crate::router::{Endpoint, Router};
 use crate::session::{self, Session};
 use crate::slot::ConsumerSlot;
-use crate::sync::{lock, read, write};
+use crate::sync::lock;
 
 /// Whether a participant may start a daemon inside its own process.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -183,77 +180,6 @@ fn process_name() -> String {
         .unwrap_or_else(|| "ndds-client".to_owned())
 }
 
-/// Local endpoints by entity number, for routing the daemon's events.
-#[derive(Debug, Default)]
-pub(crate) struct Router {
-    endpoints: RwLock<HashMap<u32, Endpoint>>,
-}
-
-#[derive(Debug, Clone)]
-enum Endpoint {
-    Producer(Arc<ProducerState>),
-    Consumer(Arc<ConsumerState>),
-}
-
-impl Endpoint {
-    fn peers(&self) -> &Peers {
-        match self {
-            Endpoint::Producer(state) => &state.peers,
-            Endpoint::Consumer(state) => &state.peers,
-        }
-    }
-}
-
-impl Router {
-    fn route(&self, message: DaemonMessage) {
-        let entity = match &message {
-            DaemonMessage::Matched { local, .. }
-            | DaemonMessage::Incompatible { local, .. }
-            | DaemonMessage::Unmatched { local, .. } => *local,
-            other => {
-                tracing::debug!(?other, "unexpected frame from the daemon");
-                return;
-            }
-        };
-        let Some(endpoint) = read(&self.endpoints).get(&entity).cloned() else {
-            return;
-        };
-        let peers = endpoint.peers();
-        let on_change = |all: Matched<'_>| {
-            if let Endpoint::Producer(state) = &endpoint {
-                state.set_matched(all);
-            }
-        };
-        let slot = match &endpoint {
-            Endpoint::Consumer(state) => Some(&state.slot),
-            Endpoint::Producer(_) => None,
-        };
-        match message {
-            DaemonMessage::Matched { remote, .. } => peers.matched(remote, on_change),
-            DaemonMessage::Unmatched { remote, .. } => {
-                if peers.unmatched(&remote, on_change)
-                    && let Some(slot) = slot
-                {
-                    slot.writer_lost(remote);
-                }
-            }
-            DaemonMessage::Incompatible { remote, .. } => {
-                if let Some(slot) = slot {
-                    slot.notify(Notification::Incompatible {
-                        writer: remote.guid,
-                        type_name: remote.type_desc.name.clone(),
-                        fingerprint: remote.fingerprint,
-                        local_type: peers.type_desc.name.clone(),
-                        local_fingerprint: peers.fingerprint,
-                    });
-                }
-                peers.incompatible(remote);
-            }
-            _ => {}
-        }
-    }
-}
-
 /// An opened session.
 type Reached = (std::os::unix::net::UnixStream, Welcome);
 
@@ -294,7 +220,7 @@ pub(crate) struct EndpointHandle {
 
 impl Drop for EndpointHandle {
     fn drop(&mut self) {
-        let removed = write(&self.inner.router.endpoints).remove(&self.entity);
+        let removed = self.inner.router.remove(self.entity);
         if matches!(removed, Some(Endpoint::Consumer(_))) {
             self.inner.data.remove_consumer(self.entity);
         }
@@ -350,7 +276,7 @@ impl Participant {
             name: settings.name.clone(),
             role: settings.role,
         };
-        let (stream, welcome) = Self::reach_daemon(&settings, hello)?;
+        let (stream, welcome) = Self::reach_daemon(&settings, hello.clone())?;
         let interface = Ipv4Addr::from(welcome.interface);
         let data = DataPlane::open(interface, welcome.domain, participant)
             .map_err(|source| ConnectError::DataSocket { interface, source })?;
@@ -358,7 +284,7 @@ impl Participant {
         let inner = Arc::new(Inner {
             participant,
             welcome,
-            session: Arc::new(Session::new(settings.socket.clone(), stream)),
+            session: Arc::new(Session::new(settings.socket.clone(), hello, stream)),
             data: Arc::new(data),
             router: Arc::new(Router::default()),
             next_entity: AtomicU32::new(1),
@@ -511,25 +437,21 @@ impl Participant {
         qos: EndpointQos,
     ) -> Result<EndpointHandle, DeclareError> {
         let peers = endpoint.peers();
-        let (topic, type_desc, fingerprint) = (
-            peers.topic.clone(),
-            peers.type_desc.clone(),
-            peers.fingerprint,
-        );
-        write(&self.inner.router.endpoints).insert(entity, endpoint);
+        let decl = EndpointDecl {
+            entity,
+            topic: peers.topic.clone(),
+            type_desc: peers.type_desc.clone(),
+            fingerprint: peers.fingerprint,
+            qos,
+            locator: self.inner.data.locator,
+        };
+        self.inner.router.insert(endpoint, decl.clone());
         // From here on, dropping the handle undoes the local registration.
         let handle = EndpointHandle {
             inner: self.inner.clone(),
             entity,
         };
-        self.inner.session.declare(EndpointDecl {
-            entity,
-            topic,
-            type_desc,
-            fingerprint,
-            qos,
-            locator: self.inner.data.locator,
-        })?;
+        self.inner.session.declare(decl)?;
         Ok(handle)
     }
 }
@@ -552,36 +474,9 @@ impl Inner {
         let (session, router) = (self.session.clone(), self.router.clone());
         let session_thread = std::thread::Builder::new()
             .name("ndds-session".into())
-            .spawn(move || read_session(reader, &session, &router))
+            .spawn(move || link::run(reader, &session, &router))
             .map_err(ConnectError::Thread)?;
         lock(&self.threads).extend([data_thread, timer_thread, session_thread]);
         Ok(())
     }
-}
-
-/// The session thread: answers go to waiting requests, events to the router.
-fn read_session(mut reader: std::os::unix::net::UnixStream, session: &Session, router: &Router) {
-    loop {
-        match session::read_frame(&mut reader) {
-            Ok(Some(DaemonMessage::Refused { reason })) => {
-                tracing::error!(%reason, "the daemon ended the session");
-                break;
-            }
-            Ok(Some(message)) => {
-                if let Some(event) = session.complete(message) {
-                    router.route(event);
-                }
-            }
-            Ok(None) | Err(_) if !session.is_open() => break,
-            Ok(None) => {
-                tracing::warn!(socket = %session.path().display(), "the daemon closed the session; samples keep flowing to known peers, but discovery stops");
-                break;
-            }
-            Err(err) => {
-                tracing::warn!(%err, "lost the daemon session; samples keep flowing to known peers, but discovery stops");
-                break;
-            }
-        }
-    }
-    session.mark_closed();
 }

@@ -2,7 +2,7 @@
 //! endpoints they are matched with (or incompatible with), kept current by the daemon's match
 //! events.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -18,6 +18,8 @@ pub(crate) type Matched<'a> = std::collections::btree_map::Values<'a, Guid, Endp
 struct Maps {
     matched: BTreeMap<Guid, EndpointInfo>,
     incompatible: BTreeMap<Guid, EndpointInfo>,
+    /// Matches not yet confirmed by a replacement daemon.
+    stale: BTreeSet<Guid>,
 }
 
 /// Topic, type, and matched and incompatible peers of one local endpoint.
@@ -46,6 +48,7 @@ impl Peers {
     pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(Matched<'_>)) {
         let mut maps = lock(&self.maps);
         maps.incompatible.remove(&remote.guid);
+        maps.stale.remove(&remote.guid);
         maps.matched.insert(remote.guid, remote);
         self.apply(&maps, apply);
     }
@@ -81,6 +84,28 @@ impl Peers {
         let was_matched = maps.matched.remove(remote).is_some();
         self.apply(&maps, apply);
         was_matched
+    }
+
+    /// Marks every match as unconfirmed; [`Peers::sweep_stale`] later drops those the new
+    /// daemon did not report again. Until then, samples keep flowing to them.
+    pub(crate) fn mark_stale(&self) {
+        let mut maps = lock(&self.maps);
+        let guids: Vec<Guid> = maps.matched.keys().copied().collect();
+        maps.stale.extend(guids);
+        maps.incompatible.clear();
+    }
+
+    /// Drops the matches still unconfirmed; returns them. `apply` as in [`Peers::matched`].
+    pub(crate) fn sweep_stale(&self, apply: impl FnOnce(Matched<'_>)) -> Vec<Guid> {
+        let mut maps = lock(&self.maps);
+        let stale = std::mem::take(&mut maps.stale);
+        for guid in &stale {
+            maps.matched.remove(guid);
+        }
+        if !stale.is_empty() {
+            self.apply(&maps, apply);
+        }
+        stale.into_iter().collect()
     }
 
     /// The matched endpoints.

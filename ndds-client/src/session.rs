@@ -90,23 +90,28 @@ pub(crate) fn handshake(path: &Path, hello: Hello) -> Result<(UnixStream, Welcom
 #[derive(Debug)]
 pub(crate) struct Session {
     path: PathBuf,
+    hello: Hello,
     writer: Mutex<UnixStream>,
     declares: Mutex<HashMap<u32, SyncSender<Result<(), String>>>>,
     queries: Mutex<HashMap<u32, SyncSender<Graph>>>,
     next_request: AtomicU32,
     open: AtomicBool,
+    /// Set once the participant is being dropped: no more reconnecting.
+    ending: AtomicBool,
 }
 
 impl Session {
-    pub(crate) fn new(path: PathBuf, stream: UnixStream) -> Self {
+    pub(crate) fn new(path: PathBuf, hello: Hello, stream: UnixStream) -> Self {
         let _ = stream.set_write_timeout(Some(ANSWER_TIMEOUT));
         Session {
             path,
+            hello,
             writer: Mutex::new(stream),
             declares: Mutex::new(HashMap::new()),
             queries: Mutex::new(HashMap::new()),
             next_request: AtomicU32::new(1),
             open: AtomicBool::new(true),
+            ending: AtomicBool::new(false),
         }
     }
 
@@ -205,9 +210,36 @@ impl Session {
         lock(&self.queries).clear();
     }
 
-    /// Closes the connection (both directions).
+    /// Closes the connection (both directions) for good.
     pub(crate) fn shutdown(&self) {
+        self.ending.store(true, Ordering::Release);
         self.mark_closed();
         let _ = lock(&self.writer).shutdown(std::net::Shutdown::Both);
+    }
+
+    /// True once [`Session::shutdown`] was called.
+    pub(crate) fn is_ending(&self) -> bool {
+        self.ending.load(Ordering::Acquire)
+    }
+
+    /// Opens a new session with the daemon at the same path, as the same participant; returns
+    /// the new connection's reading half and the daemon's welcome.
+    pub(crate) fn reconnect(&self) -> Result<(UnixStream, Welcome), ConnectError> {
+        let (stream, welcome) = handshake(&self.path, self.hello.clone())?;
+        let reader = stream.try_clone().map_err(ConnectError::Thread)?;
+        let _ = stream.set_write_timeout(Some(ANSWER_TIMEOUT));
+        *lock(&self.writer) = stream;
+        if self.is_ending() {
+            let _ = lock(&self.writer).shutdown(std::net::Shutdown::Both);
+        } else {
+            self.open.store(true, Ordering::Release);
+        }
+        Ok((reader, welcome))
+    }
+
+    /// Declares an endpoint without waiting for the answer (used when re-declaring after a
+    /// reconnection, from the thread that reads the answers).
+    pub(crate) fn declare_async(&self, decl: EndpointDecl) -> io::Result<()> {
+        self.send(&ClientMessage::Declare(decl))
     }
 }

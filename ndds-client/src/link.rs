@@ -1,0 +1,112 @@
+//! The session thread: reads the daemon's frames (answers to waiting requests, match events to
+//! the router) and, when the daemon goes away, reconnects to its successor on its own.
+//!
+//! While the daemon is down, samples keep flowing to the peers already known. When a daemon
+//! answers on the socket again, the participant opens a new session as the same participant,
+//! declares all its endpoints again, and after [`RECONNECT_GRACE`] drops the matches the new
+//! daemon did not report (it had that long to rediscover the domain).
+
+use std::os::unix::net::UnixStream;
+use std::time::{Duration, Instant};
+
+use ndds_core::ipc::DaemonMessage;
+
+use crate::router::Router;
+use crate::session::{self, Session};
+
+/// How long a new daemon has to report the matches of the old one before they are dropped.
+pub const RECONNECT_GRACE: Duration = Duration::from_secs(3);
+/// First and longest pause between reconnection attempts.
+const RETRY_FIRST: Duration = Duration::from_millis(50);
+const RETRY_MAX: Duration = Duration::from_millis(500);
+
+/// Runs the session thread until the participant ends.
+pub(crate) fn run(mut reader: UnixStream, session: &Session, router: &Router) {
+    let mut sweep_at: Option<Instant> = None;
+    loop {
+        read_until_lost(&mut reader, session, router, &mut sweep_at);
+        session.mark_closed();
+        if session.is_ending() {
+            return;
+        }
+        match reconnect(session) {
+            Some(new_reader) => {
+                reader = new_reader;
+                router.mark_stale();
+                for decl in router.declarations() {
+                    if let Err(err) = session.declare_async(decl) {
+                        tracing::warn!(%err, "re-declaring after reconnection failed");
+                    }
+                }
+                sweep_at = Instant::now().checked_add(RECONNECT_GRACE);
+            }
+            None => return,
+        }
+    }
+}
+
+/// Reads frames until the connection ends; sweeps stale matches when their time comes.
+fn read_until_lost(
+    reader: &mut UnixStream,
+    session: &Session,
+    router: &Router,
+    sweep_at: &mut Option<Instant>,
+) {
+    loop {
+        let timeout = sweep_at.map(|at| {
+            at.saturating_duration_since(Instant::now())
+                .max(Duration::from_millis(1))
+        });
+        let _ = reader.set_read_timeout(timeout);
+        match session::read_frame(reader) {
+            Ok(Some(DaemonMessage::Refused { reason })) => {
+                tracing::error!(%reason, "the daemon ended the session");
+                return;
+            }
+            Ok(Some(message)) => {
+                if let Some(event) = session.complete(message) {
+                    router.route(event);
+                }
+            }
+            Err(err)
+                if matches!(
+                    err.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Ok(None) | Err(_) if session.is_ending() => return,
+            Ok(None) => {
+                tracing::warn!(socket = %session.path().display(), "the daemon closed the session; samples keep flowing to known peers; reconnecting");
+                return;
+            }
+            Err(err) => {
+                tracing::warn!(%err, "lost the daemon session; samples keep flowing to known peers; reconnecting");
+                return;
+            }
+        }
+        if sweep_at.is_some_and(|at| Instant::now() >= at) {
+            *sweep_at = None;
+            let swept = router.sweep_stale();
+            tracing::info!(swept, "matches the new daemon did not confirm were dropped");
+        }
+    }
+}
+
+/// Tries to reach a daemon again until one answers or the participant ends.
+fn reconnect(session: &Session) -> Option<UnixStream> {
+    let mut pause = RETRY_FIRST;
+    while !session.is_ending() {
+        match session.reconnect() {
+            Ok((reader, welcome)) => {
+                tracing::info!(
+                    node = format_args!("{:016x}", welcome.node),
+                    "reconnected to the daemon; declaring endpoints again"
+                );
+                return Some(reader);
+            }
+            Err(err) => tracing::debug!(%err, "daemon not back yet"),
+        }
+        std::thread::sleep(pause);
+        pause = (pause * 2).min(RETRY_MAX);
+    }
+    None
+}

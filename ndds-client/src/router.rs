@@ -1,0 +1,135 @@
+//! The participant's local endpoints by entity number: what was declared (to declare it again
+//! after a daemon restart) and the state the daemon's match events update.
+
+use std::collections::HashMap;
+use std::sync::{Arc, RwLock};
+
+use ndds_core::arbitration::Notification;
+use ndds_core::ipc::{DaemonMessage, EndpointDecl};
+
+use crate::consumer::ConsumerState;
+use crate::peers::{Matched, Peers};
+use crate::producer::ProducerState;
+use crate::sync::{read, write};
+
+/// A local endpoint's state.
+#[derive(Debug, Clone)]
+pub(crate) enum Endpoint {
+    Producer(Arc<ProducerState>),
+    Consumer(Arc<ConsumerState>),
+}
+
+impl Endpoint {
+    pub(crate) fn peers(&self) -> &Peers {
+        match self {
+            Endpoint::Producer(state) => &state.peers,
+            Endpoint::Consumer(state) => &state.peers,
+        }
+    }
+
+    /// Applies a change of the matched set: producers re-target their samples.
+    fn on_change(&self, all: Matched<'_>) {
+        if let Endpoint::Producer(state) = self {
+            state.set_matched(all);
+        }
+    }
+
+    /// Tells a consumer that a matched producer went away.
+    fn lost(&self, writer: ndds_core::wire::Guid) {
+        if let Endpoint::Consumer(state) = self {
+            state.slot.writer_lost(writer);
+        }
+    }
+}
+
+/// Local endpoints by entity number.
+#[derive(Debug, Default)]
+pub(crate) struct Router {
+    endpoints: RwLock<HashMap<u32, (Endpoint, EndpointDecl)>>,
+}
+
+impl Router {
+    pub(crate) fn insert(&self, endpoint: Endpoint, decl: EndpointDecl) {
+        write(&self.endpoints).insert(decl.entity, (endpoint, decl));
+    }
+
+    pub(crate) fn remove(&self, entity: u32) -> Option<Endpoint> {
+        write(&self.endpoints)
+            .remove(&entity)
+            .map(|(endpoint, _)| endpoint)
+    }
+
+    /// Every declaration, to repeat after reconnecting to a daemon.
+    pub(crate) fn declarations(&self) -> Vec<EndpointDecl> {
+        read(&self.endpoints)
+            .values()
+            .map(|(_, decl)| decl.clone())
+            .collect()
+    }
+
+    /// Marks every current match as unconfirmed (the daemon was replaced).
+    pub(crate) fn mark_stale(&self) {
+        for (endpoint, _) in read(&self.endpoints).values() {
+            endpoint.peers().mark_stale();
+        }
+    }
+
+    /// Drops the matches the new daemon did not confirm; returns how many.
+    pub(crate) fn sweep_stale(&self) -> usize {
+        let endpoints: Vec<Endpoint> = read(&self.endpoints)
+            .values()
+            .map(|(endpoint, _)| endpoint.clone())
+            .collect();
+        let mut swept = 0;
+        for endpoint in endpoints {
+            for writer in endpoint.peers().sweep_stale(|all| endpoint.on_change(all)) {
+                endpoint.lost(writer);
+                swept += 1;
+            }
+        }
+        swept
+    }
+
+    /// Applies one match event of the daemon.
+    pub(crate) fn route(&self, message: DaemonMessage) {
+        let entity = match &message {
+            DaemonMessage::Matched { local, .. }
+            | DaemonMessage::Incompatible { local, .. }
+            | DaemonMessage::Unmatched { local, .. } => *local,
+            other => {
+                tracing::debug!(?other, "unexpected frame from the daemon");
+                return;
+            }
+        };
+        let Some(endpoint) = read(&self.endpoints)
+            .get(&entity)
+            .map(|(endpoint, _)| endpoint.clone())
+        else {
+            return;
+        };
+        let peers = endpoint.peers();
+        match message {
+            DaemonMessage::Matched { remote, .. } => {
+                peers.matched(remote, |all| endpoint.on_change(all));
+            }
+            DaemonMessage::Unmatched { remote, .. }
+                if peers.unmatched(&remote, |all| endpoint.on_change(all)) =>
+            {
+                endpoint.lost(remote);
+            }
+            DaemonMessage::Incompatible { remote, .. } => {
+                if let Endpoint::Consumer(state) = &endpoint {
+                    state.slot.notify(Notification::Incompatible {
+                        writer: remote.guid,
+                        type_name: remote.type_desc.name.clone(),
+                        fingerprint: remote.fingerprint,
+                        local_type: peers.type_desc.name.clone(),
+                        local_fingerprint: peers.fingerprint,
+                    });
+                }
+                peers.incompatible(remote);
+            }
+            _ => {}
+        }
+    }
+}
