@@ -252,6 +252,10 @@ fn topics_lists_a_typed_producer_and_consumer() {
 
     let run = world.ndds(&["topics"]);
     let text = run.ok();
+    assert!(text.contains("arm/pose  (1 producer, 1 consumer)"), "{run}");
+    assert!(!text.contains("strength"), "endpoints only with -v: {run}");
+    let run = world.ndds(&["topics", "-v"]);
+    let text = run.ok();
     assert!(text.contains("arm/pose"), "{run}");
     assert!(text.contains(&type_name_of::<Pose>()), "{run}");
     assert!(text.contains(&fingerprint), "{run}");
@@ -793,6 +797,39 @@ fn hz_measures_the_rate_of_a_topic() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("a `rate N Hz` line: {text_run}"));
     assert!((35.0..=65.0).contains(&rate), "about 50 Hz: {text_run}");
+}
+
+#[test]
+fn hz_reports_data_age_and_deadline_misses() {
+    let world = World::start();
+    let participant = world.participant("hz-deadline-test");
+    let producer = participant
+        .producer::<u64>("sensor/flaky", ProducerQos::default())
+        .unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let writer = write_at_rate(producer, 50.0, stop.clone());
+    let run = world.spawn(&[
+        "hz",
+        "sensor/flaky",
+        "--duration",
+        "2",
+        "--deadline",
+        "0.1",
+        "--json",
+    ]);
+    // Half-way through, the producer falls silent: about ten deadlines pass without data.
+    std::thread::sleep(Duration::from_millis(800));
+    stop.store(true, Ordering::Relaxed);
+    let _producer = writer.join().unwrap();
+    let run = run.finish(RUN_LIMIT);
+    let last = parse_line(lines(run.ok()).last().copied().unwrap_or("{}"));
+    let misses = last["deadline_misses"].as_u64().unwrap();
+    assert!((5..=13).contains(&misses), "about ten misses: {run}");
+    let age = last["age_max_ms"].as_f64().unwrap();
+    assert!(
+        (0.0..100.0).contains(&age),
+        "samples arrive within 100 ms: {run}"
+    );
 }
 
 #[test]

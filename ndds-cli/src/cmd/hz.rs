@@ -1,9 +1,10 @@
-//! `ndds hz TOPIC`: the rate at which samples of a topic arrive here.
+//! `ndds hz TOPIC`: the rate at which samples of a topic arrive here, how old they are when
+//! they arrive, and how often a deadline was missed.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use ndds_client::ConsumerQos;
+use ndds_client::{ConsumerQos, Notification, RawEvent, RawSample};
 use serde_json::json;
 
 use crate::cmd::echo::wait_for_type;
@@ -30,6 +31,9 @@ pub struct Args {
     /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
     fingerprint: Option<String>,
+    /// Count a deadline miss each time no sample arrived for this many seconds.
+    #[arg(long, value_parser = seconds::parse)]
+    deadline: Option<Duration>,
     /// One JSON object per report.
     #[arg(long)]
     json: bool,
@@ -46,58 +50,75 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         desc,
         ConsumerQos {
             depth: 4096,
+            deadline: args.deadline,
             ..ConsumerQos::default()
         },
     )?;
     let end = args.duration.and_then(seconds::deadline);
     let mut window = Window::new(args.window.max(2));
+    let mut misses = 0u64;
     let mut next_report = Instant::now() + args.every;
     loop {
         let until = end.map_or(next_report, |end| end.min(next_report));
-        if consumer
-            .recv_raw_timeout(until.saturating_duration_since(Instant::now()))
-            .is_ok()
-        {
-            window.push(Instant::now());
-            while consumer.try_recv_raw().is_ok() {
-                window.push(Instant::now());
+        let mut wait = until.saturating_duration_since(Instant::now());
+        while let Ok(event) = consumer.recv_raw_event_timeout(wait) {
+            match event {
+                RawEvent::Sample(sample) => window.push(Instant::now(), age_ms(&sample)),
+                RawEvent::Notification(
+                    Notification::NoNewData { .. } | Notification::NeverReceived { .. },
+                ) => misses += 1,
+                RawEvent::Notification(_) => {}
             }
+            wait = Duration::ZERO;
         }
         if seconds::passed(end) {
-            report(&window, args.json);
+            report(&window, misses, args.json);
             return Ok(());
         }
         if Instant::now() >= next_report {
-            report(&window, args.json);
+            report(&window, misses, args.json);
             next_report += args.every;
         }
     }
 }
 
-fn report(window: &Window, as_json: bool) {
+/// How old a sample was when it arrived, by the two hosts' clocks (0 if the source clock is
+/// ahead of ours).
+fn age_ms(sample: &RawSample) -> f64 {
+    let info = &sample.info;
+    info.reception_timestamp
+        .duration_since(info.source_timestamp)
+        .map_or(0.0, |age| age.as_secs_f64() * 1000.0)
+}
+
+fn report(window: &Window, misses: u64, as_json: bool) {
     let stats = window.stats();
     if as_json {
         let value = match stats {
-            Some(s) => {
-                json!({"rate_hz": s.rate, "min_ms": s.min_ms, "max_ms": s.max_ms, "std_dev_ms": s.std_dev_ms, "window": s.intervals})
-            }
-            None => json!({"rate_hz": 0.0, "window": 0}),
+            Some(s) => json!({
+                "rate_hz": s.rate, "min_ms": s.min_ms, "max_ms": s.max_ms,
+                "std_dev_ms": s.std_dev_ms, "window": s.intervals,
+                "age_mean_ms": s.age_mean_ms, "age_max_ms": s.age_max_ms,
+                "deadline_misses": misses,
+            }),
+            None => json!({"rate_hz": 0.0, "window": 0, "deadline_misses": misses}),
         };
         println!("{value}");
         return;
     }
     match stats {
         Some(s) => println!(
-            "rate {:.2} Hz  min {:.3} ms  max {:.3} ms  std dev {:.3} ms  window {}",
-            s.rate, s.min_ms, s.max_ms, s.std_dev_ms, s.intervals
+            "rate {:.2} Hz  min {:.3} ms  max {:.3} ms  std dev {:.3} ms  window {}  \
+             age mean {:.3} ms max {:.3} ms  deadline misses {misses}",
+            s.rate, s.min_ms, s.max_ms, s.std_dev_ms, s.intervals, s.age_mean_ms, s.age_max_ms
         ),
-        None => println!("no samples yet"),
+        None => println!("no samples yet  deadline misses {misses}"),
     }
 }
 
-/// Arrival times of the last `capacity` samples.
+/// Arrival times and ages of the last `capacity` samples.
 struct Window {
-    arrivals: VecDeque<Instant>,
+    arrivals: VecDeque<(Instant, f64)>,
     capacity: usize,
 }
 
@@ -107,6 +128,8 @@ struct Stats {
     max_ms: f64,
     std_dev_ms: f64,
     intervals: usize,
+    age_mean_ms: f64,
+    age_max_ms: f64,
 }
 
 impl Window {
@@ -117,11 +140,11 @@ impl Window {
         }
     }
 
-    fn push(&mut self, at: Instant) {
+    fn push(&mut self, at: Instant, age_ms: f64) {
         if self.arrivals.len() == self.capacity {
             self.arrivals.pop_front();
         }
-        self.arrivals.push_back(at);
+        self.arrivals.push_back((at, age_ms));
     }
 
     fn stats(&self) -> Option<Stats> {
@@ -129,7 +152,7 @@ impl Window {
             .arrivals
             .iter()
             .zip(self.arrivals.iter().skip(1))
-            .map(|(a, b)| b.duration_since(*a).as_secs_f64() * 1000.0)
+            .map(|((a, _), (b, _))| b.duration_since(*a).as_secs_f64() * 1000.0)
             .collect();
         if intervals.is_empty() {
             return None;
@@ -147,6 +170,13 @@ impl Window {
             max_ms: intervals.iter().copied().fold(0.0, f64::max),
             std_dev_ms: variance.sqrt(),
             intervals: intervals.len(),
+            age_mean_ms: self.arrivals.iter().map(|(_, age)| age).sum::<f64>()
+                / self.arrivals.len() as f64,
+            age_max_ms: self
+                .arrivals
+                .iter()
+                .map(|(_, age)| *age)
+                .fold(0.0, f64::max),
         })
     }
 }
@@ -160,12 +190,14 @@ mod tests {
         let start = Instant::now();
         let mut window = Window::new(10);
         for i in 0..30u32 {
-            window.push(start + Duration::from_millis(10) * i);
+            window.push(start + Duration::from_millis(10) * i, f64::from(i % 3));
         }
         let stats = window.stats().unwrap();
         assert_eq!(stats.intervals, 10);
         assert!((stats.rate - 100.0).abs() < 1e-6);
         assert!(stats.std_dev_ms < 1e-6);
+        assert_eq!(stats.age_max_ms, 2.0);
+        assert!((stats.age_mean_ms - 1.0).abs() < 0.2);
         assert!(Window::new(5).stats().is_none());
     }
 }

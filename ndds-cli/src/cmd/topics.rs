@@ -9,9 +9,12 @@ use crate::render::{self, EndpointView, Topic};
 /// Options of `ndds topics`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Print JSON instead of text.
+    /// Print JSON instead of text (always with every endpoint).
     #[arg(long)]
     json: bool,
+    /// List every producer (with strength and persistence) and consumer (with its QoS).
+    #[arg(short, long)]
+    verbose: bool,
 }
 
 #[derive(Serialize)]
@@ -45,7 +48,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         println!("no topics (daemon on {})", graph.local.info.hostname);
     }
     for (name, topic) in &topics {
-        print_topic(name, topic);
+        print_topic(name, topic, args.verbose);
     }
     Ok(())
 }
@@ -75,14 +78,22 @@ fn view(name: &str, topic: &Topic<'_>) -> TopicView {
     }
 }
 
-fn print_topic(name: &str, topic: &Topic<'_>) {
-    println!("{name}");
+fn print_topic(name: &str, topic: &Topic<'_>, verbose: bool) {
+    let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+    println!(
+        "{name}  ({}, {})",
+        count(topic.producers.len(), "producer"),
+        count(topic.consumers.len(), "consumer")
+    );
     let types = topic.types();
     for (type_name, fingerprint) in &types {
         println!("  type {type_name} ({})", fingerprint_hex(*fingerprint));
     }
     if types.len() > 1 {
         println!("  INCOMPATIBLE: endpoints of different types do not exchange samples");
+    }
+    if !verbose {
+        return;
     }
     for (label, endpoints) in [
         ("producer", &topic.producers),
