@@ -3,14 +3,28 @@
 //! A harness for tests that run the real programs: `ndds-daemon` processes standing for hosts,
 //! the `ndds` CLI, and the test client `ndds-test-node`. Every [`TestDomain`] gets its own
 //! domain id, discovery port, multicast group and socket directory, so tests running in
-//! parallel never see each other, and every daemon binds to loopback: no traffic leaves the
-//! machine. Processes are killed when their handles drop, even when a test panics.
+//! parallel never see each other. Processes are killed when their handles drop, even when a
+//! test panics.
+//!
+//! Two settings:
+//! - **loopback**: every daemon binds to `127.0.0.1` of the machine ([`TestDomain::daemon`]);
+//! - **simulated hosts** ([`netns`]): each host is a network namespace on a bridge of its own,
+//!   its daemon binds to the host's address, and faults (loss, partitions) are injected with
+//!   `nft` inside the hosts. Needs root, `ip` and `nft`.
+//!
+//! Either way no traffic leaves the machine.
+//!
+//! ## Layout
+//! - `lib.rs`: [`TestDomain`], binaries, polling helpers;
+//! - [`process`]: child processes owned by a test (daemons, test nodes, short commands);
+//! - [`netns`]: hosts as network namespaces, fault injection, a daemon per host ([`netns::Cluster`]).
 //!
 //! The binaries are taken from the cargo target directory of the running test; `cargo test
 //! --workspace` builds them (`ndds-daemon` and `ndds` have integration tests of their own,
 //! which makes cargo build them for any workspace test run).
 #![warn(missing_docs)]
 
+pub mod netns;
 pub mod process;
 
 use std::net::Ipv4Addr;
@@ -80,13 +94,18 @@ impl TestDomain {
 
     /// The flags that put a daemon in this domain, on loopback, with the test timers.
     pub fn daemon_args(&self, name: &str) -> Vec<String> {
+        self.daemon_args_on(name, Ipv4Addr::LOCALHOST)
+    }
+
+    /// The flags that put a daemon in this domain, bound to `interface`, with the test timers.
+    pub fn daemon_args_on(&self, name: &str, interface: Ipv4Addr) -> Vec<String> {
         vec![
             "--domain".into(),
             self.domain.to_string(),
             "--socket".into(),
             self.socket(name).display().to_string(),
             "--interface".into(),
-            "127.0.0.1".into(),
+            interface.to_string(),
             "--multicast-group".into(),
             self.group.to_string(),
             "--discovery-port".into(),
@@ -98,7 +117,7 @@ impl TestDomain {
         ]
     }
 
-    /// Starts a daemon called `name` and waits until it accepts clients.
+    /// Starts a daemon called `name` on loopback and waits until it accepts clients.
     pub fn daemon(&self, name: &str) -> DaemonProcess {
         DaemonProcess::start(self, name)
     }

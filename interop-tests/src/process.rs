@@ -1,6 +1,11 @@
 //! Child processes owned by a test: killed and reaped when dropped.
+//!
+//! Each kind starts either in this network namespace or inside a simulated host
+//! ([`Host`]), through the [`Command`] the host builds (`ip netns exec HOST ...`, which execs
+//! the program itself: the child's pid is the program's).
 
 use std::io::{BufRead, BufReader, Read};
+use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{Receiver, channel};
@@ -9,6 +14,7 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
+use crate::netns::Host;
 use crate::{TestDomain, binary};
 
 /// How long a daemon may take to accept clients after it is started.
@@ -25,15 +31,21 @@ pub struct Output {
     pub stderr: String,
 }
 
-/// Runs a command to completion, killing it at `timeout`.
+/// Runs a program to completion, killing it at `timeout`.
 pub fn run(program: &Path, args: &[String], timeout: Duration) -> Output {
-    let mut child = Command::new(program)
-        .args(args)
+    let mut command = Command::new(program);
+    command.args(args);
+    run_command(command, timeout)
+}
+
+/// Runs a prepared command to completion, killing it at `timeout`.
+pub fn run_command(mut command: Command, timeout: Duration) -> Output {
+    let mut child = command
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .unwrap_or_else(|err| panic!("cannot start {}: {err}", program.display()));
+        .unwrap_or_else(|err| panic!("cannot start {command:?}: {err}"));
     let stdout = drain(child.stdout.take());
     let stderr = drain(child.stderr.take());
     let deadline = Instant::now() + timeout;
@@ -81,12 +93,30 @@ pub struct DaemonProcess {
 }
 
 impl DaemonProcess {
-    /// Starts a daemon in `domain` and waits until its socket accepts connections.
+    /// Starts a daemon in `domain` on loopback and waits until its socket accepts connections.
     pub fn start(domain: &TestDomain, name: &str) -> Self {
+        let command = Command::new(binary("ndds-daemon"));
+        Self::launch(command, domain, name, Ipv4Addr::LOCALHOST)
+    }
+
+    /// Starts a daemon in `domain` inside `host`, bound to the host's address, and waits until
+    /// its socket accepts connections. The socket lives in the domain's directory, which every
+    /// host shares.
+    pub fn start_on(host: &Host, domain: &TestDomain, name: &str) -> Self {
+        let command = host.exec(binary("ndds-daemon"));
+        Self::launch(command, domain, name, host.ip())
+    }
+
+    fn launch(mut command: Command, domain: &TestDomain, name: &str, interface: Ipv4Addr) -> Self {
         let log = domain.path(&format!("{name}.log"));
-        let log_file = std::fs::File::create(&log).expect("daemon log file");
-        let child = Command::new(binary("ndds-daemon"))
-            .args(domain.daemon_args(name))
+        // Appended to: a daemon restarted under the same name keeps its predecessor's log.
+        let log_file = std::fs::File::options()
+            .create(true)
+            .append(true)
+            .open(&log)
+            .expect("daemon log file");
+        let child = command
+            .args(domain.daemon_args_on(name, interface))
             .env("RUST_LOG", "debug")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -122,6 +152,13 @@ impl DaemonProcess {
     /// Freezes the process (SIGSTOP): it stays alive but silent.
     pub fn stop(&self) {
         signal(&self.child, Signal::SIGSTOP);
+    }
+
+    /// Kills the process with SIGKILL (a crash: no goodbye of any kind) and reaps it. Its
+    /// socket file stays behind, as after a real crash.
+    pub fn kill9(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 
     /// Resumes a frozen process (SIGCONT).
@@ -165,7 +202,18 @@ pub struct ClientProcess {
 impl ClientProcess {
     /// Starts `ndds-test-node` with `args`, connected to the daemon at `socket`.
     pub fn test_node(socket: &Path, args: &[&str]) -> Self {
-        let mut child = Command::new(binary("ndds-test-node"))
+        Self::spawn(Command::new(binary("ndds-test-node")), socket, args)
+    }
+
+    /// Starts `ndds-test-node` with `args` inside `host`, connected to the daemon at `socket`
+    /// (which must run in the same host: the client binds its data socket to the daemon's
+    /// interface).
+    pub fn test_node_on(host: &Host, socket: &Path, args: &[&str]) -> Self {
+        Self::spawn(host.exec(binary("ndds-test-node")), socket, args)
+    }
+
+    fn spawn(mut command: Command, socket: &Path, args: &[&str]) -> Self {
+        let mut child = command
             .args(args)
             .env("NDDS_SOCKET", socket)
             .env("NDDS_EMBEDDED", "never")
@@ -210,10 +258,25 @@ impl ClientProcess {
         }
     }
 
+    /// Discards the lines already printed; returns how many there were.
+    pub fn drain(&self) -> usize {
+        self.lines.try_iter().count()
+    }
+
     /// Kills the process with SIGKILL (a crash: no goodbye of any kind).
     pub fn kill9(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+
+    /// Freezes the process (SIGSTOP): it stays alive but silent.
+    pub fn stop(&self) {
+        signal(&self.child, Signal::SIGSTOP);
+    }
+
+    /// Resumes a frozen process (SIGCONT).
+    pub fn resume(&self) {
+        signal(&self.child, Signal::SIGCONT);
     }
 
     /// Waits for the process to exit; returns its exit code.
@@ -224,6 +287,7 @@ impl ClientProcess {
 
 impl Drop for ClientProcess {
     fn drop(&mut self) {
+        signal(&self.child, Signal::SIGCONT);
         let _ = self.child.kill();
         let _ = self.child.wait();
     }

@@ -299,10 +299,13 @@ fn a_datagram_naming_one_reader_many_times_delivers_once() {
         .connect()
         .unwrap();
     let consumer = participant
-        .consumer::<u32>("dup", ConsumerQos {
-            depth: 100_000,
-            ..ConsumerQos::default()
-        })
+        .consumer::<u32>(
+            "dup",
+            ConsumerQos {
+                depth: 100_000,
+                ..ConsumerQos::default()
+            },
+        )
         .unwrap();
     let producer = participant
         .producer::<u32>("dup", ProducerQos::default())

@@ -35,6 +35,13 @@ enum Role {
         /// Stop after this many samples (default: run until killed).
         #[arg(long)]
         count: Option<u64>,
+        /// Before writing, wait until this many consumers are matched (reported as a
+        /// `matched` event; exits with an error after `--wait-timeout`).
+        #[arg(long, default_value_t = 0)]
+        wait_consumers: usize,
+        /// Seconds `--wait-consumers` may take.
+        #[arg(long, default_value_t = 10.0)]
+        wait_timeout: f64,
     },
     /// Read `Telemetry` samples and print each one.
     Consume {
@@ -53,7 +60,16 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let participant = Participant::connect().context("connect to the test daemon")?;
     match cli.role {
-        Role::Produce { topic, rate, count } => produce(&participant, &topic, rate, count),
+        Role::Produce {
+            topic,
+            rate,
+            count,
+            wait_consumers,
+            wait_timeout,
+        } => {
+            let wait = (wait_consumers, Duration::from_secs_f64(wait_timeout));
+            produce(&participant, &topic, rate, count, wait)
+        }
         Role::Consume {
             topic,
             count,
@@ -71,9 +87,22 @@ fn produce(
     topic: &str,
     rate: f64,
     count: Option<u64>,
+    (wait_consumers, wait_timeout): (usize, Duration),
 ) -> anyhow::Result<()> {
     let producer = participant.producer::<Telemetry>(topic, ProducerQos::default())?;
     emit(json!({"event": "ready", "pid": std::process::id()}));
+    if wait_consumers > 0 {
+        let waited = Instant::now();
+        anyhow::ensure!(
+            producer.wait_for_consumers(wait_consumers, wait_timeout),
+            "fewer than {wait_consumers} consumers matched within {wait_timeout:?}"
+        );
+        emit(json!({
+            "event": "matched",
+            "consumers": producer.matched().len(),
+            "waited_ms": waited.elapsed().as_secs_f64() * 1000.0,
+        }));
+    }
     let period = Duration::from_secs_f64(1.0 / rate.max(0.001));
     let start = Instant::now();
     let mut seq = 0;
