@@ -278,8 +278,17 @@ impl Participant {
         };
         let (stream, welcome) = Self::reach_daemon(&settings, hello.clone())?;
         let interface = Ipv4Addr::from(welcome.interface);
-        let data = DataPlane::open(interface, welcome.domain, participant)
-            .map_err(|source| ConnectError::DataSocket { interface, source })?;
+        let data = match DataPlane::open(interface, welcome.domain, participant) {
+            Ok(data) => data,
+            // A tool may reach a daemon's socket from where the daemon's interface does not
+            // exist (another network namespace); listings need no data socket that works.
+            Err(err) if settings.role == Role::Tool => {
+                tracing::debug!(%interface, %err, "tool without a usable data socket; using loopback");
+                DataPlane::open(Ipv4Addr::LOCALHOST, welcome.domain, participant)
+                    .map_err(|source| ConnectError::DataSocket { interface, source })?
+            }
+            Err(source) => return Err(ConnectError::DataSocket { interface, source }),
+        };
         let reader = stream.try_clone().map_err(ConnectError::Thread)?;
         let inner = Arc::new(Inner {
             participant,
