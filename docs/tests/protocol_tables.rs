@@ -257,7 +257,13 @@ fn header_table_matches_the_emitted_header() {
 fn domain_table_matches_the_mapping() {
     let doc = doc();
     let mut problems = Problems::new();
-    let columns = ["domain", "multicast group", "discovery port", "unix socket"];
+    let columns = [
+        "domain",
+        "multicast group",
+        "discovery port",
+        "unicast port",
+        "unix socket",
+    ];
     if let Some(table) = single_table(&doc, &mut problems, &columns) {
         for row in &table.rows {
             let Ok(id) = row.plain(0).parse::<u32>() else {
@@ -272,9 +278,10 @@ fn domain_table_matches_the_mapping() {
                 id.to_string(),
                 domain::multicast_group(id).to_string(),
                 domain::discovery_port(id).to_string(),
+                domain::unicast_port(id).to_string(),
                 domain::default_socket_path(id).display().to_string(),
             ];
-            let written: Vec<String> = (0..4).map(|i| row.plain(i)).collect();
+            let written: Vec<String> = (0..expected.len()).map(|i| row.plain(i)).collect();
             if written != expected {
                 problems.at(
                     &doc,

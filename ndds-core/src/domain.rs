@@ -3,11 +3,15 @@
 //! | what | value for domain `d` (0 ≤ d ≤ 232) |
 //! |---|---|
 //! | discovery multicast group | `239.255.76.d` |
-//! | discovery UDP port | `7600 + d` |
+//! | discovery UDP port (multicast) | `7600 + d` |
+//! | unicast discovery port | `7850 + d` |
 //! | daemon Unix socket | `/tmp/ndds-d.sock` |
 //!
 //! Every value can be overridden (daemon flags and config file, `NDDS_SOCKET`); these are only
 //! the defaults that let daemons and clients of one domain find each other with no set-up.
+//! The unicast port is fixed so that a static peer list can name a peer by its host alone
+//! (`--peers host`); a daemon that finds it taken (several daemons of one domain on one host)
+//! falls back to any free port, and peers then learn that port from its announcements.
 
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
@@ -16,6 +20,10 @@ use std::path::PathBuf;
 pub const MAX_DOMAIN: u16 = 232;
 /// Discovery port of domain 0; domain `d` uses `BASE_PORT + d`.
 pub const BASE_PORT: u16 = 7600;
+
+/// Unicast discovery port of domain 0; domain `d` uses `UNICAST_BASE_PORT + d`. The range
+/// (7850 to 8082) does not overlap the multicast ports (7600 to 7832).
+pub const UNICAST_BASE_PORT: u16 = 7850;
 
 /// A domain id outside `0..=MAX_DOMAIN`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -40,6 +48,12 @@ pub fn discovery_port(domain: u16) -> u16 {
     BASE_PORT + domain.min(MAX_DOMAIN)
 }
 
+/// The default unicast discovery port of a domain: where a daemon receives unicast discovery
+/// datagrams, and the port a peer named without one is assumed to use.
+pub fn unicast_port(domain: u16) -> u16 {
+    UNICAST_BASE_PORT + domain.min(MAX_DOMAIN)
+}
+
 /// The default path of the daemon's Unix socket for a domain.
 pub fn default_socket_path(domain: u16) -> PathBuf {
     PathBuf::from(format!("/tmp/ndds-{domain}.sock"))
@@ -55,6 +69,9 @@ mod tests {
         assert_eq!(multicast_group(232), Ipv4Addr::new(239, 255, 76, 232));
         assert_eq!(discovery_port(0), 7600);
         assert_eq!(discovery_port(17), 7617);
+        assert_eq!(unicast_port(0), 7850);
+        assert_eq!(unicast_port(232), 8082);
+        assert!(discovery_port(MAX_DOMAIN) < unicast_port(0));
         assert_eq!(default_socket_path(3), PathBuf::from("/tmp/ndds-3.sock"));
         assert_eq!(check(232), Ok(232));
         assert_eq!(check(233), Err(DomainError(233)));

@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use ndds_core::discovery::engine::{MAX_ENDPOINTS_PER_NODE, MAX_REMOTE_ENDPOINTS};
-use ndds_core::discovery::{Destination, DiscoveryConfig, Engine};
+use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Via};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     self, Announce, DropReason, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo,
@@ -62,7 +62,12 @@ fn a_solicit_is_answered_only_at_its_own_source_address() {
     let solicit = Message::Solicit(Solicit {
         node: node_info(honest),
     });
-    engine.handle_datagram(now, SocketAddr::V4(honest.into()), &datagram(2, &solicit));
+    engine.handle_datagram(
+        now,
+        SocketAddr::V4(honest.into()),
+        Via::Multicast,
+        &datagram(2, &solicit),
+    );
     assert_eq!(unicast_replies(&mut engine, now), vec![honest]);
 
     // A datagram from 10.0.0.3 naming a victim's address is recorded but not answered.
@@ -71,8 +76,46 @@ fn a_solicit_is_answered_only_at_its_own_source_address() {
         node: node_info(victim),
     });
     let source: SocketAddr = "10.0.0.3:7700".parse().unwrap();
-    engine.handle_datagram(now, source, &datagram(3, &forged));
+    engine.handle_datagram(now, source, Via::Multicast, &datagram(3, &forged));
     assert!(unicast_replies(&mut engine, now).is_empty());
+}
+
+#[test]
+fn a_node_heard_by_unicast_gets_copies_only_at_its_own_source_address() {
+    let now = Instant::now();
+    let mut engine = engine(now);
+    // Two nodes heard by unicast only: one honest, one naming a victim's address.
+    let honest = locator(2, 7850);
+    let announce = |unicast| {
+        Message::Announce(Announce {
+            node: node_info(unicast),
+            endpoints: vec![],
+            withdrawn: vec![],
+        })
+    };
+    let from_honest = SocketAddr::V4(honest.into());
+    engine.handle_datagram(
+        now,
+        from_honest,
+        Via::Unicast,
+        &datagram(2, &announce(honest)),
+    );
+    let victim = locator(99, 53);
+    let source: SocketAddr = "10.0.0.3:7850".parse().unwrap();
+    engine.handle_datagram(now, source, Via::Unicast, &datagram(3, &announce(victim)));
+    assert_eq!(engine.nodes().count(), 2);
+    // The forged node is known but never sent anything: no reply, no fan-out copy.
+    assert_eq!(
+        engine.fanout(),
+        vec![Destination::Multicast, Destination::Unicast(honest)]
+    );
+    let later = now + Duration::from_secs(2);
+    engine.handle_timeout(later);
+    let destinations: Vec<Destination> = std::iter::from_fn(|| engine.poll_transmit())
+        .map(|t| t.destination)
+        .collect();
+    assert!(destinations.contains(&Destination::Unicast(honest)));
+    assert!(!destinations.contains(&Destination::Unicast(victim)));
 }
 
 fn endpoint(participant: u64) -> EndpointInfo {
@@ -114,7 +157,7 @@ fn remote_endpoints_are_capped_per_node_and_in_all() {
                 endpoints: chunk.to_vec(),
                 withdrawn: vec![],
             });
-            engine.handle_datagram(now, from, &datagram(1000 + node, &announce));
+            engine.handle_datagram(now, from, Via::Multicast, &datagram(1000 + node, &announce));
         }
     }
     assert_eq!(engine.endpoints().count(), MAX_REMOTE_ENDPOINTS);
@@ -141,7 +184,7 @@ fn two_nodes_with_one_id_cannot_see_each_other_and_say_so() {
     a.handle_timeout(now);
     let from_a = SocketAddr::V4(locator(1, 7600).into());
     for transmit in std::iter::from_fn(|| a.poll_transmit()) {
-        b.handle_datagram(now, from_a, &transmit.payload);
+        b.handle_datagram(now, from_a, Via::Multicast, &transmit.payload);
     }
     assert_eq!(b.node_id(), 42);
     assert!(b.stats().dropped(DropReason::Own) >= 1);

@@ -2,159 +2,24 @@
 //! withdrawals, crashes, restarts, `Bye`, loss, partitions. Every timing assertion is in virtual
 //! time, so these tests are exact and replay identically.
 
+#[path = "support/fixtures.rs"]
+mod fixtures;
 #[path = "support/simnet.rs"]
 mod simnet;
 
 use std::collections::BTreeSet;
 use std::time::Duration;
 
-use ndds_core::discovery::{DiscoveryConfig, Engine, Event, LossReason, Origin};
+use ndds_core::discovery::{DiscoveryConfig, Engine, Event, LossReason, Origin, Via};
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::{
-    ConsumerQosWire, DropReason, EndpointInfo, EndpointQos, Guid, MessageKind, ProducerQosWire,
-};
-use serde::de::DeserializeOwned;
-use serde::{Deserialize, Serialize};
+use ndds_core::wire::{DropReason, Guid, MessageKind};
 
+use fixtures::*;
 use simnet::{SimNet, config, locator};
 
 const PERIOD: Duration = Duration::from_secs(1);
 const LEASE: Duration = Duration::from_secs(5);
 const MS: Duration = Duration::from_millis(1);
-
-// ----- sample types and endpoints ----------------------------------------------------------
-
-#[derive(Serialize, Deserialize)]
-struct Pose {
-    x: f64,
-    y: f64,
-}
-
-/// Same topic as `Pose` in the tests, different structure: incompatible.
-#[derive(Serialize, Deserialize)]
-struct PoseV2 {
-    x: f64,
-    y: f64,
-    z: f64,
-}
-
-#[derive(Serialize, Deserialize)]
-struct Scan {
-    ranges: Vec<f32>,
-}
-
-/// Endpoint `entity` of the client on node `node`.
-fn guid(node: usize, entity: u32) -> Guid {
-    Guid {
-        participant: 0xC0DE_0000 + node as u64,
-        entity,
-    }
-}
-
-fn endpoint<T: Serialize + DeserializeOwned>(
-    guid: Guid,
-    topic: &str,
-    qos: EndpointQos,
-) -> EndpointInfo {
-    let type_desc = TypeDescription::try_of::<T>().unwrap();
-    EndpointInfo {
-        guid,
-        topic: topic.to_owned(),
-        fingerprint: type_desc.fingerprint(),
-        type_desc,
-        qos,
-        locator: locator(200),
-        pid: 4242,
-        process: "simnet".to_owned(),
-    }
-}
-
-fn producer<T: Serialize + DeserializeOwned>(guid: Guid, topic: &str) -> EndpointInfo {
-    endpoint::<T>(
-        guid,
-        topic,
-        EndpointQos::Producer(ProducerQosWire::default()),
-    )
-}
-
-fn consumer<T: Serialize + DeserializeOwned>(guid: Guid, topic: &str) -> EndpointInfo {
-    endpoint::<T>(
-        guid,
-        topic,
-        EndpointQos::Consumer(ConsumerQosWire::default()),
-    )
-}
-
-// ----- event queries -----------------------------------------------------------------------
-
-/// When node `n` first emitted an event satisfying `pred` at or after `since`.
-fn first(
-    net: &SimNet,
-    n: usize,
-    since: Duration,
-    pred: impl Fn(&Event) -> bool,
-) -> Option<Duration> {
-    net.events_since(n, since)
-        .find(|(_, e)| pred(e))
-        .map(|(at, _)| *at)
-}
-
-fn count(net: &SimNet, n: usize, since: Duration, pred: impl Fn(&Event) -> bool) -> usize {
-    net.events_since(n, since).filter(|(_, e)| pred(e)).count()
-}
-
-fn matched(local: Guid, other: Guid) -> impl Fn(&Event) -> bool {
-    move |e| matches!(e, Event::Matched { local: l, remote } if *l == local && remote.guid == other)
-}
-
-fn incompatible(local: Guid, other: Guid) -> impl Fn(&Event) -> bool {
-    move |e| matches!(e, Event::Incompatible { local: l, remote } if *l == local && remote.guid == other)
-}
-
-fn unmatched(local: Guid, other: Guid) -> impl Fn(&Event) -> bool {
-    move |e| matches!(e, Event::Unmatched { local: l, remote } if *l == local && *remote == other)
-}
-
-fn lost(node: u64, reason: LossReason) -> impl Fn(&Event) -> bool {
-    move |e| matches!(e, Event::NodeLost { node: id, reason: r } if *id == node && *r == reason)
-}
-
-fn any_unmatched(e: &Event) -> bool {
-    matches!(e, Event::Unmatched { .. })
-}
-
-/// The (local, other) pairs node `n` currently considers matched, replaying its events.
-fn match_set(net: &SimNet, n: usize) -> BTreeSet<(Guid, Guid)> {
-    let mut pairs = BTreeSet::new();
-    for (_, event) in net.events_since(n, Duration::ZERO) {
-        match event {
-            Event::Matched { local, remote } => {
-                pairs.insert((*local, remote.guid));
-            }
-            Event::Unmatched { local, remote } => {
-                pairs.remove(&(*local, *remote));
-            }
-            _ => {}
-        }
-    }
-    pairs
-}
-
-/// Every event of node `n` since `since`, as (local, other) pairs of matches only; fails on
-/// any other kind of match event.
-fn matches_since(net: &SimNet, n: usize, since: Duration) -> BTreeSet<(Guid, Guid)> {
-    let mut pairs = BTreeSet::new();
-    for (_, event) in net.events_since(n, since) {
-        match event {
-            Event::Matched { local, remote } => assert!(pairs.insert((*local, remote.guid))),
-            Event::Incompatible { .. } | Event::Unmatched { .. } => {
-                panic!("node {n}: unexpected {event:?}")
-            }
-            _ => {}
-        }
-    }
-    pairs
-}
 
 /// A network of `n` nodes with the given timers, run until they all know each other.
 fn network(seed: u64, n: usize, period: Duration, lease: Duration) -> SimNet {
@@ -577,31 +442,6 @@ fn bye_removes_a_node_everywhere_at_once() {
 
 // ----- loss and partitions -----------------------------------------------------------------
 
-/// Every node declares a producer and a consumer of one topic.
-fn shared_topic(net: &mut SimNet, nodes: usize) {
-    for n in 0..nodes {
-        net.add_local(n, producer::<Pose>(guid(n, 1), "shared"));
-        net.add_local(n, consumer::<Pose>(guid(n, 2), "shared"));
-    }
-}
-
-/// The matches node `n` has when it sees the endpoints of `peers` (itself included).
-fn full_match_set(n: usize, peers: &[usize]) -> BTreeSet<(Guid, Guid)> {
-    let mut pairs = BTreeSet::new();
-    for &m in peers {
-        pairs.insert((guid(n, 1), guid(m, 2)));
-        pairs.insert((guid(n, 2), guid(m, 1)));
-    }
-    pairs
-}
-
-fn sees_all(net: &SimNet, n: usize, peers: &[usize]) -> bool {
-    peers
-        .iter()
-        .all(|&m| net.knows(n, guid(m, 1)) && net.knows(n, guid(m, 2)))
-        && net.engine(n).endpoints().count() == 2 * peers.len()
-}
-
 #[test]
 fn lossy_network_converges_and_never_drops_a_live_endpoint() {
     // 30 % loss on every link. A live endpoint is dropped only when every refresh of one link
@@ -741,14 +581,14 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
         .unwrap();
     engine.handle_timeout(start);
     let own: Vec<Vec<u8>> = std::iter::from_fn(|| engine.poll_transmit())
-        .map(|t| t.payload)
+        .map(|t| t.payload.to_vec())
         .collect();
     assert!(own.len() >= 2, "announcement and solicit");
     while engine.poll_event().is_some() {}
 
     let from = "10.0.0.1:7400".parse().unwrap();
     for bytes in &own {
-        engine.handle_datagram(start, from, bytes);
+        engine.handle_datagram(start, from, Via::Multicast, bytes);
     }
     // The same datagrams from a node of another domain.
     let mut other =
@@ -757,7 +597,7 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
         .add_local(producer::<Pose>(guid(1, 1), "arm/pose"))
         .unwrap();
     let foreign = other.poll_transmit().unwrap().payload;
-    engine.handle_datagram(start, from, &foreign);
+    engine.handle_datagram(start, from, Via::Multicast, &foreign);
 
     let stats = engine.stats();
     assert_eq!(stats.dropped(DropReason::Own), own.len() as u64);

@@ -13,7 +13,7 @@ use std::cell::Cell;
 use std::net::SocketAddr;
 use std::time::Instant;
 
-use ndds_core::discovery::{DiscoveryConfig, Engine, Event};
+use ndds_core::discovery::{DiscoveryConfig, Engine, Event, Via};
 use ndds_core::types::layout::MAX_FORMATS;
 use ndds_core::types::{
     Container, ContainerShape, Field, Format, LayoutError, TypeDescription, TypeLayout,
@@ -234,7 +234,7 @@ proptest! {
         for bytes in &inputs {
             let mut bytes = bytes.clone();
             bytes[6..8].copy_from_slice(&0u16.to_le_bytes());
-            engine.handle_datagram(now, from(), &bytes);
+            engine.handle_datagram(now, from(), Via::Unicast, &bytes);
         }
         let stats = engine.stats();
         prop_assert_eq!(stats.received, inputs.len() as u64);
@@ -413,7 +413,7 @@ fn from() -> SocketAddr {
 fn assert_engine_refuses(bytes: &[u8]) {
     let now = Instant::now();
     let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
-    engine.handle_datagram(now, from(), bytes);
+    engine.handle_datagram(now, from(), Via::Unicast, bytes);
     assert_eq!(engine.stats().accepted, 1);
     assert_eq!(engine.stats().invalid_endpoints, 1);
     assert_eq!(engine.endpoints().count(), 0);
@@ -580,7 +580,7 @@ fn the_engine_handles_an_exploding_layout_in_bounded_memory() {
     let bytes = encode(&announce_one(doubling_tuples(20)));
     let now = Instant::now();
     let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
-    let ((), usage) = measure(|| engine.handle_datagram(now, from(), &bytes));
+    let ((), usage) = measure(|| engine.handle_datagram(now, from(), Via::Unicast, &bytes));
     assert!(
         usage.peak <= budget(bytes.len()),
         "a {}-byte datagram made the engine allocate {usage:?}",
@@ -801,7 +801,12 @@ fn a_node_cannot_flood_the_engine_with_endpoints() {
             unreachable!()
         };
         announce.endpoints = endpoints;
-        engine.handle_datagram(now, from(), &encode(&Message::Announce(announce)));
+        engine.handle_datagram(
+            now,
+            from(),
+            Via::Unicast,
+            &encode(&Message::Announce(announce)),
+        );
     }
     assert_eq!(engine.endpoints().count(), MAX_ENDPOINTS_PER_NODE);
     assert_eq!(engine.stats().invalid_endpoints, 100);
@@ -830,7 +835,7 @@ fn nodes_with_unusable_unicast_locators_or_timers_are_invalid() {
         broken.push(encode(&Message::Announce(announce)));
     }
     for bytes in &broken {
-        engine.handle_datagram(now, from(), bytes);
+        engine.handle_datagram(now, from(), Via::Unicast, bytes);
     }
     assert_eq!(
         engine.stats().dropped(DropReason::Invalid),

@@ -12,8 +12,10 @@ use crate::daemon::Daemon;
 /// The ndds discovery daemon: run one per host and domain.
 ///
 /// Clients on this host connect to it through its Unix socket; it finds the daemons of other
-/// hosts over UDP multicast on the chosen interface. By default it uses the loopback interface
-/// only: pass `--interface` (an address or a name such as eth0) to reach other hosts.
+/// hosts over UDP multicast on the chosen interface, and by unicast through `--peers` where
+/// multicast does not reach (`--no-multicast` turns multicast off). By default it uses the
+/// loopback interface only: pass `--interface` (an address or a name such as eth0) to reach
+/// other hosts.
 #[derive(Debug, Parser)]
 #[command(name = "ndds-daemon", version)]
 pub struct Args {

@@ -8,9 +8,11 @@
 //! | `domain` | 0 |
 //! | `socket` | `/tmp/ndds-<domain>.sock` |
 //! | `interface` | `127.0.0.1` (loopback: this host only; name an interface to reach others) |
+//! | `multicast` | true |
 //! | `multicast_group` | `239.255.76.<domain>` |
 //! | `discovery_port` | `7600 + domain` |
-//! | `unicast_port` | 0 (any free port) |
+//! | `unicast_port` | `7850 + domain`, or any free port if that one is taken |
+//! | `peers` | none |
 //! | `announce_period_ms` | 1000 |
 //! | `lease_ms` | 5000 |
 //! | `multicast_ttl` | 1 |
@@ -19,10 +21,12 @@ use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use ndds_core::discovery::MAX_PEERS;
 use ndds_core::domain;
 use serde::Deserialize;
 
 use crate::iface;
+use crate::peers::PeerSpec;
 
 /// The daemon's settings as the config file and the command line give them, every one
 /// optional. Unknown keys in the file are an error.
@@ -38,15 +42,25 @@ pub struct ConfigFile {
     /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
     #[arg(long)]
     pub interface: Option<String>,
+    /// Do not use multicast: neither join the discovery group nor send to it; discovery then
+    /// relies on --peers and on the daemons that list this one (config file: multicast = false).
+    #[arg(long = "no-multicast", num_args = 0, default_missing_value = "false")]
+    pub multicast: Option<bool>,
     /// Discovery multicast group [default: 239.255.76.DOMAIN].
     #[arg(long)]
     pub multicast_group: Option<Ipv4Addr>,
     /// Discovery multicast port [default: 7600 + DOMAIN].
     #[arg(long)]
     pub discovery_port: Option<u16>,
-    /// Unicast discovery port [default: any free port].
+    /// Unicast discovery port; 0 picks any free port. Given explicitly, it must be free
+    /// [default: 7850 + DOMAIN, or any free port if that one is taken].
     #[arg(long)]
     pub unicast_port: Option<u16>,
+    /// Static unicast peers, HOST or HOST:PORT (port default: 7850 + DOMAIN), comma-separated
+    /// and repeatable; every discovery datagram is also sent to each, multicast or not
+    /// (config file: peers = ["a:7850", "b"]). Flags replace the file's list.
+    #[arg(long, value_delimiter = ',')]
+    pub peers: Option<Vec<PeerSpec>>,
     /// Refresh period in milliseconds [default: 1000].
     #[arg(long)]
     pub announce_period_ms: Option<u64>,
@@ -81,9 +95,11 @@ impl ConfigFile {
             domain: self.domain.or(lower.domain),
             socket: self.socket.or(lower.socket),
             interface: self.interface.or(lower.interface),
+            multicast: self.multicast.or(lower.multicast),
             multicast_group: self.multicast_group.or(lower.multicast_group),
             discovery_port: self.discovery_port.or(lower.discovery_port),
             unicast_port: self.unicast_port.or(lower.unicast_port),
+            peers: self.peers.or(lower.peers),
             announce_period_ms: self.announce_period_ms.or(lower.announce_period_ms),
             lease_ms: self.lease_ms.or(lower.lease_ms),
             multicast_ttl: self.multicast_ttl.or(lower.multicast_ttl),
@@ -91,7 +107,8 @@ impl ConfigFile {
         }
     }
 
-    /// Applies the defaults and resolves the interface.
+    /// Applies the defaults and resolves the interface. Peers are checked here but resolved
+    /// when the daemon starts ([`crate::Daemon::bind`]).
     pub fn resolve(self) -> Result<DaemonConfig, ConfigError> {
         let domain = domain::check(self.domain.unwrap_or(0))?;
         let interface = match self.interface.as_deref() {
@@ -109,7 +126,12 @@ impl ConfigFile {
             config.group = group;
         }
         config.port = self.discovery_port.unwrap_or(config.port);
-        config.unicast_port = self.unicast_port.unwrap_or(config.unicast_port);
+        config.unicast_port = self.unicast_port.or(config.unicast_port);
+        config.multicast = self.multicast.unwrap_or(config.multicast);
+        config.peers = self.peers.unwrap_or_default();
+        if config.peers.len() > MAX_PEERS {
+            return Err(ConfigError::TooManyPeers(config.peers.len()));
+        }
         if let Some(ms) = self.announce_period_ms {
             config.announce_period = Duration::from_millis(ms);
         }
@@ -136,8 +158,14 @@ pub struct DaemonConfig {
     pub group: Ipv4Addr,
     /// Discovery multicast port.
     pub port: u16,
-    /// Unicast discovery port (0: any free port).
-    pub unicast_port: u16,
+    /// Unicast discovery port: `None` for the domain's default (`7850 + domain`, or any free
+    /// port if that one is taken), `Some(0)` for any free port, `Some(port)` for exactly that
+    /// port (taken: an error).
+    pub unicast_port: Option<u16>,
+    /// Whether to join and send to the multicast group.
+    pub multicast: bool,
+    /// Static unicast peers, resolved when the daemon starts (at most [`MAX_PEERS`]).
+    pub peers: Vec<PeerSpec>,
     /// Refresh period.
     pub announce_period: Duration,
     /// Lease announced to other nodes.
@@ -161,7 +189,9 @@ impl DaemonConfig {
             interface,
             group: domain::multicast_group(domain),
             port: domain::discovery_port(domain),
-            unicast_port: 0,
+            unicast_port: None,
+            multicast: true,
+            peers: Vec::new(),
             announce_period: defaults.announce_period,
             lease: defaults.lease,
             ttl: 1,
@@ -178,6 +208,7 @@ impl DaemonConfig {
         );
         config.announce_period = self.announce_period;
         config.lease = self.lease;
+        config.multicast = self.multicast;
         config
     }
 }
@@ -210,9 +241,12 @@ pub enum ConfigError {
     /// The group is not a multicast address.
     #[error("{0} is not an IPv4 multicast address (224.0.0.0/4)")]
     NotMulticast(Ipv4Addr),
-    /// Inconsistent timers.
+    /// More peers than [`MAX_PEERS`].
+    #[error("{0} peers listed (--peers, config key peers); at most {MAX_PEERS} are accepted")]
+    TooManyPeers(usize),
+    /// Inconsistent discovery settings (timers).
     #[error(transparent)]
-    Timers(#[from] ndds_core::discovery::ConfigError),
+    Discovery(#[from] ndds_core::discovery::ConfigError),
 }
 
 #[cfg(test)]
@@ -231,6 +265,49 @@ mod tests {
         assert_eq!(config.port, 7605);
         assert_eq!(config.group, Ipv4Addr::new(239, 255, 76, 5));
         assert_eq!(config.socket, PathBuf::from("/tmp/ndds-5.sock"));
+        assert_eq!(
+            config.unicast_port, None,
+            "the domain's default, with fallback"
+        );
+        assert!(config.multicast);
+        assert!(config.peers.is_empty());
+    }
+
+    #[test]
+    fn peers_and_multicast_come_from_the_file_and_flags() {
+        let file: ConfigFile =
+            toml::from_str("peers = [\"10.0.0.2:7900\", \"robot-7\"]\nmulticast = false\n")
+                .unwrap();
+        let config = file.clone().resolve().unwrap();
+        assert!(!config.multicast);
+        let written: Vec<String> = config.peers.iter().map(|p| p.to_string()).collect();
+        assert_eq!(written, ["10.0.0.2:7900", "robot-7"]);
+        // Flags replace the file's list.
+        let flags = ConfigFile {
+            peers: Some(vec!["10.0.0.9".parse().unwrap()]),
+            ..Default::default()
+        };
+        let config = flags.or(file).resolve().unwrap();
+        assert_eq!(config.peers.len(), 1);
+        assert!(!config.multicast, "from the file");
+
+        let err = toml::from_str::<ConfigFile>("peers = [\"a:b:c\"]\n").unwrap_err();
+        assert!(err.to_string().contains("a:b:c"), "{err}");
+    }
+
+    #[test]
+    fn too_many_peers_are_refused() {
+        let peers = (0..=MAX_PEERS)
+            .map(|i| format!("10.1.{}.{}", i / 256, i % 256).parse().unwrap())
+            .collect();
+        let err = ConfigFile {
+            peers: Some(peers),
+            ..Default::default()
+        }
+        .resolve()
+        .unwrap_err();
+        assert!(matches!(err, ConfigError::TooManyPeers(257)), "{err}");
+        assert!(err.to_string().contains("at most 256"), "{err}");
     }
 
     #[test]

@@ -4,14 +4,14 @@
 //! [`DaemonError`] if one is unavailable; [`Daemon::run`] then serves until its shutdown token
 //! is cancelled, says `Bye` to the domain, waits for its tasks and removes its socket file.
 
-use std::net::SocketAddr;
+use std::net::{SocketAddr, SocketAddrV4};
 use std::os::unix::fs::{FileTypeExt, MetadataExt};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use ndds_core::discovery::Engine;
+use ndds_core::discovery::{Engine, Via};
 use ndds_core::wire::{Locator, MAX_DATAGRAM};
 use tokio::net::{UdpSocket, UnixListener};
 use tokio::sync::mpsc;
@@ -21,7 +21,8 @@ use tokio_util::task::TaskTracker;
 use crate::config::DaemonConfig;
 use crate::connection;
 use crate::driver::{Counters, Driver, Input};
-use crate::sockets::{self, DiscoverySockets, SocketError};
+use crate::peers::{self, Peer, PeerError};
+use crate::sockets::{self, DiscoverySockets, SocketError, UnicastPort};
 
 /// Datagrams and frames queued for the driver before datagrams are dropped (and counted).
 const INPUT_QUEUE: usize = 4096;
@@ -54,7 +55,10 @@ pub enum DaemonError {
     /// A UDP socket could not be set up.
     #[error("cannot set up discovery sockets: {0}")]
     Socket(#[from] SocketError),
-    /// The discovery timers are inconsistent.
+    /// A static peer could not be resolved or used.
+    #[error(transparent)]
+    Peer(#[from] PeerError),
+    /// The discovery settings are inconsistent (timers, too many peers).
     #[error(transparent)]
     Config(#[from] ndds_core::discovery::ConfigError),
 }
@@ -65,20 +69,34 @@ pub struct Daemon {
     config: DaemonConfig,
     engine: Engine,
     sockets: DiscoverySockets,
+    peers: Vec<Peer>,
     listener: UnixListener,
     socket_inode: Option<u64>,
 }
 
 impl Daemon {
-    /// Binds the discovery sockets and the Unix socket. Must be called inside a tokio runtime.
+    /// Resolves the peers, binds the discovery sockets and the Unix socket. Must be called
+    /// inside a tokio runtime.
     pub async fn bind(config: DaemonConfig) -> Result<Self, DaemonError> {
-        let sockets = sockets::open(
-            config.interface,
-            config.group,
-            config.port,
-            config.unicast_port,
-            config.ttl,
-        )?;
+        let peers = peers::resolve(&config.peers, config.domain).await?;
+        if config.interface.is_loopback() {
+            for peer in peers.iter().filter(|p| p.locator.addr[0] != 127) {
+                tracing::warn!(
+                    peer = %peer.spec,
+                    at = %peer.locator,
+                    "this peer is not on this host, but the daemon uses the loopback interface: \
+                     it cannot be reached (use --interface)"
+                );
+            }
+        }
+        let group = config
+            .multicast
+            .then(|| SocketAddrV4::new(config.group, config.port));
+        let unicast_port = match config.unicast_port {
+            Some(port) => UnicastPort::Exact(port),
+            None => UnicastPort::Default(ndds_core::domain::unicast_port(config.domain)),
+        };
+        let sockets = sockets::open(config.interface, group, unicast_port, config.ttl)?;
         let unicast = match sockets.unicast.local_addr() {
             Ok(SocketAddr::V4(addr)) => Locator::from(addr),
             _ => Locator::UNSPECIFIED,
@@ -91,6 +109,7 @@ impl Daemon {
         discovery.pid = std::process::id();
         discovery.unicast = unicast;
         discovery.version = env!("CARGO_PKG_VERSION").to_owned();
+        discovery.peers = peers.iter().map(|peer| peer.locator).collect();
         let engine = Engine::new(discovery, Instant::now())?;
         let listener = listen(&config.socket)?;
         let socket_inode = std::fs::metadata(&config.socket).ok().map(|m| m.ino());
@@ -98,6 +117,7 @@ impl Daemon {
             config,
             engine,
             sockets,
+            peers,
             listener,
             socket_inode,
         })
@@ -124,6 +144,7 @@ impl Daemon {
             config,
             engine,
             sockets,
+            peers,
             listener,
             socket_inode,
         } = self;
@@ -133,18 +154,30 @@ impl Daemon {
             socket = %config.socket.display(),
             interface = %config.interface,
             unicast = %engine.config().unicast,
-            group = %sockets.group,
+            group = %sockets.group.map_or("off".to_owned(), |g| g.to_string()),
+            peers = %peers.iter().map(|p| format!("{} ({})", p.spec, p.locator)).collect::<Vec<_>>().join(", "),
             "ndds-daemon serving"
         );
+        if sockets.group.is_none() && peers.is_empty() {
+            tracing::warn!(
+                "multicast is off and no peers are listed: only daemons that list this one as \
+                 a peer will find it"
+            );
+        }
         let counters = Arc::new(Counters::default());
         let (inputs, mut queue) = mpsc::channel(INPUT_QUEUE);
         let tasks = TaskTracker::new();
         let children = shutdown.child_token();
         let unicast = Arc::new(sockets.unicast);
-        let multicast = Arc::new(sockets.multicast);
-        for socket in [multicast, unicast.clone()] {
+        let multicast = sockets
+            .multicast
+            .map(|socket| (Arc::new(socket), Via::Multicast));
+        for (socket, via) in multicast
+            .into_iter()
+            .chain([(unicast.clone(), Via::Unicast)])
+        {
             let (inputs, counters, stop) = (inputs.clone(), counters.clone(), children.clone());
-            tasks.spawn(receive(socket, inputs, counters, stop));
+            tasks.spawn(receive(socket, via, inputs, counters, stop));
         }
         tasks.spawn(accept(
             listener,
@@ -155,7 +188,7 @@ impl Daemon {
         ));
         drop(inputs);
 
-        let mut driver = Driver::new(engine, unicast, sockets.group, counters);
+        let mut driver = Driver::new(engine, unicast, sockets.group, peers, counters);
         driver.flush().await;
         loop {
             let deadline = driver.deadline().map(tokio::time::Instant::from_std);
@@ -197,6 +230,7 @@ async fn sleep_until(deadline: Option<tokio::time::Instant>) {
 
 async fn receive(
     socket: Arc<UdpSocket>,
+    via: Via,
     inputs: mpsc::Sender<Input>,
     counters: Arc<Counters>,
     stop: CancellationToken,
@@ -211,6 +245,7 @@ async fn receive(
             Ok((len, from)) => {
                 let input = Input::Datagram {
                     from,
+                    via,
                     bytes: buf[..len].to_vec(),
                 };
                 match inputs.try_send(input) {

@@ -4,21 +4,22 @@
 //! timer) is handled here in order, then the engine's transmits are sent and its events routed
 //! to the clients that own the local endpoints they name.
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::net::{SocketAddr, SocketAddrV4};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use ndds_core::discovery::{Destination, Engine, Event, Origin, Transmit};
+use ndds_core::discovery::{Destination, Engine, Event, Origin, Transmit, Via};
 use ndds_core::ipc::{
     ClientMessage, ClientSummary, DaemonMessage, EndpointDecl, EndpointSummary, Graph, Hello,
-    IPC_VERSION, NodeSummary, Role, Welcome,
+    IPC_VERSION, NodeSummary, PeerSummary, Role, Welcome,
 };
 use ndds_core::wire::{DropReason, EndpointInfo, Guid, Locator};
 use tokio::net::UdpSocket;
 
 use crate::connection::ClientLink;
+use crate::peers::Peer;
 
 /// Daemon-local number of a connection.
 pub type ClientId = u64;
@@ -30,6 +31,8 @@ pub enum Input {
     Datagram {
         /// Its source.
         from: SocketAddr,
+        /// The socket that received it: multicast or unicast.
+        via: Via,
         /// Its bytes.
         bytes: Vec<u8>,
     },
@@ -83,24 +86,28 @@ struct Client {
 pub struct Driver {
     engine: Engine,
     socket: Arc<UdpSocket>,
-    group: SocketAddrV4,
+    group: Option<SocketAddrV4>,
+    peers: Vec<Peer>,
     clients: HashMap<ClientId, Client>,
     by_participant: HashMap<u64, ClientId>,
     counters: Arc<Counters>,
 }
 
 impl Driver {
-    /// A driver around `engine`, sending through `socket`.
+    /// A driver around `engine`, sending through `socket` to `group` (`None`: multicast off);
+    /// `peers` are the configured peers the engine was given, for the graph.
     pub fn new(
         engine: Engine,
         socket: Arc<UdpSocket>,
-        group: SocketAddrV4,
+        group: Option<SocketAddrV4>,
+        peers: Vec<Peer>,
         counters: Arc<Counters>,
     ) -> Self {
         Driver {
             engine,
             socket,
             group,
+            peers,
             clients: HashMap::new(),
             by_participant: HashMap::new(),
             counters,
@@ -120,8 +127,9 @@ impl Driver {
     /// Handles one input.
     pub fn on_input(&mut self, input: Input) {
         match input {
-            Input::Datagram { from, bytes } => {
-                self.engine.handle_datagram(Instant::now(), from, &bytes);
+            Input::Datagram { from, via, bytes } => {
+                self.engine
+                    .handle_datagram(Instant::now(), from, via, &bytes);
             }
             Input::Opened { client, link } => {
                 self.clients.insert(
@@ -163,9 +171,11 @@ impl Driver {
     }
 
     async fn transmit(&mut self, transmit: Transmit) {
-        let to = match transmit.destination {
-            Destination::Multicast => self.group,
-            Destination::Unicast(locator) => SocketAddrV4::from(locator),
+        let to = match (transmit.destination, self.group) {
+            (Destination::Multicast, Some(group)) => group,
+            // The engine never addresses the group when multicast is off.
+            (Destination::Multicast, None) => return,
+            (Destination::Unicast(locator), _) => SocketAddrV4::from(locator),
         };
         if let Err(err) = self.socket.send_to(&transmit.payload, to).await {
             self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
@@ -385,15 +395,25 @@ impl Driver {
     pub fn graph(&self) -> Graph {
         let now = Instant::now();
         let millis_until = |t: Instant| t.saturating_duration_since(now).as_millis() as u64;
+        let millis_since = |t: Instant| now.saturating_duration_since(t).as_millis() as u64;
         let local_info = self.engine.node_info();
         let local = NodeSummary {
             node: self.engine.node_id(),
             interface: local_info.unicast.addr,
             info: local_info,
-            multicast: Some(Locator::from(self.group)),
+            multicast: self.group.map(Locator::from),
             last_seen_ms: 0,
             expires_in_ms: None,
+            peers: self.peer_summaries(),
+            multicast_seen_ms: None,
+            unicast_copies: false,
         };
+        let copies: HashSet<Locator> = (self.engine.fanout().into_iter())
+            .filter_map(|d| match d {
+                Destination::Unicast(locator) => Some(locator),
+                Destination::Multicast => None,
+            })
+            .collect();
         let mut nodes: Vec<NodeSummary> = self
             .engine
             .nodes()
@@ -402,8 +422,11 @@ impl Driver {
                 interface: remote.info.unicast.addr,
                 info: remote.info.clone(),
                 multicast: None,
-                last_seen_ms: now.saturating_duration_since(remote.last_seen).as_millis() as u64,
+                last_seen_ms: millis_since(remote.last_seen),
                 expires_in_ms: Some(millis_until(remote.expires)),
+                peers: Vec::new(),
+                multicast_seen_ms: remote.last_multicast.map(millis_since),
+                unicast_copies: copies.contains(&remote.info.unicast),
             })
             .collect();
         nodes.sort_by(|a, b| {
@@ -446,6 +469,22 @@ impl Driver {
             endpoints,
             counters: self.counters(),
         }
+    }
+
+    /// The configured peers, each with the node currently known at its locator.
+    fn peer_summaries(&self) -> Vec<PeerSummary> {
+        self.peers
+            .iter()
+            .map(|peer| PeerSummary {
+                name: peer.spec.to_string(),
+                locator: peer.locator,
+                node: self
+                    .engine
+                    .nodes()
+                    .find(|(_, remote)| remote.info.unicast == peer.locator)
+                    .map(|(id, _)| id),
+            })
+            .collect()
     }
 
     fn client_summaries(&self) -> Vec<ClientSummary> {

@@ -3,7 +3,8 @@
 //! The per-host discovery daemon of ndds: a thin tokio driver around
 //! [`ndds_core::discovery::Engine`]. One daemon runs per host and domain. It
 //! - exchanges discovery datagrams with the other daemons of its domain over UDP multicast
-//!   on one chosen interface ([`sockets`]),
+//!   on one chosen interface, and by unicast with static peers and with daemons that reach it
+//!   only by unicast ([`sockets`], [`peers`]); multicast can be turned off,
 //! - serves local clients and tools over a Unix socket with length-delimited postcard frames
 //!   ([`connection`]), and withdraws a client's endpoints the moment its connection drops,
 //! - routes the engine's match events to the clients that own the endpoints ([`driver`]).
@@ -12,7 +13,8 @@
 //! It can run as the `ndds-daemon` binary or inside another process ([`embed`]).
 //!
 //! ## Layout
-//! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution.
+//! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution;
+//!   [`peers`]: static unicast peers, parsed and resolved.
 //! - [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
 //! - [`cli`]: the binary's command line, usable from other binaries too.
 #![warn(missing_docs)]
@@ -24,6 +26,7 @@ pub mod daemon;
 pub mod driver;
 pub mod embed;
 pub mod iface;
+pub mod peers;
 pub mod sockets;
 
 pub use config::{ConfigError, ConfigFile, DaemonConfig};

@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 use ndds_core::discovery::engine::{
     MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES, MAX_REMOTE_ENDPOINTS,
 };
-use ndds_core::discovery::{DiscoveryConfig, Engine, MAX_TOPIC_LEN};
+use ndds_core::discovery::fanout::unicast_window;
+use ndds_core::discovery::{DiscoveryConfig, Engine, MAX_PEERS, MAX_TOPIC_LEN};
 use ndds_core::types::TypeDescription;
 use ndds_core::types::layout::{
     MAX_ARRAY_LEN, MAX_EXPANDED_FORMATS, MAX_FORMAT_DEPTH, MAX_FORMATS,
@@ -35,6 +36,7 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("MAX_DATAGRAM", MAX_DATAGRAM.to_string()),
         ("MAX_DOMAIN", domain::MAX_DOMAIN.to_string()),
         ("BASE_PORT", domain::BASE_PORT.to_string()),
+        ("UNICAST_BASE_PORT", domain::UNICAST_BASE_PORT.to_string()),
         ("announce_period", duration(config.announce_period)),
         ("lease", duration(config.lease)),
         ("solicit_delays", durations(&config.solicit_delays)),
@@ -42,12 +44,14 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("period_jitter", config.period_jitter.to_string()),
         ("withdraw_repeats", config.withdraw_repeats.to_string()),
         ("announce_chunk", config.announce_chunk.to_string()),
+        ("unicast_window", duration(unicast_window(&config))),
         ("MAX_TOPIC_LEN", MAX_TOPIC_LEN.to_string()),
         ("MAX_NODES", MAX_NODES.to_string()),
         ("MAX_ENDPOINTS_PER_NODE", MAX_ENDPOINTS_PER_NODE.to_string()),
         ("MAX_REMOTE_ENDPOINTS", MAX_REMOTE_ENDPOINTS.to_string()),
         ("MAX_PENDING_REPLIES", MAX_PENDING_REPLIES.to_string()),
         ("MAX_LEASE", duration(MAX_LEASE)),
+        ("MAX_PEERS", MAX_PEERS.to_string()),
         (
             "WITHDRAWN_PER_DATAGRAM",
             engine.withdrawn_per_announce.to_string(),
@@ -69,9 +73,36 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("MAX_FRAME", ipc::MAX_FRAME.to_string()),
         ("OUTBOX", ndds_daemon::connection::OUTBOX.to_string()),
         ("interface", daemon.interface.to_string()),
-        ("unicast_port", daemon.unicast_port.to_string()),
+        ("unicast_port", unicast_port_default(&daemon)),
+        ("multicast", daemon.multicast.to_string()),
+        ("peers", peers_default(&daemon)),
         ("multicast_ttl", daemon.ttl.to_string()),
     ]
+}
+
+/// The default unicast port as the document writes it: `UNICAST_BASE_PORT + domain`.
+fn unicast_port_default(daemon: &ndds_daemon::DaemonConfig) -> String {
+    assert_eq!(
+        daemon.unicast_port, None,
+        "the default unicast port follows the domain"
+    );
+    let resolved = |d: u32| {
+        let config = ndds_daemon::ConfigFile {
+            domain: Some(d),
+            ..Default::default()
+        }
+        .resolve()
+        .expect("the daemon's defaults resolve");
+        (config.unicast_port, domain::unicast_port(config.domain))
+    };
+    assert_eq!(resolved(9), (None, domain::UNICAST_BASE_PORT + 9));
+    "UNICAST_BASE_PORT + domain".to_owned()
+}
+
+/// The default peer list as the document writes it.
+fn peers_default(daemon: &ndds_daemon::DaemonConfig) -> String {
+    assert!(daemon.peers.is_empty(), "no peers by default");
+    "none".to_owned()
 }
 
 /// A duration the way the document writes it: `0`, `5 s`, `200 ms` or `250 µs`.

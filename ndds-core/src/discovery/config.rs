@@ -38,7 +38,18 @@ pub struct DiscoveryConfig {
     pub withdraw_repeats: u8,
     /// Target size of one announcement datagram; larger announcements are split (default 16 KiB).
     pub announce_chunk: usize,
+    /// Whether to use the domain's multicast group (default true). When false the engine never
+    /// produces a [`Destination::Multicast`](super::Destination::Multicast) transmit: discovery
+    /// then relies on `peers` and on the nodes that list this one as their peer.
+    pub multicast: bool,
+    /// Unicast discovery locators of static peers (default none, at most [`MAX_PEERS`]). Every
+    /// datagram the engine would multicast is also sent to each of them, multicast on or off.
+    /// Duplicates and this node's own locator are ignored.
+    pub peers: Vec<Locator>,
 }
+
+/// Most static peers a node may list.
+pub const MAX_PEERS: usize = 256;
 
 impl DiscoveryConfig {
     /// Defaults for a node of `domain` receiving unicast at `unicast`.
@@ -62,6 +73,8 @@ impl DiscoveryConfig {
             period_jitter: 0.1,
             withdraw_repeats: 3,
             announce_chunk: 16 * 1024,
+            multicast: true,
+            peers: Vec::new(),
         }
     }
 
@@ -91,8 +104,21 @@ impl DiscoveryConfig {
         if !(MIN_CHUNK..=MAX_CHUNK).contains(&self.announce_chunk) {
             return Err(ConfigError::Chunk(self.announce_chunk));
         }
+        if self.peers.len() > MAX_PEERS {
+            return Err(ConfigError::TooManyPeers(self.peers.len()));
+        }
+        if let Some(peer) = self.peers.iter().find(|p| !is_unicast(p)) {
+            return Err(ConfigError::Peer(*peer));
+        }
         Ok(())
     }
+}
+
+/// Whether `locator` can receive unicast: a host address (not `0.0.0.0`, multicast or
+/// broadcast) and a port other than 0.
+pub fn is_unicast(locator: &Locator) -> bool {
+    let addr = std::net::Ipv4Addr::from(locator.addr);
+    !(addr.is_unspecified() || addr.is_multicast() || addr.is_broadcast() || locator.port == 0)
 }
 
 /// Longest solicit delay or reply jitter accepted.
@@ -131,4 +157,55 @@ pub enum ConfigError {
     /// Announcement chunk size out of range.
     #[error("announcement chunk of {0} bytes is outside {MIN_CHUNK}..={MAX_CHUNK}")]
     Chunk(usize),
+    /// More than [`MAX_PEERS`] peers.
+    #[error("{0} peers listed; at most {MAX_PEERS} are accepted")]
+    TooManyPeers(usize),
+    /// A peer locator that cannot receive unicast.
+    #[error(
+        "peer {0} is not a unicast address: expected a host address (not 0.0.0.0, multicast or \
+         broadcast) and a port other than 0"
+    )]
+    Peer(Locator),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn loc(addr: [u8; 4], port: u16) -> Locator {
+        Locator { addr, port }
+    }
+
+    #[test]
+    fn peers_are_bounded_and_must_be_unicast() {
+        let mut config = DiscoveryConfig::new(0, loc([10, 0, 0, 1], 7850));
+        config.peers = (0..MAX_PEERS)
+            .map(|i| loc([10, 1, (i / 256) as u8, i as u8], 7850))
+            .collect();
+        assert_eq!(config.validate(), Ok(()));
+        config.peers.push(loc([10, 2, 0, 1], 7850));
+        let err = config.validate().unwrap_err();
+        assert_eq!(err, ConfigError::TooManyPeers(MAX_PEERS + 1));
+        assert!(err.to_string().contains("at most 256"), "{err}");
+
+        for bad in [
+            loc([0, 0, 0, 0], 7850),
+            loc([239, 255, 76, 0], 7850),
+            loc([255, 255, 255, 255], 7850),
+            loc([10, 0, 0, 2], 0),
+        ] {
+            config.peers = vec![bad];
+            let err = config.validate().unwrap_err();
+            assert_eq!(err, ConfigError::Peer(bad));
+            assert!(err.to_string().contains(&bad.to_string()), "{err}");
+        }
+    }
+
+    #[test]
+    fn multicast_off_without_peers_is_valid() {
+        // Such a node is found by the nodes that list it, and answers them.
+        let mut config = DiscoveryConfig::new(0, loc([10, 0, 0, 1], 7850));
+        config.multicast = false;
+        assert_eq!(config.validate(), Ok(()));
+    }
 }

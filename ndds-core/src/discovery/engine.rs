@@ -2,7 +2,8 @@
 //!
 //! # Call order
 //! The driver owns one [`Engine`] and loops:
-//! 1. feed input: [`Engine::handle_datagram`] for each received datagram,
+//! 1. feed input: [`Engine::handle_datagram`] for each received datagram, saying whether it
+//!    came through the multicast group or to the unicast locator ([`Via`]),
 //!    [`Engine::add_local`] / [`Engine::remove_locals`] for client requests, and
 //!    [`Engine::handle_timeout`] when the instant named by [`Engine::poll_timeout`] is reached;
 //! 2. drain output: send every [`Engine::poll_transmit`], deliver every [`Engine::poll_event`];
@@ -10,17 +11,24 @@
 //!
 //! # Behaviour
 //! At creation the engine schedules `Solicit`s (see [`DiscoveryConfig::solicit_delays`]) and an
-//! immediate full announcement. Every `announce_period` (± jitter) it multicasts a full
-//! announcement. A new local endpoint is announced at once; removed ones are withdrawn at once
-//! and repeated in the next announcements. Remote nodes and endpoints decay when not refreshed
-//! within the lease their node announced. [`Engine::close`] says `Bye`.
+//! immediate full announcement. Every `announce_period` (± jitter) it sends a full
+//! announcement to the domain. A new local endpoint is announced at once; removed ones are
+//! withdrawn at once and repeated in the next announcements. Remote nodes and endpoints decay
+//! when not refreshed within the lease their node announced. [`Engine::close`] says `Bye`.
+//!
+//! "To the domain" means the multicast group plus unicast copies to configured peers and to
+//! nodes not heard by multicast lately: see [`super::fanout`] for the rule. Commands
+//! ([`Engine::add_local`], [`Engine::remove_locals`], [`Engine::close`]) take no time; the
+//! fan-out they need is judged at the instant of the latest input.
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::config::{ConfigError, DiscoveryConfig};
 use super::event::{Destination, Event, LossReason, Transmit};
+use super::fanout::{Fanout, Via};
 use super::table::{Entry, Origin, Table};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
@@ -51,8 +59,19 @@ pub struct RemoteNode {
     pub last_from: SocketAddr,
     /// When it was last heard from.
     pub last_seen: Instant,
+    /// When a `Solicit` or `Announce` of it last arrived through the multicast group (`None`:
+    /// never).
+    pub last_multicast: Option<Instant>,
     /// When it is forgotten unless refreshed.
     pub expires: Instant,
+}
+
+impl RemoteNode {
+    /// Whether its datagrams come from the locator it announces, as a daemon's do (it sends
+    /// everything from its unicast socket). Only such a node is ever sent anything unasked.
+    pub fn speaks_from_its_locator(&self) -> bool {
+        self.last_from == SocketAddr::V4(self.info.unicast.into())
+    }
 }
 
 /// Counters kept by the engine.
@@ -124,6 +143,9 @@ pub struct Engine {
     replies: Vec<(Instant, Locator)>,
     next_announce: Instant,
     next_expiry: Option<Instant>,
+    fanout: Fanout,
+    /// The instant of the latest input: the "now" of commands.
+    now: Instant,
     transmits: VecDeque<Transmit>,
     events: VecDeque<Event>,
     stats: Stats,
@@ -144,6 +166,7 @@ impl Engine {
         };
         let node_id = config.node_id.filter(|id| *id != 0).unwrap_or(drawn);
         let solicits = config.solicit_delays.iter().map(|d| now + *d).collect();
+        let fanout = Fanout::new(&config);
         Ok(Engine {
             config,
             node_id,
@@ -156,6 +179,8 @@ impl Engine {
             replies: Vec::new(),
             next_announce: now,
             next_expiry: None,
+            fanout,
+            now,
             transmits: VecDeque::new(),
             events: VecDeque::new(),
             stats: Stats::default(),
@@ -197,6 +222,22 @@ impl Engine {
         self.nodes.iter().map(|(id, node)| (*id, node))
     }
 
+    /// The configured peers in use: sorted, without duplicates or this node's own locator.
+    pub fn peers(&self) -> &[Locator] {
+        self.fanout.peers()
+    }
+
+    /// Where a datagram for the whole domain would go now (see [`super::fanout`]).
+    pub fn fanout(&self) -> Vec<Destination> {
+        let stale = self
+            .nodes
+            .values()
+            .filter(|node| node.speaks_from_its_locator())
+            .filter(|node| self.fanout.multicast_stale(node.last_multicast, self.now))
+            .map(|node| node.info.unicast);
+        self.fanout.destinations(stale)
+    }
+
     /// Every known endpoint, local and remote.
     pub fn endpoints(&self) -> impl Iterator<Item = &Entry> {
         self.table.iter()
@@ -209,10 +250,11 @@ impl Engine {
 
     // ----- input -------------------------------------------------------------------------
 
-    /// Processes one received datagram.
-    pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) {
+    /// Processes one received datagram, which arrived from `from` through `via`.
+    pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, via: Via, bytes: &[u8]) {
+        self.now = self.now.max(now);
         self.stats.received += 1;
-        match self.accept(now, from, bytes) {
+        match self.accept(now, from, via, bytes) {
             Ok(()) => self.stats.accepted += 1,
             Err(reason) => {
                 self.stats.dropped[reason.index()] += 1;
@@ -222,7 +264,13 @@ impl Engine {
         self.update_expiry();
     }
 
-    fn accept(&mut self, now: Instant, from: SocketAddr, bytes: &[u8]) -> Result<(), DropReason> {
+    fn accept(
+        &mut self,
+        now: Instant,
+        from: SocketAddr,
+        via: Via,
+        bytes: &[u8],
+    ) -> Result<(), DropReason> {
         if self.closed {
             return Err(DropReason::Unexpected);
         }
@@ -235,12 +283,12 @@ impl Engine {
             Message::Solicit(solicit) => {
                 check_node(&solicit.node)?;
                 let unicast = solicit.node.unicast;
-                self.touch_node(now, header.sender, from, solicit.node)?;
+                self.touch_node(now, header.sender, (from, via), solicit.node)?;
                 self.schedule_reply(now, unicast, from);
             }
             Message::Announce(announce) => {
                 check_node(&announce.node)?;
-                self.on_announce(now, header, from, announce)?;
+                self.on_announce(now, header, (from, via), announce)?;
             }
             Message::Withdraw(withdraw) => {
                 for guid in &withdraw.endpoints {
@@ -257,13 +305,13 @@ impl Engine {
         &mut self,
         now: Instant,
         header: Header,
-        from: SocketAddr,
+        (from, via): (SocketAddr, Via),
         announce: Announce,
     ) -> Result<(), DropReason> {
         let node = header.sender;
         let lease = lease_of(&announce.node);
         let unicast = announce.node.unicast;
-        if self.touch_node(now, node, from, announce.node)? {
+        if self.touch_node(now, node, (from, via), announce.node)? {
             // A node we did not know: answer with everything we have so it need not wait for
             // our next refresh (its Solicit may have been lost).
             self.schedule_reply(now, unicast, from);
@@ -297,17 +345,19 @@ impl Engine {
         &mut self,
         now: Instant,
         node: u64,
-        from: SocketAddr,
+        (from, via): (SocketAddr, Via),
         info: NodeInfo,
     ) -> Result<bool, DropReason> {
         let lease = lease_of(&info);
         let full = self.nodes.len() >= MAX_NODES;
+        let by_multicast = (via == Via::Multicast).then_some(now);
         match self.nodes.get_mut(&node) {
             Some(known) => {
                 self.node_expiry.remove(&(known.expires, node));
                 known.info = info;
                 known.last_from = from;
                 known.last_seen = now;
+                known.last_multicast = by_multicast.or(known.last_multicast);
                 known.expires = now + lease;
                 self.node_expiry.insert((known.expires, node));
                 Ok(false)
@@ -327,6 +377,7 @@ impl Engine {
                         info,
                         last_from: from,
                         last_seen: now,
+                        last_multicast: by_multicast,
                         expires: now + lease,
                     },
                 );
@@ -417,7 +468,8 @@ impl Engine {
             expires: None,
         };
         self.table.insert(entry, &mut self.events);
-        self.push_transmit(Destination::Multicast, payload);
+        let destinations = self.fanout();
+        self.push_transmits(&destinations, payload.into());
         Ok(())
     }
 
@@ -442,11 +494,12 @@ impl Engine {
             self.withdrawn
                 .push_back((*guid, self.config.withdraw_repeats));
         }
+        let destinations = self.fanout();
         for chunk in removed.chunks(2048) {
             let message = Message::Withdraw(Withdraw {
                 endpoints: chunk.to_vec(),
             });
-            self.encode_and_push(Destination::Multicast, &message);
+            self.encode_and_push(&destinations, &message);
         }
     }
 
@@ -455,7 +508,8 @@ impl Engine {
         if self.closed {
             return;
         }
-        self.encode_and_push(Destination::Multicast, &Message::Bye(Bye));
+        let destinations = self.fanout();
+        self.encode_and_push(&destinations, &Message::Bye(Bye));
         self.closed = true;
     }
 
@@ -464,12 +518,16 @@ impl Engine {
         if self.closed {
             return;
         }
+        self.now = self.now.max(now);
+        // Expire first: a node forgotten now gets no more unicast copies.
+        self.expire(now);
         while self.solicits.front().is_some_and(|t| *t <= now) {
             self.solicits.pop_front();
             let message = Message::Solicit(Solicit {
                 node: self.node_info(),
             });
-            self.encode_and_push(Destination::Multicast, &message);
+            let destinations = self.fanout();
+            self.encode_and_push(&destinations, &message);
         }
         let mut due = Vec::new();
         self.replies.retain(|(at, to)| {
@@ -480,14 +538,14 @@ impl Engine {
             !is_due
         });
         for to in due {
-            self.announce_all(Destination::Unicast(to), false);
+            self.announce_all(&[Destination::Unicast(to)], false);
         }
         if self.next_announce <= now {
-            self.announce_all(Destination::Multicast, true);
+            let destinations = self.fanout();
+            self.announce_all(&destinations, true);
             let jittered = self.jittered_period();
             self.next_announce = now + jittered;
         }
-        self.expire(now);
         self.update_expiry();
     }
 
@@ -542,7 +600,7 @@ impl Engine {
 
     /// Sends every local endpoint (split over datagrams of `announce_chunk` bytes) plus the
     /// recent withdrawals. A periodic announcement also ages the withdrawal list.
-    fn announce_all(&mut self, destination: Destination, periodic: bool) {
+    fn announce_all(&mut self, destinations: &[Destination], periodic: bool) {
         let withdrawn: Vec<Guid> = self.withdrawn.iter().map(|(g, _)| *g).collect();
         if periodic {
             for (_, left) in self.withdrawn.iter_mut() {
@@ -576,7 +634,7 @@ impl Engine {
                 endpoints,
                 withdrawn,
             });
-            self.encode_and_push(destination, &message);
+            self.encode_and_push(destinations, &message);
         }
     }
 
@@ -603,20 +661,23 @@ impl Engine {
         chunks
     }
 
-    fn encode_and_push(&mut self, destination: Destination, message: &Message<'_>) {
+    fn encode_and_push(&mut self, destinations: &[Destination], message: &Message<'_>) {
         let mut payload = Vec::new();
         match wire::encode(self.config.domain, self.node_id, message, &mut payload) {
-            Ok(()) => self.push_transmit(destination, payload),
+            Ok(()) => self.push_transmits(destinations, payload.into()),
             Err(err) => tracing::error!(%err, kind = message.kind().name(), "cannot encode"),
         }
     }
 
-    fn push_transmit(&mut self, destination: Destination, payload: Vec<u8>) {
-        self.stats.sent += 1;
-        self.transmits.push_back(Transmit {
-            destination,
-            payload,
-        });
+    /// Queues one datagram for each destination; the copies share their bytes.
+    fn push_transmits(&mut self, destinations: &[Destination], payload: Arc<[u8]>) {
+        for destination in destinations {
+            self.stats.sent += 1;
+            self.transmits.push_back(Transmit {
+                destination: *destination,
+                payload: payload.clone(),
+            });
+        }
     }
 
     fn update_expiry(&mut self) {

@@ -1,5 +1,7 @@
 //! What the discovery engine tells its driver.
 
+use std::sync::Arc;
+
 use crate::wire::{EndpointInfo, Guid, Locator, NodeInfo};
 
 /// An output of the discovery engine, taken with [`super::Engine::poll_event`].
@@ -67,6 +69,7 @@ pub enum Destination {
 pub struct Transmit {
     /// Where to send it.
     pub destination: Destination,
-    /// The complete datagram, header included.
-    pub payload: Vec<u8>,
+    /// The complete datagram, header included. The copies of one datagram sent to several
+    /// destinations share these bytes.
+    pub payload: Arc<[u8]>,
 }

@@ -27,7 +27,8 @@ pub struct NodeSummary {
     pub node: u64,
     /// What it says about itself.
     pub info: NodeInfo,
-    /// The discovery multicast group and port (known for the local node only).
+    /// The discovery multicast group and port; `None` when the answering daemon has multicast
+    /// off, and for remote nodes (whose settings are not known).
     pub multicast: Option<Locator>,
     /// Interface address the node uses (the address of its unicast locator).
     pub interface: [u8; 4],
@@ -35,6 +36,26 @@ pub struct NodeSummary {
     pub last_seen_ms: u64,
     /// Milliseconds until it is forgotten unless refreshed (`None` for the local node).
     pub expires_in_ms: Option<u64>,
+    /// The answering daemon's configured unicast peers, as configured (empty for remote nodes).
+    pub peers: Vec<PeerSummary>,
+    /// Milliseconds since a `Solicit` or `Announce` of this remote node last arrived through
+    /// the multicast group (`None`: never, and for the local node).
+    pub multicast_seen_ms: Option<u64>,
+    /// Whether the answering daemon also sends its domain-wide datagrams to this remote node by
+    /// unicast: a configured peer, or a node not heard by multicast lately (false for the local
+    /// node).
+    pub unicast_copies: bool,
+}
+
+/// One configured unicast peer of the answering daemon.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PeerSummary {
+    /// As configured: `host`, `host:port`, `address` or `address:port`.
+    pub name: String,
+    /// The unicast locator it resolved to at start.
+    pub locator: Locator,
+    /// The node currently known at that locator, if any.
+    pub node: Option<u64>,
 }
 
 /// One client or tool connected to the answering daemon.

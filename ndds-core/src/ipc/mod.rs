@@ -13,10 +13,11 @@ pub mod graph;
 
 pub use client::{ClientMessage, EndpointDecl, Hello, Role};
 pub use daemon::{DaemonMessage, Welcome};
-pub use graph::{ClientSummary, EndpointSummary, Graph, NodeSummary};
+pub use graph::{ClientSummary, EndpointSummary, Graph, NodeSummary, PeerSummary};
 
-/// Version of the frames in this module; client and daemon must agree.
-pub const IPC_VERSION: u16 = 1;
+/// Version of the frames in this module; client and daemon must agree. Version 2 added the
+/// unicast discovery fields of [`NodeSummary`] (`peers`, `multicast_seen_ms`, `unicast_copies`).
+pub const IPC_VERSION: u16 = 2;
 
 /// Largest frame either side sends or accepts, in bytes.
 pub const MAX_FRAME: usize = 16 * 1024 * 1024;

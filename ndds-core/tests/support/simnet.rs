@@ -2,20 +2,26 @@
 //! crashes and restarts — no sockets, no clock reads, every run replays exactly from its seed.
 //!
 //! Nodes are numbered `0..n` in the order they were added. Node `i` receives unicast at
-//! `10.0.0.(i+1):7400`. A multicast `Transmit` reaches every other running node; a unicast one
-//! reaches the running node whose configured unicast locator matches. Each delivery to one node
-//! is lost with that link's probability, drawn from the network's seeded RNG.
+//! `10.0.0.(i+1):7400`. A multicast `Transmit` reaches every other running node that has
+//! multicast on (`DiscoveryConfig::multicast`) and whose multicast is not cut
+//! ([`SimNet::cut_multicast`]); a unicast one reaches the running node whose configured unicast
+//! locator matches. Each delivery to one node is lost with that link's probability, drawn from
+//! the network's seeded RNG. A node with multicast off that sends to the group fails the test.
 //!
 //! [`SimNet::run_for`] drives the engines: deliver every datagram due now, then jump virtual time
 //! to the earliest instant anything happens next (an engine's `poll_timeout()` or a datagram in
 //! flight) and run the engines' timers due then. Every event an engine emits is recorded with the
 //! virtual time it was taken, and so is every datagram delivered.
 
+// Each test binary that includes this module uses a different subset of it.
+#![allow(dead_code)]
+
 use std::collections::{BTreeMap, HashSet};
 use std::net::{SocketAddr, SocketAddrV4};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event};
+use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event, Via};
 use ndds_core::wire::{self, EndpointInfo, Guid, Locator, MessageKind};
 
 /// Domain of every simulated engine.
@@ -41,6 +47,17 @@ pub fn config(index: usize, seed: u64, period: Duration, lease: Duration) -> Dis
     config.hostname = format!("host{index}");
     config.announce_period = period;
     config.lease = lease;
+    config
+}
+
+/// `config` with multicast on or off and the unicast locators of `peers` as its peer list.
+pub fn with_peers(
+    mut config: DiscoveryConfig,
+    multicast: bool,
+    peers: &[usize],
+) -> DiscoveryConfig {
+    config.multicast = multicast;
+    config.peers = peers.iter().map(|&p| locator(p)).collect();
     config
 }
 
@@ -74,7 +91,7 @@ struct InFlight {
     to: usize,
     kind: MessageKind,
     unicast: bool,
-    payload: Vec<u8>,
+    payload: Arc<[u8]>,
 }
 
 /// The network. See the module docs.
@@ -87,6 +104,7 @@ pub struct SimNet {
     link_loss: BTreeMap<(usize, usize), f64>,
     latency: Duration,
     cut: HashSet<(usize, usize)>,
+    no_multicast: HashSet<usize>,
     /// Datagrams in flight by arrival time, in sending order within one instant.
     in_flight: BTreeMap<(Instant, u64), InFlight>,
     sent: u64,
@@ -107,6 +125,7 @@ impl SimNet {
             link_loss: BTreeMap::new(),
             latency: Duration::from_millis(1),
             cut: HashSet::new(),
+            no_multicast: HashSet::new(),
             in_flight: BTreeMap::new(),
             sent: 0,
             deliveries: Vec::new(),
@@ -164,9 +183,16 @@ impl SimNet {
         self.partition(&[n], &others);
     }
 
-    /// Restores every cut link (loss settings stay).
+    /// Multicast no longer reaches nodes `nodes`, nor leaves them; unicast still flows (a
+    /// network segment without multicast).
+    pub fn cut_multicast(&mut self, nodes: &[usize]) {
+        self.no_multicast.extend(nodes);
+    }
+
+    /// Restores every cut link and multicast everywhere (loss settings stay).
     pub fn heal(&mut self) {
         self.cut.clear();
+        self.no_multicast.clear();
     }
 
     /// Stops node `n` dead: no `Bye`, nothing delivered to or from it, not driven.
@@ -284,9 +310,14 @@ impl SimNet {
             }
             let now = self.now;
             let from = SocketAddr::V4(SocketAddrV4::from(locator(datagram.from)));
+            let via = if datagram.unicast {
+                Via::Unicast
+            } else {
+                Via::Multicast
+            };
             self.nodes[datagram.to]
                 .engine
-                .handle_datagram(now, from, &datagram.payload);
+                .handle_datagram(now, from, via, &datagram.payload);
             self.deliveries.push(Delivery {
                 at: self.elapsed(),
                 from: datagram.from,
@@ -313,13 +344,26 @@ impl SimNet {
         }
     }
 
-    fn send(&mut self, from: usize, destination: Destination, payload: Vec<u8>) {
+    fn send(&mut self, from: usize, destination: Destination, payload: Arc<[u8]>) {
         let kind = wire::decode(&payload)
             .expect("engines send valid datagrams")
             .0
             .kind;
         let targets: Vec<usize> = match destination {
-            Destination::Multicast => (0..self.nodes.len()).filter(|&i| i != from).collect(),
+            Destination::Multicast => {
+                assert!(
+                    self.nodes[from].engine.config().multicast,
+                    "node {from} has multicast off but sent {kind:?} to the group"
+                );
+                if self.no_multicast.contains(&from) {
+                    Vec::new()
+                } else {
+                    (0..self.nodes.len())
+                        .filter(|&i| i != from && !self.no_multicast.contains(&i))
+                        .filter(|&i| self.nodes[i].engine.config().multicast)
+                        .collect()
+                }
+            }
             Destination::Unicast(to) => (0..self.nodes.len())
                 .filter(|&i| self.nodes[i].engine.config().unicast == to)
                 .collect(),
