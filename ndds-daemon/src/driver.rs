@@ -512,6 +512,8 @@ impl Driver {
             ("datagrams_received".to_owned(), stats.received),
             ("datagrams_accepted".to_owned(), stats.accepted),
             ("datagrams_sent".to_owned(), stats.sent),
+            ("bytes_received".to_owned(), stats.bytes_received),
+            ("bytes_sent".to_owned(), stats.bytes_sent),
             ("invalid_endpoints".to_owned(), stats.invalid_endpoints),
         ];
         for reason in DropReason::ALL {

@@ -81,8 +81,12 @@ pub struct Stats {
     pub received: u64,
     /// Datagrams accepted and processed.
     pub accepted: u64,
-    /// Datagrams produced for sending.
+    /// Datagrams produced for sending (one per destination).
     pub sent: u64,
+    /// Bytes of the datagrams handed to [`Engine::handle_datagram`].
+    pub bytes_received: u64,
+    /// Bytes of the datagrams produced for sending (one copy per destination).
+    pub bytes_sent: u64,
     /// Dropped datagrams by reason, indexed by [`DropReason::index`].
     pub dropped: [u64; DropReason::ALL.len()],
     /// Announced endpoints ignored because they broke a rule: bad layout or topic, wrong
@@ -254,6 +258,7 @@ impl Engine {
     pub fn handle_datagram(&mut self, now: Instant, from: SocketAddr, via: Via, bytes: &[u8]) {
         self.now = self.now.max(now);
         self.stats.received += 1;
+        self.stats.bytes_received += bytes.len() as u64;
         match self.accept(now, from, via, bytes) {
             Ok(()) => self.stats.accepted += 1,
             Err(reason) => {
@@ -673,6 +678,7 @@ impl Engine {
     fn push_transmits(&mut self, destinations: &[Destination], payload: Arc<[u8]>) {
         for destination in destinations {
             self.stats.sent += 1;
+            self.stats.bytes_sent += payload.len() as u64;
             self.transmits.push_back(Transmit {
                 destination: *destination,
                 payload: payload.clone(),
