@@ -77,6 +77,34 @@ fn drain(pipe: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<St
     })
 }
 
+/// Resident memory of a process, from `/proc/PID/status`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Memory {
+    /// Resident set size now (`VmRSS`), KiB.
+    pub rss_kib: u64,
+    /// Largest resident set size so far (`VmHWM`), KiB.
+    pub peak_kib: u64,
+}
+
+/// The resident memory of process `pid`, or `None` when it is gone (or not readable).
+pub fn memory(pid: u32) -> Option<Memory> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let field = |name: &str| {
+        status
+            .lines()
+            .find_map(|line| line.strip_prefix(name))
+            .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse().ok())
+    };
+    Some(Memory {
+        rss_kib: field("VmRSS:")?,
+        peak_kib: field("VmHWM:")?,
+    })
+}
+
+fn running(child: &mut Child) -> bool {
+    matches!(child.try_wait(), Ok(None))
+}
+
 fn signal(child: &Child, signal: Signal) {
     let pid = Pid::from_raw(i32::try_from(child.id()).expect("pid fits i32"));
     let _ = kill(pid, signal);
@@ -142,6 +170,16 @@ impl DaemonProcess {
     /// Process id.
     pub fn pid(&self) -> u32 {
         self.child.id()
+    }
+
+    /// True while the process runs (it has not exited nor been killed).
+    pub fn is_running(&mut self) -> bool {
+        running(&mut self.child)
+    }
+
+    /// Its resident memory, `None` once it is gone.
+    pub fn memory(&self) -> Option<Memory> {
+        memory(self.pid())
     }
 
     /// Everything the daemon logged so far.
@@ -239,6 +277,16 @@ impl ClientProcess {
         self.child.id()
     }
 
+    /// True while the process runs (it has not exited nor been killed).
+    pub fn is_running(&mut self) -> bool {
+        running(&mut self.child)
+    }
+
+    /// Its resident memory, `None` once it is gone.
+    pub fn memory(&self) -> Option<Memory> {
+        memory(self.pid())
+    }
+
     /// The next stdout line, or `None` at the timeout or end of output.
     pub fn line(&self, timeout: Duration) -> Option<String> {
         self.lines.recv_timeout(timeout).ok()
@@ -256,6 +304,19 @@ impl ClientProcess {
                 return Some(value);
             }
         }
+    }
+
+    /// The JSON lines read until `until` (lines that are not JSON are skipped; lines still
+    /// queued at `until` stay for the next read).
+    pub fn events_until(&self, until: Instant) -> Vec<serde_json::Value> {
+        let mut events = Vec::new();
+        while let Some(left) = until.checked_duration_since(Instant::now()) {
+            let Some(line) = self.line(left) else { break };
+            if let Ok(value) = serde_json::from_str(&line) {
+                events.push(value);
+            }
+        }
+        events
     }
 
     /// Discards the lines already printed; returns how many there were.

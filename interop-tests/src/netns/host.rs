@@ -14,6 +14,7 @@ use nix::sched::{CloneFlags, setns};
 use super::LINK;
 use super::command::{ip_path, nft_in};
 use super::faults::{self, Faults, TABLE};
+use super::meter::{self, METER_TABLE, Traffic};
 use crate::TestDomain;
 use crate::process::{self, ClientProcess, DaemonProcess, Output};
 
@@ -138,6 +139,28 @@ impl Host {
         let _faults = self.lock_faults();
         let listing = nft_in(&self.name, &format!("list table inet {TABLE}")).unwrap_or_default();
         faults::dropped(&listing)
+    }
+
+    /// Starts (or restarts, from zero) counting the UDP datagrams through this host's link to
+    /// the bridge; read them with [`traffic`](Self::traffic).
+    pub fn start_meter(&self) {
+        if let Err(err) = nft_in(&self.name, &meter::script(LINK)) {
+            panic!(
+                "cannot install the traffic meter of host {}: {err}",
+                self.name
+            );
+        }
+    }
+
+    /// The UDP traffic through this host's link since [`start_meter`](Self::start_meter)
+    /// (zero if it was never started).
+    pub fn traffic(&self) -> Traffic {
+        let listing = nft_in(
+            &self.name,
+            &format!("list counters table inet {METER_TABLE}"),
+        )
+        .unwrap_or_default();
+        meter::parse(&listing)
     }
 
     fn lock_faults(&self) -> std::sync::MutexGuard<'_, Faults> {

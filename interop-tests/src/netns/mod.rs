@@ -31,6 +31,7 @@ mod cluster;
 mod command;
 mod faults;
 mod host;
+mod meter;
 mod sweep;
 
 use std::net::Ipv4Addr;
@@ -40,6 +41,7 @@ pub use cluster::Cluster;
 pub use command::require;
 pub use faults::{Faults, TABLE};
 pub use host::Host;
+pub use meter::{METER_TABLE, Traffic};
 pub use sweep::{PREFIX, list, sweep_stale};
 
 use command::{ip, ip_batch};

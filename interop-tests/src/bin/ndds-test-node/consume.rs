@@ -79,7 +79,10 @@ pub fn run<T: TestSample>(participant: &Participant, args: &Args) -> anyhow::Res
             .collect();
         threads
             .into_iter()
-            .map(|t| t.join().unwrap_or_else(|_| Err(anyhow::anyhow!("panicked"))))
+            .map(|t| {
+                t.join()
+                    .unwrap_or_else(|_| Err(anyhow::anyhow!("panicked")))
+            })
             .collect()
     });
     emit(json!({

@@ -119,10 +119,7 @@ pub fn run<T: TestSample>(participant: &Participant, args: &Args) -> anyhow::Res
     Ok(())
 }
 
-fn wait_for_consumers<T: TestSample>(
-    producers: &[Producer<T>],
-    args: &Args,
-) -> anyhow::Result<()> {
+fn wait_for_consumers<T: TestSample>(producers: &[Producer<T>], args: &Args) -> anyhow::Result<()> {
     let waited = Instant::now();
     let timeout = Duration::from_secs_f64(args.wait_timeout);
     for producer in producers {

@@ -59,7 +59,10 @@ pub fn notification(topic: &str, notification: &Notification) -> Value {
             "OldData",
             json!({"writer": writer.to_string(), "writer_seq": seq}),
         ),
-        Notification::ProducerLost { writer, was_current } => (
+        Notification::ProducerLost {
+            writer,
+            was_current,
+        } => (
             "ProducerLost",
             json!({"writer": writer.to_string(), "was_current": was_current}),
         ),
