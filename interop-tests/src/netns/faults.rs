@@ -1,8 +1,9 @@
 //! Network faults of one host, as an nftables table in the host's namespace.
 //!
 //! Everything is filtered on the way *in*, at the receiver, and only what arrives through the
-//! host's link to the bridge: traffic inside the host (loopback, its own multicast echo) is
-//! never touched. The whole table is replaced in one nft transaction at each change, so a
+//! host's link to the bridge from another address: traffic inside the host (loopback, and its
+//! own multicast echo, which the kernel loops back as if it had arrived on the link) is never
+//! touched. The whole table is replaced in one nft transaction at each change, so a
 //! host never runs with half a rule set.
 
 use std::collections::BTreeSet;
@@ -28,8 +29,8 @@ impl Faults {
     }
 
     /// The nft script that replaces the host's fault table with these faults (or removes it
-    /// when there are none). `link` is the host's interface to the bridge.
-    pub fn script(&self, link: &str) -> String {
+    /// when there are none). `link` is the host's interface to the bridge, `own` its address.
+    pub fn script(&self, link: &str, own: Ipv4Addr) -> String {
         // Adding then deleting the table makes the deletion valid whether or not it existed.
         let mut script = format!("add table inet {TABLE}\ndelete table inet {TABLE}\n");
         if self.is_empty() {
@@ -50,7 +51,8 @@ impl Faults {
         if self.loss_percent > 0 {
             let _ = writeln!(
                 script,
-                "    iifname \"{link}\" meta l4proto udp numgen random mod 100 < {} counter drop",
+                "    iifname \"{link}\" ip saddr != {own} meta l4proto udp numgen random mod 100 < {} \
+                 counter drop",
                 self.loss_percent.min(100)
             );
         }
@@ -77,7 +79,7 @@ mod tests {
 
     #[test]
     fn no_faults_only_removes_the_table() {
-        let script = Faults::default().script("veth0");
+        let script = Faults::default().script("veth0", Ipv4Addr::new(10, 1, 2, 9));
         assert_eq!(
             script,
             "add table inet ndds_faults\ndelete table inet ndds_faults\n"
@@ -90,10 +92,11 @@ mod tests {
             loss_percent: 30,
             blocked: [Ipv4Addr::new(10, 1, 2, 3), Ipv4Addr::new(10, 1, 2, 1)].into(),
         };
-        let script = faults.script("veth0");
+        let script = faults.script("veth0", Ipv4Addr::new(10, 1, 2, 9));
         assert!(script.contains("iifname \"veth0\" ip saddr { 10.1.2.1, 10.1.2.3 } counter drop"));
         assert!(script.contains(
-            "iifname \"veth0\" meta l4proto udp numgen random mod 100 < 30 counter drop"
+            "iifname \"veth0\" ip saddr != 10.1.2.9 meta l4proto udp numgen random mod 100 < 30 \
+             counter drop"
         ));
         assert!(script.contains("hook input"));
     }

@@ -128,7 +128,7 @@ impl Host {
         if *faults == before {
             return;
         }
-        if let Err(err) = nft_in(&self.name, &faults.script(LINK)) {
+        if let Err(err) = nft_in(&self.name, &faults.script(LINK, self.ip)) {
             *faults = before;
             panic!("cannot install the faults of host {}: {err}", self.name);
         }
@@ -144,7 +144,7 @@ impl Host {
     /// Starts (or restarts, from zero) counting the UDP datagrams through this host's link to
     /// the bridge; read them with [`traffic`](Self::traffic).
     pub fn start_meter(&self) {
-        if let Err(err) = nft_in(&self.name, &meter::script(LINK)) {
+        if let Err(err) = nft_in(&self.name, &meter::script(LINK, self.ip)) {
             panic!(
                 "cannot install the traffic meter of host {}: {err}",
                 self.name

@@ -2,8 +2,11 @@
 //! in the host's namespace (apart from the fault table, which is replaced at every change).
 //!
 //! The counters sit on the `input` and `output` hooks, where IP fragments are still (input:
-//! already) whole datagrams: they count datagrams and their IP lengths, not link frames.
+//! already) whole datagrams: they count datagrams and their IP lengths, not link frames. The
+//! host's own multicast, which the kernel loops back as if it had arrived on the link, is not
+//! counted as input.
 
+use std::net::Ipv4Addr;
 use std::ops::Sub;
 
 /// The nftables table (family `inet`) that holds a host's traffic counters.
@@ -37,8 +40,8 @@ impl Sub for Traffic {
 }
 
 /// The nft script that (re)creates the meter table with zeroed counters. `link` is the host's
-/// interface to the bridge.
-pub fn script(link: &str) -> String {
+/// interface to the bridge, `own` its address.
+pub fn script(link: &str, own: Ipv4Addr) -> String {
     format!(
         "add table inet {METER_TABLE}\ndelete table inet {METER_TABLE}\n\
          table inet {METER_TABLE} {{\n\
@@ -46,7 +49,7 @@ pub fn script(link: &str) -> String {
          \x20 counter udp_out {{ }}\n\
          \x20 chain input {{\n\
          \x20   type filter hook input priority filter - 10; policy accept;\n\
-         \x20   iifname \"{link}\" meta l4proto udp counter name \"udp_in\"\n\
+         \x20   iifname \"{link}\" ip saddr != {own} meta l4proto udp counter name \"udp_in\"\n\
          \x20 }}\n\
          \x20 chain output {{\n\
          \x20   type filter hook output priority filter - 10; policy accept;\n\
@@ -95,9 +98,11 @@ mod tests {
 
     #[test]
     fn the_script_counts_udp_on_the_link_both_ways() {
-        let script = script("veth0");
+        let script = script("veth0", Ipv4Addr::new(10, 1, 2, 9));
         assert!(script.starts_with("add table inet ndds_meter\ndelete table inet ndds_meter\n"));
-        assert!(script.contains("iifname \"veth0\" meta l4proto udp counter name \"udp_in\""));
+        assert!(script.contains(
+            "iifname \"veth0\" ip saddr != 10.1.2.9 meta l4proto udp counter name \"udp_in\""
+        ));
         assert!(script.contains("oifname \"veth0\" meta l4proto udp counter name \"udp_out\""));
         assert!(script.contains("hook input") && script.contains("hook output"));
     }
