@@ -247,9 +247,11 @@ fn a_blast_of_junk_at_discovery_and_data_ports_leaves_traffic_and_memory_intact(
     let ended_us = unix_us_now();
     let alive = running(&mut [&mut consumer, &mut producer])
         && (0..3).all(|h| cluster.daemon_mut(h).is_running());
+    // Samples written after the blast, and time for the daemon to drain its input.
+    lines.extend(consumer.events_until(Instant::now() + Duration::from_millis(300)));
     let memory_after = cluster.daemon(C).memory().expect("daemon memory");
     let consumer_after = consumer.memory().expect("consumer memory");
-    lines.extend(consumer.events_until(Instant::now() + Duration::from_millis(300)));
+    // (The first sample, read before the quiet second, is not in `lines`.)
     let (quiet, quiet_written) = delivered(&lines, quiet_us + 100_000, started_us);
     let (received, written) = delivered(&lines, started_us, ended_us);
     let share = received as f64 / written as f64;
@@ -282,9 +284,16 @@ fn a_blast_of_junk_at_discovery_and_data_ports_leaves_traffic_and_memory_intact(
     assert!(alive, "every daemon and client survives");
     let lost = notifications(&lines, "ProducerLost");
     assert!(lost.is_empty(), "discovery lost the producer: {lost:?}");
+    // The consumer's receive thread discards junk after a 16-byte header check, far faster
+    // than one sender host can produce it (about 80 000 small and 1 200 maximum-size
+    // datagrams a second here, a third of them at the data port), and its 4 MiB receive
+    // buffer absorbs the bursts: every sample arrived in every run, also with both cores
+    // busy. 90 % leaves room for a slow scheduler without letting a real regression through.
     assert!(share >= 0.9, "delivered {share:.3} during the blast");
     let growth = memory_after.rss_kib.saturating_sub(memory_before.rss_kib);
+    let peak = memory_after.peak_kib.saturating_sub(memory_before.rss_kib);
     assert!(growth < RSS_BOUND_KIB, "daemon RSS grew by {growth} KiB");
+    assert!(peak < RSS_BOUND_KIB, "daemon RSS peaked {peak} KiB higher");
     for ((name, before), after) in DROPS.iter().zip(&drops_before).zip(&drops_after).take(5) {
         assert!(after > before, "{name} counts the junk");
     }
