@@ -33,6 +33,8 @@ fn init_logging() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        // A closed stderr (a parent that went away) must not turn a log line into a panic.
+        .log_internal_errors(false)
         .without_time()
         .try_init();
 }

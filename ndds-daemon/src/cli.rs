@@ -64,6 +64,8 @@ pub fn init_logging() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        // A closed stderr (a parent that went away) must not turn a log line into a panic.
+        .log_internal_errors(false)
         .try_init();
 }
 
@@ -74,11 +76,13 @@ fn stop_on_signal(shutdown: CancellationToken) -> anyhow::Result<()> {
     let mut int = signal(SignalKind::interrupt()).context("cannot catch SIGINT")?;
     let mut term = signal(SignalKind::terminate()).context("cannot catch SIGTERM")?;
     tokio::spawn(async move {
-        tokio::select! {
-            _ = int.recv() => tracing::info!("SIGINT: shutting down"),
-            _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
-        }
+        let name = tokio::select! {
+            _ = int.recv() => "SIGINT",
+            _ = term.recv() => "SIGTERM",
+        };
+        // Cancel before logging: nothing may stand between a signal and the shutdown.
         shutdown.cancel();
+        tracing::info!("{name}: shutting down");
     });
     Ok(())
 }

@@ -151,3 +151,19 @@ fn frames_queued_behind_a_refusal_open_no_session() {
     );
     assert_eq!(terminate(&mut daemon), Some(0));
 }
+
+#[test]
+fn a_daemon_whose_stderr_reader_is_gone_still_stops_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut daemon = spawn(&isolated(dir.path()));
+    let socket = dir.path().join("d.sock");
+    drop(connect(&socket));
+    // The parent that read its log went away: every later log line fails to write.
+    drop(daemon.stderr.take());
+    assert_eq!(
+        terminate(&mut daemon),
+        Some(0),
+        "no panic on a closed stderr"
+    );
+    assert!(!socket.exists(), "socket removed on exit");
+}

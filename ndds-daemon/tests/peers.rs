@@ -7,7 +7,6 @@ mod common;
 use std::io::Read;
 use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
 use std::path::Path;
-use std::process::Child;
 use std::time::{Duration, Instant};
 
 use ndds_core::ipc::{Graph, NodeSummary};
@@ -27,7 +26,7 @@ fn free_port() -> u16 {
 
 /// A daemon in `dir/name` on unicast port `port`, with `extra` flags (which replace the
 /// isolating ones of the same name).
-fn daemon(dir: &Path, name: &str, port: u16, extra: &[String]) -> (Child, std::path::PathBuf) {
+fn daemon(dir: &Path, name: &str, port: u16, extra: &[String]) -> (Spawned, std::path::PathBuf) {
     let dir = dir.join(name);
     std::fs::create_dir_all(&dir).unwrap();
     let mut args = isolated(&dir);
@@ -61,7 +60,7 @@ fn node_at(graph: &Graph, port: u16) -> Option<&NodeSummary> {
     graph.nodes.iter().find(|n| n.info.unicast.port == port)
 }
 
-fn log_of(mut child: Child) -> String {
+fn log_of(mut child: Spawned) -> String {
     let mut log = String::new();
     if let Some(mut err) = child.stderr.take() {
         let _ = err.read_to_string(&mut log);

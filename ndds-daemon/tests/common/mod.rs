@@ -61,14 +61,40 @@ pub fn isolated(dir: &Path) -> Vec<String> {
     ]
 }
 
-pub fn spawn(args: &[String]) -> Child {
-    Command::new(DAEMON)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start ndds-daemon")
+/// A daemon process that is killed when the handle drops, also when a test panics.
+pub struct Spawned(Child);
+
+impl std::ops::Deref for Spawned {
+    type Target = Child;
+
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Spawned {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Spawned {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+pub fn spawn(args: &[String]) -> Spawned {
+    Spawned(
+        Command::new(DAEMON)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start ndds-daemon"),
+    )
 }
 
 pub fn connect(socket: &Path) -> UnixStream {
