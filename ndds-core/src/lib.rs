@@ -12,6 +12,8 @@
 //! ## Layout
 //! - [`wire`]: header and one file per datagram kind, encode/decode, drop reasons.
 //! - [`arbitration`]: a consumer's arbitration, minimum separation, deadline and statuses.
+//! - [`reliability`]: reliable streams (history, heartbeats, acknowledgements, repair).
+//! - [`fragment`]: large samples split into pieces and reassembled.
 //! - [`types`]: type descriptions, layouts, canonical text and fingerprints.
 //! - [`dynamic`]: decode a sample to JSON (and encode JSON to a sample) from its description.
 //! - [`discovery`]: the sans-IO discovery engine and its configuration.
@@ -23,6 +25,8 @@ pub mod arbitration;
 pub mod discovery;
 pub mod domain;
 pub mod dynamic;
+pub mod fragment;
 pub mod ipc;
+pub mod reliability;
 pub mod types;
 pub mod wire;

@@ -301,7 +301,6 @@ impl Engine {
                 }
             }
             Message::Bye(Bye) => self.forget_node(header.sender, LossReason::Bye),
-            Message::Data(_) => return Err(DropReason::Unexpected),
         }
         Ok(())
     }
@@ -666,7 +665,7 @@ impl Engine {
         chunks
     }
 
-    fn encode_and_push(&mut self, destinations: &[Destination], message: &Message<'_>) {
+    fn encode_and_push(&mut self, destinations: &[Destination], message: &Message) {
         let mut payload = Vec::new();
         match wire::encode(self.config.domain, self.node_id, message, &mut payload) {
             Ok(()) => self.push_transmits(destinations, payload.into()),

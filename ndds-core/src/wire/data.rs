@@ -1,32 +1,51 @@
-//! `Data` (kind 16): one user sample, from a producing process to one consuming process.
+//! `Data` (kind 16): samples and stream control from one producing process to one consuming
+//! process, as a sequence of submessages.
 //!
 //! ```text
-//! header(kind = 16, sender = writer's participant id)
-//!   | varint writer entity | u64 reader participant (varint) | varint n | n × varint reader entity
-//!   | varint seq | varint timestamp_ns | zigzag strength | varint persistence_us
-//!   | varint len | len × payload byte
+//! header(kind = 16, sender = producing participant id)
+//!   | varint reader_participant
+//!   | submessage { submessage }          (at least one)
+//! submessage := u8 sub_kind | postcard body
+//!   sub_kind 1  Sample     one whole sample
+//!   sub_kind 2  Fragment   one piece of a sample too large for a datagram
+//!   sub_kind 3  Heartbeat  a reliable writer's available range of sequence numbers
+//!   sub_kind 4  Gap        sequence numbers a reliable writer can no longer provide
 //! ```
 //!
-//! One datagram goes to each consuming process (locator) that has matched readers; `readers`
-//! lists the reader entities of `reader_participant` at that locator. The payload is the
-//! postcard encoding of the sample value. Strength and persistence travel with every sample so a
-//! consumer can arbitrate between producers without consulting discovery.
+//! Every submessage names its writer (an entity of the sender participant) and the reader
+//! entities of `reader_participant` it is for. Several submessages share a datagram when a
+//! producer batches small samples, or when a heartbeat rides behind samples. Submessages of a
+//! kind this version does not know end the parse of the datagram (the submessages before them
+//! stand).
 
 use std::borrow::Cow;
 
 use serde::{Deserialize, Serialize};
 
-/// Body of a `Data` datagram. The payload borrows from the received buffer.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Data<'a> {
-    /// Entity number of the producing endpoint within the sender participant.
-    pub writer: u32,
-    /// Participant id of the consuming process this datagram is for.
-    pub reader_participant: u64,
-    /// Entity numbers of the consuming endpoints, within `reader_participant`.
-    /// Borrowed when sending (no allocation per sample), owned after decoding.
-    #[serde(deserialize_with = "super::bounded::cow_vec")]
-    pub readers: Cow<'a, [u32]>,
+use super::bounded;
+use super::header::{HEADER_LEN, Header, MessageKind};
+use super::{DropReason, MAX_DATAGRAM};
+
+/// Flag bit: the writer is reliable (readers acknowledge, and repair from its history).
+pub const FLAG_RELIABLE: u8 = 1;
+
+/// Submessage kinds inside a `Data` datagram.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum DataSubKind {
+    /// [`Sample`]
+    Sample = 1,
+    /// [`Fragment`]
+    Fragment = 2,
+    /// [`Heartbeat`]
+    Heartbeat = 3,
+    /// [`Gap`]
+    Gap = 4,
+}
+
+/// What every sample and fragment says about its writer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SampleMeta {
     /// Per-writer sequence number, starting at 1.
     pub seq: u64,
     /// Source timestamp: nanoseconds since the Unix epoch when the sample was written.
@@ -35,7 +54,326 @@ pub struct Data<'a> {
     pub strength: i32,
     /// The writer's persistence in µs.
     pub persistence_us: u64,
-    /// postcard-encoded sample value.
+    /// [`FLAG_RELIABLE`] and future flags.
+    pub flags: u8,
+}
+
+/// A whole sample.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Sample<'a> {
+    /// Writer entity within the sending participant.
+    pub writer: u32,
+    /// Reader entities within `reader_participant`.
+    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
+    pub readers: Cow<'a, [u32]>,
+    /// Sequence number, timestamp, strength, persistence, flags.
+    pub meta: SampleMeta,
+    /// postcard encoding of the value.
     #[serde(borrow)]
     pub payload: &'a [u8],
+}
+
+/// One piece of a sample too large for one datagram. All pieces but the last carry exactly
+/// `frag_size` bytes; piece `index` covers bytes `index × frag_size ..` of the sample.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Fragment<'a> {
+    /// Writer entity.
+    pub writer: u32,
+    /// Reader entities.
+    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
+    pub readers: Cow<'a, [u32]>,
+    /// Sequence number, timestamp, strength, persistence, flags of the whole sample.
+    pub meta: SampleMeta,
+    /// Length of the whole sample in bytes.
+    pub total_len: u32,
+    /// Size of every piece but the last.
+    pub frag_size: u32,
+    /// Index of this piece.
+    pub index: u32,
+    /// Its bytes.
+    #[serde(borrow)]
+    pub chunk: &'a [u8],
+}
+
+/// A reliable writer's history: sequence numbers `first..=last` can be repaired.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Heartbeat<'a> {
+    /// Writer entity.
+    pub writer: u32,
+    /// Reader entities.
+    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
+    pub readers: Cow<'a, [u32]>,
+    /// Oldest sequence number still in the history (`last + 1` when empty).
+    pub first: u64,
+    /// Newest sequence number written.
+    pub last: u64,
+}
+
+/// Sequence numbers `from..to` will never be sent (again): readers skip them and report them
+/// lost.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Gap<'a> {
+    /// Writer entity.
+    pub writer: u32,
+    /// Reader entities.
+    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
+    pub readers: Cow<'a, [u32]>,
+    /// First missing sequence number.
+    pub from: u64,
+    /// One past the last missing sequence number.
+    pub to: u64,
+}
+
+/// One decoded submessage of a `Data` datagram.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DataSub<'a> {
+    /// A whole sample.
+    Sample(Sample<'a>),
+    /// A piece of a sample.
+    Fragment(Fragment<'a>),
+    /// A reliable writer's range.
+    Heartbeat(Heartbeat<'a>),
+    /// Numbers that will never come.
+    Gap(Gap<'a>),
+}
+
+impl DataSub<'_> {
+    fn kind(&self) -> DataSubKind {
+        match self {
+            DataSub::Sample(_) => DataSubKind::Sample,
+            DataSub::Fragment(_) => DataSubKind::Fragment,
+            DataSub::Heartbeat(_) => DataSubKind::Heartbeat,
+            DataSub::Gap(_) => DataSubKind::Gap,
+        }
+    }
+}
+
+/// Builds `Data` datagrams into a reusable buffer: no allocation once the buffer has grown.
+#[derive(Debug, Default)]
+pub struct DataWriter {
+    buf: Vec<u8>,
+    subs: usize,
+}
+
+impl DataWriter {
+    /// An empty builder.
+    pub fn new() -> Self {
+        DataWriter::default()
+    }
+
+    /// Starts a datagram from `sender` (participant) to `reader_participant`, discarding
+    /// anything begun before.
+    pub fn begin(&mut self, domain: u16, sender: u64, reader_participant: u64) {
+        self.buf.clear();
+        self.subs = 0;
+        Header {
+            kind: MessageKind::Data,
+            domain,
+            sender,
+        }
+        .emit(&mut self.buf);
+        let buf = std::mem::take(&mut self.buf);
+        // Encoding a u64 into a Vec cannot fail.
+        self.buf = postcard::to_extend(&reader_participant, buf).unwrap_or_default();
+    }
+
+    /// Appends a submessage if the datagram stays within `limit` bytes; returns whether it
+    /// was appended (the datagram is unchanged otherwise).
+    pub fn push(&mut self, sub: &DataSub<'_>, limit: usize) -> bool {
+        let mark = self.buf.len();
+        self.buf.push(sub.kind() as u8);
+        let buf = std::mem::take(&mut self.buf);
+        let result = match sub {
+            DataSub::Sample(s) => postcard::to_extend(s, buf),
+            DataSub::Fragment(f) => postcard::to_extend(f, buf),
+            DataSub::Heartbeat(h) => postcard::to_extend(h, buf),
+            DataSub::Gap(g) => postcard::to_extend(g, buf),
+        };
+        match result {
+            Ok(buf) if buf.len() <= limit.min(MAX_DATAGRAM) => {
+                self.buf = buf;
+                self.subs += 1;
+                true
+            }
+            Ok(mut buf) => {
+                buf.truncate(mark);
+                self.buf = buf;
+                false
+            }
+            Err(_) => {
+                // Encoding into a Vec fails only for values serde rejects; none here.
+                self.buf.truncate(mark);
+                false
+            }
+        }
+    }
+
+    /// Number of submessages in the datagram so far.
+    pub fn len(&self) -> usize {
+        self.subs
+    }
+
+    /// True when no submessage was added since `begin`.
+    pub fn is_empty(&self) -> bool {
+        self.subs == 0
+    }
+
+    /// The datagram so far.
+    pub fn bytes(&self) -> &[u8] {
+        &self.buf
+    }
+
+    /// Bytes the datagram would grow by for an empty submessage header; a caller can budget a
+    /// payload as `limit - bytes().len() - overhead`.
+    pub fn size(&self) -> usize {
+        self.buf.len()
+    }
+}
+
+/// Bytes a `Sample` submessage adds to its payload, at most (kind byte, writer, up to
+/// `readers` reader entities, metadata, payload length).
+pub fn sample_overhead(readers: usize) -> usize {
+    1 + 5 + 5 + 5 * readers + (10 + 10 + 5 + 10 + 1) + 5
+}
+
+/// A parsed `Data` datagram: who it is for, and an iterator over its submessages.
+#[derive(Clone, Debug)]
+pub struct DataDatagram<'a> {
+    /// The header.
+    pub header: Header,
+    /// The participant the datagram is for.
+    pub reader_participant: u64,
+    rest: &'a [u8],
+}
+
+impl<'a> DataDatagram<'a> {
+    /// Parses the header and the reader participant; submessages are decoded by iterating.
+    /// The domain is checked against `domain`.
+    pub fn parse(bytes: &'a [u8], domain: u16) -> Result<Self, DropReason> {
+        let (header, body) = Header::parse(bytes)?;
+        if header.domain != domain {
+            return Err(DropReason::OtherDomain);
+        }
+        if header.kind != MessageKind::Data {
+            return Err(DropReason::Unexpected);
+        }
+        let (reader_participant, rest) =
+            postcard::take_from_bytes::<u64>(body).map_err(|_| DropReason::Malformed)?;
+        if rest.is_empty() {
+            return Err(DropReason::Malformed);
+        }
+        Ok(DataDatagram {
+            header,
+            reader_participant,
+            rest,
+        })
+    }
+
+    /// The submessages, in order. An item that fails to decode is `Err(Malformed)` and ends
+    /// the iteration; an unknown submessage kind is `Err(UnknownKind)` and ends it too.
+    pub fn subs(&self) -> SubIter<'a> {
+        SubIter { rest: self.rest }
+    }
+}
+
+/// Iterator over the submessages of a [`DataDatagram`].
+#[derive(Clone, Debug)]
+pub struct SubIter<'a> {
+    rest: &'a [u8],
+}
+
+impl<'a> Iterator for SubIter<'a> {
+    type Item = Result<DataSub<'a>, DropReason>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let (&kind, body) = self.rest.split_first()?;
+        let decoded = match kind {
+            1 => take(body).map(|(s, rest)| (DataSub::Sample(s), rest)),
+            2 => take(body).map(|(f, rest)| (DataSub::Fragment(f), rest)),
+            3 => take(body).map(|(h, rest)| (DataSub::Heartbeat(h), rest)),
+            4 => take(body).map(|(g, rest)| (DataSub::Gap(g), rest)),
+            _ => Err(DropReason::UnknownKind),
+        };
+        match decoded {
+            Ok((sub, rest)) => {
+                self.rest = rest;
+                Some(Ok(sub))
+            }
+            Err(reason) => {
+                self.rest = &[];
+                Some(Err(reason))
+            }
+        }
+    }
+}
+
+fn take<'a, T: Deserialize<'a>>(body: &'a [u8]) -> Result<(T, &'a [u8]), DropReason> {
+    postcard::take_from_bytes(body).map_err(|_| DropReason::Malformed)
+}
+
+/// The smallest possible `Data` datagram: header, participant, one submessage kind byte.
+pub const MIN_DATA_LEN: usize = HEADER_LEN + 2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(payload: &[u8]) -> DataSub<'_> {
+        DataSub::Sample(Sample {
+            writer: 1,
+            readers: Cow::Owned(vec![2, 3]),
+            meta: SampleMeta {
+                seq: 9,
+                timestamp_ns: 123,
+                strength: -2,
+                persistence_us: 1000,
+                flags: FLAG_RELIABLE,
+            },
+            payload,
+        })
+    }
+
+    #[test]
+    fn batches_round_trip_and_respect_the_limit() {
+        let mut w = DataWriter::new();
+        w.begin(7, 0xAB, 0xCD);
+        assert!(w.push(&sample(&[1; 10]), 200));
+        let heartbeat = DataSub::Heartbeat(Heartbeat {
+            writer: 1,
+            readers: Cow::Owned(vec![2]),
+            first: 3,
+            last: 9,
+        });
+        assert!(w.push(&heartbeat, 200));
+        let before = w.bytes().to_vec();
+        assert!(!w.push(&sample(&[0; 300]), 200), "would exceed the limit");
+        assert_eq!(w.bytes(), &before[..], "unchanged by a refused push");
+        let datagram = DataDatagram::parse(w.bytes(), 7).unwrap();
+        assert_eq!(datagram.reader_participant, 0xCD);
+        assert_eq!(datagram.header.sender, 0xAB);
+        let subs: Vec<_> = datagram.subs().collect::<Result<_, _>>().unwrap();
+        assert_eq!(subs, vec![sample(&[1; 10]), heartbeat]);
+        assert_eq!(
+            DataDatagram::parse(w.bytes(), 8).unwrap_err(),
+            DropReason::OtherDomain
+        );
+    }
+
+    #[test]
+    fn a_broken_submessage_ends_the_iteration() {
+        let mut w = DataWriter::new();
+        w.begin(0, 1, 2);
+        assert!(w.push(&sample(&[5; 4]), 1000));
+        let mut bytes = w.bytes().to_vec();
+        bytes.extend_from_slice(&[1, 0xff, 0xff]);
+        let datagram = DataDatagram::parse(&bytes, 0).unwrap();
+        let subs: Vec<_> = datagram.subs().collect();
+        assert_eq!(subs.len(), 2);
+        assert!(subs[0].is_ok());
+        assert_eq!(subs[1], Err(DropReason::Malformed));
+        bytes.truncate(w.bytes().len());
+        bytes.push(99);
+        let subs: Vec<_> = DataDatagram::parse(&bytes, 0).unwrap().subs().collect();
+        assert_eq!(subs[1], Err(DropReason::UnknownKind));
+    }
 }

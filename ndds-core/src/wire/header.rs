@@ -31,18 +31,21 @@ pub enum MessageKind {
     Withdraw = 3,
     /// A daemon leaves the domain: forget it and all of its endpoints.
     Bye = 4,
-    /// One user sample, sent by a producing process directly to consuming processes.
+    /// Samples and stream control, sent by a producing process directly to a consuming one.
     Data = 16,
+    /// Acknowledgements and repair requests from a consuming process to a producing one.
+    Feedback = 17,
 }
 
 impl MessageKind {
     /// Every kind, in wire order.
-    pub const ALL: [MessageKind; 5] = [
+    pub const ALL: [MessageKind; 6] = [
         MessageKind::Solicit,
         MessageKind::Announce,
         MessageKind::Withdraw,
         MessageKind::Bye,
         MessageKind::Data,
+        MessageKind::Feedback,
     ];
 
     /// The kind with this wire value, or `None` for a value this version does not know.
@@ -58,6 +61,7 @@ impl MessageKind {
             MessageKind::Withdraw => "Withdraw",
             MessageKind::Bye => "Bye",
             MessageKind::Data => "Data",
+            MessageKind::Feedback => "Feedback",
         }
     }
 }

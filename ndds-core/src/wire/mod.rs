@@ -10,6 +10,7 @@ pub mod bounded;
 pub mod bye;
 pub mod data;
 pub mod endpoint;
+pub mod feedback;
 pub mod header;
 pub mod node;
 pub mod qos;
@@ -20,7 +21,8 @@ use serde::Serialize;
 
 pub use announce::Announce;
 pub use bye::Bye;
-pub use data::Data;
+pub use data::{DataDatagram, DataSub, DataWriter, SampleMeta};
+pub use feedback::{FeedbackDatagram, FeedbackSub};
 pub use endpoint::{EndpointInfo, EndpointKind, Guid, Locator};
 pub use header::{HEADER_LEN, Header, MAGIC, MessageKind, PROTOCOL_VERSION};
 pub use node::NodeInfo;
@@ -103,9 +105,10 @@ impl DropReason {
     }
 }
 
-/// A decoded datagram body.
+/// A decoded discovery datagram body. (`Data` and `Feedback` datagrams are sequences of
+/// submessages, parsed with [`DataDatagram`] and [`FeedbackDatagram`].)
 #[derive(Clone, Debug, PartialEq)]
-pub enum Message<'a> {
+pub enum Message {
     /// See [`solicit`].
     Solicit(Solicit),
     /// See [`announce`].
@@ -114,11 +117,9 @@ pub enum Message<'a> {
     Withdraw(Withdraw),
     /// See [`bye`].
     Bye(Bye),
-    /// See [`data`].
-    Data(Data<'a>),
 }
 
-impl Message<'_> {
+impl Message {
     /// The header kind of this message.
     pub fn kind(&self) -> MessageKind {
         match self {
@@ -126,7 +127,6 @@ impl Message<'_> {
             Message::Announce(_) => MessageKind::Announce,
             Message::Withdraw(_) => MessageKind::Withdraw,
             Message::Bye(_) => MessageKind::Bye,
-            Message::Data(_) => MessageKind::Data,
         }
     }
 }
@@ -151,7 +151,7 @@ pub enum EncodeError {
 pub fn encode(
     domain: u16,
     sender: u64,
-    message: &Message<'_>,
+    message: &Message,
     out: &mut Vec<u8>,
 ) -> Result<(), EncodeError> {
     let start = out.len();
@@ -166,7 +166,6 @@ pub fn encode(
         Message::Announce(body) => append_body(body, out),
         Message::Withdraw(body) => append_body(body, out),
         Message::Bye(body) => append_body(body, out),
-        Message::Data(body) => append_body(body, out),
     };
     let size = out.len() - start;
     match result {
@@ -188,23 +187,24 @@ fn append_body<T: Serialize>(body: &T, out: &mut Vec<u8>) -> Result<(), postcard
     Ok(())
 }
 
-/// Decodes a datagram: header checks, then the body of the kind the header names.
+/// Decodes a discovery datagram: header checks, then the body of the kind the header names.
+/// `Data` and `Feedback` datagrams are [`DropReason::Unexpected`] here.
 ///
 /// The domain is not checked here; see [`decode_for_domain`].
-pub fn decode(bytes: &[u8]) -> Result<(Header, Message<'_>), DropReason> {
+pub fn decode(bytes: &[u8]) -> Result<(Header, Message), DropReason> {
     let (header, body) = Header::parse(bytes)?;
     let message = match header.kind {
         MessageKind::Solicit => Message::Solicit(decode_body(body)?),
         MessageKind::Announce => Message::Announce(decode_body(body)?),
         MessageKind::Withdraw => Message::Withdraw(decode_body(body)?),
         MessageKind::Bye => Message::Bye(decode_body(body)?),
-        MessageKind::Data => Message::Data(decode_body(body)?),
+        MessageKind::Data | MessageKind::Feedback => return Err(DropReason::Unexpected),
     };
     Ok((header, message))
 }
 
 /// Decodes a datagram and rejects it unless it belongs to `domain`.
-pub fn decode_for_domain(bytes: &[u8], domain: u16) -> Result<(Header, Message<'_>), DropReason> {
+pub fn decode_for_domain(bytes: &[u8], domain: u16) -> Result<(Header, Message), DropReason> {
     let (header, _) = Header::parse(bytes)?;
     if header.domain != domain {
         return Err(DropReason::OtherDomain);

@@ -1,0 +1,1 @@
+//! Large samples without IO: splitting into pieces, and bounded reassembly. (Being written.)
