@@ -46,8 +46,11 @@ pub enum Notification {
         /// True if it was the producer in charge; any producer may take over at once.
         was_current: bool,
     },
-    /// A producer of this topic has another type: its samples never reach this consumer.
+    /// A producer of this topic has another type, or offers best effort to this reliable
+    /// consumer: its samples never reach this consumer.
     Incompatible {
+        /// Why.
+        reason: crate::discovery::Incompatibility,
         /// The other endpoint.
         writer: Guid,
         /// Its type name.

@@ -14,4 +14,4 @@ pub use config::{ConfigError, DiscoveryConfig, MAX_PEERS};
 pub use engine::{Engine, LocalError, MAX_TOPIC_LEN, RemoteNode, Stats};
 pub use event::{Destination, Event, LossReason, Transmit};
 pub use fanout::Via;
-pub use table::{Entry, Origin};
+pub use table::{Entry, Incompatibility, Origin, incompatibility};

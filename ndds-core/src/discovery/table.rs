@@ -1,16 +1,41 @@
 //! The endpoint table: every known endpoint (local and remote), indexed by topic, and the
 //! matching rules between them.
 //!
-//! Matching: a producer and a consumer match when their topic names are equal and their type
-//! fingerprints are equal; when the names are equal and the fingerprints differ they are
-//! *incompatible*. Events are produced only for the local side of a pair; a pair of two local
+//! Matching: a producer and a consumer match when their topic names are equal, their type
+//! fingerprints are equal, and the producer offers reliability if the consumer requests it;
+//! otherwise, on one topic, they are *incompatible* (see [`incompatibility`]). Events are produced only for the local side of a pair; a pair of two local
 //! endpoints produces an event for each.
 
 use std::collections::{BTreeSet, HashMap};
 use std::time::Instant;
 
 use super::event::Event;
-use crate::wire::{EndpointInfo, EndpointKind, Guid};
+use crate::wire::{EndpointInfo, EndpointKind, EndpointQos, Guid, Reliability};
+
+/// Why a producer and a consumer of one topic do not match.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Incompatibility {
+    /// Their type fingerprints differ.
+    Type,
+    /// The consumer requests reliability and the producer offers best effort only.
+    Reliability,
+}
+
+/// Why `a` and `b` (a producer and a consumer of one topic, in either order) do not match, or
+/// `None` when they do.
+pub fn incompatibility(a: &EndpointInfo, b: &EndpointInfo) -> Option<Incompatibility> {
+    if a.fingerprint != b.fingerprint {
+        return Some(Incompatibility::Type);
+    }
+    let (producer, consumer) = match (&a.qos, &b.qos) {
+        (EndpointQos::Producer(p), EndpointQos::Consumer(c))
+        | (EndpointQos::Consumer(c), EndpointQos::Producer(p)) => (p, c),
+        _ => return None,
+    };
+    let wants_reliable = matches!(consumer.reliability, Reliability::Reliable { .. });
+    let offers_reliable = matches!(producer.reliability, Reliability::Reliable { .. });
+    (wants_reliable && !offers_reliable).then_some(Incompatibility::Reliability)
+}
 
 /// Who owns an endpoint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -219,7 +244,7 @@ fn unindex(
 }
 
 fn pair_event(local: &EndpointInfo, other: &EndpointInfo) -> Event {
-    if local.fingerprint == other.fingerprint {
+    if incompatibility(local, other).is_none() {
         Event::Matched {
             local: local.guid,
             remote: other.clone(),

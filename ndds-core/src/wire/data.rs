@@ -1,9 +1,9 @@
-//! `Data` (kind 16): samples and stream control from one producing process to one consuming
-//! process, as a sequence of submessages.
+//! `Data` (kind 16): samples and stream control from one writer of a producing process to
+//! readers of one consuming process, as a sequence of submessages.
 //!
 //! ```text
 //! header(kind = 16, sender = producing participant id)
-//!   | varint reader_participant
+//!   | varint reader_participant | varint writer | varint n | n × varint reader
 //!   | submessage { submessage }          (at least one)
 //! submessage := u8 sub_kind | postcard body
 //!   sub_kind 1  Sample     one whole sample
@@ -12,22 +12,25 @@
 //!   sub_kind 4  Gap        sequence numbers a reliable writer can no longer provide
 //! ```
 //!
-//! Every submessage names its writer (an entity of the sender participant) and the reader
-//! entities of `reader_participant` it is for. Several submessages share a datagram when a
-//! producer batches small samples, or when a heartbeat rides behind samples. Submessages of a
-//! kind this version does not know end the parse of the datagram (the submessages before them
-//! stand).
-
-use std::borrow::Cow;
+//! The datagram prefix names the writer (an entity of the sender participant) and the reader
+//! entities of `reader_participant` every submessage is for (at most [`MAX_READERS`]). Several
+//! submessages share a datagram when a producer batches small samples, or when a heartbeat
+//! rides behind samples. A submessage of a kind this version does not know, or one that does
+//! not decode, ends the parse of the datagram (the submessages before it stand).
 
 use serde::{Deserialize, Serialize};
+use smallvec::SmallVec;
 
-use super::bounded;
 use super::header::{HEADER_LEN, Header, MessageKind};
 use super::{DropReason, MAX_DATAGRAM};
 
 /// Flag bit: the writer is reliable (readers acknowledge, and repair from its history).
 pub const FLAG_RELIABLE: u8 = 1;
+/// Most reader entities one datagram may address.
+pub const MAX_READERS: usize = 1024;
+
+/// The reader entities a datagram addresses; up to eight are held without allocating.
+pub type Readers = SmallVec<[u32; 8]>;
 
 /// Submessage kinds inside a `Data` datagram.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -61,11 +64,6 @@ pub struct SampleMeta {
 /// A whole sample.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Sample<'a> {
-    /// Writer entity within the sending participant.
-    pub writer: u32,
-    /// Reader entities within `reader_participant`.
-    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
-    pub readers: Cow<'a, [u32]>,
     /// Sequence number, timestamp, strength, persistence, flags.
     pub meta: SampleMeta,
     /// postcard encoding of the value.
@@ -77,11 +75,6 @@ pub struct Sample<'a> {
 /// `frag_size` bytes; piece `index` covers bytes `index × frag_size ..` of the sample.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Fragment<'a> {
-    /// Writer entity.
-    pub writer: u32,
-    /// Reader entities.
-    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
-    pub readers: Cow<'a, [u32]>,
     /// Sequence number, timestamp, strength, persistence, flags of the whole sample.
     pub meta: SampleMeta,
     /// Length of the whole sample in bytes.
@@ -96,13 +89,8 @@ pub struct Fragment<'a> {
 }
 
 /// A reliable writer's history: sequence numbers `first..=last` can be repaired.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Heartbeat<'a> {
-    /// Writer entity.
-    pub writer: u32,
-    /// Reader entities.
-    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
-    pub readers: Cow<'a, [u32]>,
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Heartbeat {
     /// Oldest sequence number still in the history (`last + 1` when empty).
     pub first: u64,
     /// Newest sequence number written.
@@ -111,13 +99,8 @@ pub struct Heartbeat<'a> {
 
 /// Sequence numbers `from..to` will never be sent (again): readers skip them and report them
 /// lost.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Gap<'a> {
-    /// Writer entity.
-    pub writer: u32,
-    /// Reader entities.
-    #[serde(borrow, deserialize_with = "bounded::cow_vec")]
-    pub readers: Cow<'a, [u32]>,
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Gap {
     /// First missing sequence number.
     pub from: u64,
     /// One past the last missing sequence number.
@@ -132,9 +115,9 @@ pub enum DataSub<'a> {
     /// A piece of a sample.
     Fragment(Fragment<'a>),
     /// A reliable writer's range.
-    Heartbeat(Heartbeat<'a>),
+    Heartbeat(Heartbeat),
     /// Numbers that will never come.
-    Gap(Gap<'a>),
+    Gap(Gap),
 }
 
 impl DataSub<'_> {
@@ -161,9 +144,9 @@ impl DataWriter {
         DataWriter::default()
     }
 
-    /// Starts a datagram from `sender` (participant) to `reader_participant`, discarding
-    /// anything begun before.
-    pub fn begin(&mut self, domain: u16, sender: u64, reader_participant: u64) {
+    /// Starts a datagram from `writer` of participant `sender` to `readers` of
+    /// `reader_participant`, discarding anything begun before.
+    pub fn begin(&mut self, domain: u16, sender: u64, to: &Addressing<'_>) {
         self.buf.clear();
         self.subs = 0;
         Header {
@@ -173,8 +156,8 @@ impl DataWriter {
         }
         .emit(&mut self.buf);
         let buf = std::mem::take(&mut self.buf);
-        // Encoding a u64 into a Vec cannot fail.
-        self.buf = postcard::to_extend(&reader_participant, buf).unwrap_or_default();
+        // Encoding integers into a Vec cannot fail.
+        self.buf = postcard::to_extend(to, buf).unwrap_or_default();
     }
 
     /// Appends a submessage if the datagram stays within `limit` bytes; returns whether it
@@ -222,19 +205,30 @@ impl DataWriter {
     pub fn bytes(&self) -> &[u8] {
         &self.buf
     }
-
-    /// Bytes the datagram would grow by for an empty submessage header; a caller can budget a
-    /// payload as `limit - bytes().len() - overhead`.
-    pub fn size(&self) -> usize {
-        self.buf.len()
-    }
 }
 
-/// Bytes a `Sample` submessage adds to its payload, at most (kind byte, writer, up to
-/// `readers` reader entities, metadata, payload length).
-pub fn sample_overhead(readers: usize) -> usize {
-    1 + 5 + 5 + 5 * readers + (10 + 10 + 5 + 10 + 1) + 5
+/// Who a datagram is for: its writer and readers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Addressing<'a> {
+    /// The participant the datagram is for.
+    pub reader_participant: u64,
+    /// Writer entity within the sending participant.
+    pub writer: u32,
+    /// Reader entities within `reader_participant`.
+    pub readers: &'a [u32],
 }
+
+/// Bytes of a datagram's header and addressing, at most, for `readers` reader entities.
+pub fn prefix_overhead(readers: usize) -> usize {
+    HEADER_LEN + 10 + 5 + 5 + 5 * readers
+}
+
+/// Bytes a `Sample` submessage adds to its payload, at most (kind byte, metadata, payload
+/// length).
+pub const SAMPLE_OVERHEAD: usize = 1 + (10 + 10 + 5 + 10 + 1) + 5;
+
+/// Bytes a `Fragment` submessage adds to its chunk, at most.
+pub const FRAGMENT_OVERHEAD: usize = SAMPLE_OVERHEAD + 5 + 5 + 5;
 
 /// A parsed `Data` datagram: who it is for, and an iterator over its submessages.
 #[derive(Clone, Debug)]
@@ -243,6 +237,10 @@ pub struct DataDatagram<'a> {
     pub header: Header,
     /// The participant the datagram is for.
     pub reader_participant: u64,
+    /// Writer entity within the sending participant.
+    pub writer: u32,
+    /// Reader entities within `reader_participant`, deduplicated and sorted.
+    pub readers: Readers,
     rest: &'a [u8],
 }
 
@@ -257,14 +255,30 @@ impl<'a> DataDatagram<'a> {
         if header.kind != MessageKind::Data {
             return Err(DropReason::Unexpected);
         }
-        let (reader_participant, rest) =
-            postcard::take_from_bytes::<u64>(body).map_err(|_| DropReason::Malformed)?;
+        let (reader_participant, rest) = take::<u64>(body)?;
+        let (writer, rest) = take::<u32>(rest)?;
+        let (count, mut rest) = take::<u32>(rest)?;
+        // Each reader takes at least one byte: a claim beyond the bytes left is malformed
+        // before anything is allocated.
+        if count as usize > MAX_READERS || count as usize > rest.len() {
+            return Err(DropReason::Malformed);
+        }
+        let mut readers = Readers::new();
+        for _ in 0..count {
+            let (reader, tail) = take::<u32>(rest)?;
+            readers.push(reader);
+            rest = tail;
+        }
+        readers.sort_unstable();
+        readers.dedup();
         if rest.is_empty() {
             return Err(DropReason::Malformed);
         }
         Ok(DataDatagram {
             header,
             reader_participant,
+            writer,
+            readers,
             rest,
         })
     }
@@ -320,8 +334,6 @@ mod tests {
 
     fn sample(payload: &[u8]) -> DataSub<'_> {
         DataSub::Sample(Sample {
-            writer: 1,
-            readers: Cow::Owned(vec![2, 3]),
             meta: SampleMeta {
                 seq: 9,
                 timestamp_ns: 123,
@@ -333,23 +345,26 @@ mod tests {
         })
     }
 
+    const TO: Addressing<'static> = Addressing {
+        reader_participant: 0xCD,
+        writer: 1,
+        readers: &[3, 2, 3],
+    };
+
     #[test]
     fn batches_round_trip_and_respect_the_limit() {
         let mut w = DataWriter::new();
-        w.begin(7, 0xAB, 0xCD);
+        w.begin(7, 0xAB, &TO);
         assert!(w.push(&sample(&[1; 10]), 200));
-        let heartbeat = DataSub::Heartbeat(Heartbeat {
-            writer: 1,
-            readers: Cow::Owned(vec![2]),
-            first: 3,
-            last: 9,
-        });
+        let heartbeat = DataSub::Heartbeat(Heartbeat { first: 3, last: 9 });
         assert!(w.push(&heartbeat, 200));
         let before = w.bytes().to_vec();
         assert!(!w.push(&sample(&[0; 300]), 200), "would exceed the limit");
         assert_eq!(w.bytes(), &before[..], "unchanged by a refused push");
         let datagram = DataDatagram::parse(w.bytes(), 7).unwrap();
         assert_eq!(datagram.reader_participant, 0xCD);
+        assert_eq!(datagram.writer, 1);
+        assert_eq!(datagram.readers.as_slice(), &[2, 3], "sorted, deduplicated");
         assert_eq!(datagram.header.sender, 0xAB);
         let subs: Vec<_> = datagram.subs().collect::<Result<_, _>>().unwrap();
         assert_eq!(subs, vec![sample(&[1; 10]), heartbeat]);
@@ -362,7 +377,7 @@ mod tests {
     #[test]
     fn a_broken_submessage_ends_the_iteration() {
         let mut w = DataWriter::new();
-        w.begin(0, 1, 2);
+        w.begin(0, 1, &TO);
         assert!(w.push(&sample(&[5; 4]), 1000));
         let mut bytes = w.bytes().to_vec();
         bytes.extend_from_slice(&[1, 0xff, 0xff]);
@@ -375,5 +390,21 @@ mod tests {
         bytes.push(99);
         let subs: Vec<_> = DataDatagram::parse(&bytes, 0).unwrap().subs().collect();
         assert_eq!(subs[1], Err(DropReason::UnknownKind));
+    }
+
+    #[test]
+    fn a_huge_reader_count_is_malformed_before_anything_is_allocated() {
+        let mut bytes = Vec::new();
+        Header {
+            kind: MessageKind::Data,
+            domain: 0,
+            sender: 1,
+        }
+        .emit(&mut bytes);
+        bytes.extend_from_slice(&[5, 1, 0xFF, 0xFF, 0xFF, 0xFF, 0x0F, 1, 2]);
+        assert_eq!(
+            DataDatagram::parse(&bytes, 0).unwrap_err(),
+            DropReason::Malformed
+        );
     }
 }
