@@ -30,7 +30,7 @@ fn node_info(unicast: Locator) -> NodeInfo {
     }
 }
 
-fn datagram(sender: u64, message: &Message<'_>) -> Vec<u8> {
+fn datagram(sender: u64, message: &Message) -> Vec<u8> {
     let mut out = Vec::new();
     wire::encode(0, sender, message, &mut out).unwrap();
     out
