@@ -1,14 +1,21 @@
-//! Every wire message round-trips through `wire::encode` / `wire::decode`, and every way of
-//! damaging a valid datagram (wrong domain, magic, version or kind, truncation, a trailing byte)
-//! is dropped with the documented reason.
+//! Every wire message round-trips, and every way of damaging a valid datagram is dropped with
+//! the documented reason.
+//!
+//! Discovery messages go through `wire::encode` / `wire::decode` here (wrong domain, magic,
+//! version or kind, truncation, a trailing byte); `Data` and `Feedback` datagrams, sequences of
+//! submessages, in `wire_data/roundtrip.rs`.
 
 #[path = "support/messages.rs"]
 mod messages;
+#[path = "support/submessages.rs"]
+mod submessages;
+#[path = "wire_data/roundtrip.rs"]
+mod wire_data;
 
 use ndds_core::types::{Format, TypeDescription, TypeLayout};
 use ndds_core::wire::{
-    self, Data, DropReason, EncodeError, HEADER_LEN, MAGIC, MAX_DATAGRAM, Message, MessageKind,
-    PROTOCOL_VERSION,
+    self, DataDatagram, DropReason, EncodeError, FeedbackDatagram, HEADER_LEN, MAGIC, MAX_DATAGRAM,
+    Message, MessageKind, NodeInfo, PROTOCOL_VERSION, Solicit,
 };
 use proptest::prelude::*;
 
@@ -86,11 +93,11 @@ proptest! {
         );
     }
 
-    /// A body read as another known kind is either malformed or a message of that kind.
+    /// A body read as another discovery kind is either malformed or a message of that kind.
     #[test]
     fn body_under_another_known_kind_is_never_misreported(
         d in datagram(),
-        kind in messages::kind(),
+        kind in messages::discovery_kind(),
     ) {
         let mut bytes = d.encode();
         bytes[5] = kind as u8;
@@ -100,6 +107,29 @@ proptest! {
                 prop_assert_eq!(message.kind(), kind);
             }
             Err(reason) => prop_assert_eq!(reason, DropReason::Malformed),
+        }
+    }
+
+    /// A discovery body under the `Data` or `Feedback` kind is not decoded at all by
+    /// `wire::decode`, and its own kind is not decoded by the data-plane parsers.
+    #[test]
+    fn discovery_and_data_planes_refuse_each_others_kinds(d in datagram()) {
+        let mut bytes = d.encode();
+        prop_assert_eq!(
+            DataDatagram::parse(&bytes, d.domain).map(|_| ()),
+            Err(DropReason::Unexpected)
+        );
+        prop_assert_eq!(
+            FeedbackDatagram::parse(&bytes, d.domain).map(|_| ()),
+            Err(DropReason::Unexpected)
+        );
+        for kind in [MessageKind::Data, MessageKind::Feedback] {
+            bytes[5] = kind as u8;
+            prop_assert_eq!(wire::decode(&bytes), Err(DropReason::Unexpected));
+            prop_assert_eq!(
+                wire::decode_for_domain(&bytes, d.domain),
+                Err(DropReason::Unexpected)
+            );
         }
     }
 
@@ -230,10 +260,11 @@ fn sample_descriptions_are_distinct_and_valid() {
 #[test]
 fn every_kind_has_its_documented_wire_value() {
     let values: Vec<u8> = MessageKind::ALL.iter().map(|k| *k as u8).collect();
-    assert_eq!(values, [1, 2, 3, 4, 16]);
+    assert_eq!(values, [1, 2, 3, 4, 16, 17]);
     for kind in MessageKind::ALL {
         assert_eq!(MessageKind::from_u8(kind as u8), Some(kind));
     }
+    assert_eq!(MessageKind::Feedback.name(), "Feedback");
 }
 
 #[test]
@@ -253,43 +284,42 @@ fn a_bye_is_exactly_a_header() {
     assert_eq!(message, Message::Bye(wire::Bye));
 }
 
+fn solicit_with_hostname(hostname: String) -> Message {
+    Message::Solicit(Solicit {
+        node: NodeInfo {
+            hostname,
+            pid: 1,
+            unicast: wire::Locator {
+                addr: [10, 0, 0, 1],
+                port: 7850,
+            },
+            lease_ms: 5000,
+            announce_period_ms: 1000,
+            version: String::new(),
+        },
+    })
+}
+
 #[test]
 fn oversized_datagram_is_refused_and_output_untouched() {
-    let fixed = data_datagram(&[]).len();
-    // The largest payload that fits: the payload length prefix is a 3-byte varint here.
-    let fits = vec![0xA5; MAX_DATAGRAM - fixed - 2];
-    let bytes = data_datagram(&fits);
-    assert_eq!(bytes.len(), MAX_DATAGRAM);
-    match wire::decode(&bytes) {
-        Ok((_, Message::Data(data))) => assert_eq!(data.payload, &fits[..]),
+    let mut out = Vec::new();
+    wire::encode(3, 9, &solicit_with_hostname(String::new()), &mut out).unwrap();
+    let fixed = out.len();
+    // The longest host name that fits: its length prefix is a 3-byte varint here.
+    let fits = "h".repeat(MAX_DATAGRAM - fixed - 2);
+    out.clear();
+    wire::encode(3, 9, &solicit_with_hostname(fits.clone()), &mut out).unwrap();
+    assert_eq!(out.len(), MAX_DATAGRAM);
+    match wire::decode(&out) {
+        Ok((_, Message::Solicit(solicit))) => assert_eq!(solicit.node.hostname, fits),
         other => panic!("largest datagram did not decode: {other:?}"),
     }
 
-    let too_big = vec![0xA5; fits.len() + 1];
     let mut out = b"kept".to_vec();
-    let err = wire::encode(3, 9, &Message::Data(data_with(&too_big)), &mut out).unwrap_err();
+    let err = wire::encode(3, 9, &solicit_with_hostname(fits + "h"), &mut out).unwrap_err();
     assert!(
         matches!(err, EncodeError::TooLarge { size } if size == MAX_DATAGRAM + 1),
         "{err:?}"
     );
     assert_eq!(out, b"kept");
-}
-
-fn data_with(payload: &[u8]) -> Data<'_> {
-    Data {
-        writer: 1,
-        reader_participant: 2,
-        readers: vec![3].into(),
-        seq: 4,
-        timestamp_ns: 5,
-        strength: -6,
-        persistence_us: 7,
-        payload,
-    }
-}
-
-fn data_datagram(payload: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    wire::encode(3, 9, &Message::Data(data_with(payload)), &mut out).unwrap();
-    out
 }

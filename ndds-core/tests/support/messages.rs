@@ -1,19 +1,20 @@
 //! proptest strategies for every wire message, shared by the wire test binaries.
 //!
-//! Endpoints carry real type descriptions (traced from a handful of Rust types with
-//! `TypeDescription::try_of`, or opaque names) and the fingerprint that goes with them, so a
-//! generated `Announce` is one a real daemon could have sent.
+//! These are the discovery messages, whole datagrams for `wire::encode` / `wire::decode`; the
+//! `Data` and `Feedback` submessages are in `submessages.rs`. Endpoints carry real type
+//! descriptions (traced from a handful of Rust types with `TypeDescription::try_of`, or opaque
+//! names) and the fingerprint that goes with them, so a generated `Announce` is one a real
+//! daemon could have sent.
 
 // Each test binary that includes this module uses a different subset of it.
 #![allow(dead_code)]
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::OnceLock;
 
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
-    Announce, Bye, ConsumerMode, ConsumerQosWire, Data, EndpointInfo, EndpointQos, Guid, Locator,
+    Announce, Bye, ConsumerMode, ConsumerQosWire, EndpointInfo, EndpointQos, Guid, Locator,
     Message, MessageKind, NodeInfo, ProducerQosWire, Reliability, Solicit, Withdraw,
 };
 use proptest::collection::vec;
@@ -67,47 +68,23 @@ pub fn sample_descriptions() -> &'static [TypeDescription] {
     })
 }
 
-/// Owned form of [`Message`] (whose `Data` borrows its payload), for strategies.
+/// A discovery message, as strategies generate it.
 #[derive(Clone, Debug)]
 pub enum OwnedMessage {
     Solicit(Solicit),
     Announce(Announce),
     Withdraw(Withdraw),
     Bye,
-    Data(OwnedData),
-}
-
-/// [`Data`] with an owned payload.
-#[derive(Clone, Debug)]
-pub struct OwnedData {
-    pub writer: u32,
-    pub reader_participant: u64,
-    pub readers: Vec<u32>,
-    pub seq: u64,
-    pub timestamp_ns: u64,
-    pub strength: i32,
-    pub persistence_us: u64,
-    pub payload: Vec<u8>,
 }
 
 impl OwnedMessage {
-    /// The wire message, borrowing from `self`.
-    pub fn as_message(&self) -> Message<'_> {
+    /// The wire message.
+    pub fn as_message(&self) -> Message {
         match self {
             OwnedMessage::Solicit(m) => Message::Solicit(m.clone()),
             OwnedMessage::Announce(m) => Message::Announce(m.clone()),
             OwnedMessage::Withdraw(m) => Message::Withdraw(m.clone()),
             OwnedMessage::Bye => Message::Bye(Bye),
-            OwnedMessage::Data(d) => Message::Data(Data {
-                writer: d.writer,
-                reader_participant: d.reader_participant,
-                readers: Cow::Borrowed(&d.readers),
-                seq: d.seq,
-                timestamp_ns: d.timestamp_ns,
-                strength: d.strength,
-                persistence_us: d.persistence_us,
-                payload: &d.payload,
-            }),
         }
     }
 }
@@ -240,30 +217,6 @@ pub fn endpoint() -> impl Strategy<Value = EndpointInfo> {
         )
 }
 
-pub fn data() -> impl Strategy<Value = OwnedData> {
-    (
-        (any::<u32>(), any::<u64>(), vec(any::<u32>(), 0..8)),
-        (any::<u64>(), any::<u64>(), any::<i32>(), any::<u64>()),
-        vec(any::<u8>(), 0..512),
-    )
-        .prop_map(
-            |(
-                (writer, reader_participant, readers),
-                (seq, timestamp_ns, strength, persistence_us),
-                payload,
-            )| OwnedData {
-                writer,
-                reader_participant,
-                readers,
-                seq,
-                timestamp_ns,
-                strength,
-                persistence_us,
-                payload,
-            },
-        )
-}
-
 pub fn message() -> impl Strategy<Value = OwnedMessage> {
     prop_oneof![
         node_info().prop_map(|node| OwnedMessage::Solicit(Solicit { node })),
@@ -276,7 +229,6 @@ pub fn message() -> impl Strategy<Value = OwnedMessage> {
         ),
         vec(guid(), 0..32).prop_map(|endpoints| OwnedMessage::Withdraw(Withdraw { endpoints })),
         Just(OwnedMessage::Bye),
-        data().prop_map(OwnedMessage::Data),
     ]
 }
 
@@ -291,4 +243,17 @@ pub fn datagram() -> impl Strategy<Value = Datagram> {
 /// Any of the kinds this version knows.
 pub fn kind() -> impl Strategy<Value = MessageKind> {
     (0..MessageKind::ALL.len()).prop_map(|i| MessageKind::ALL[i])
+}
+
+/// The kinds `wire::decode` decodes (everything but `Data` and `Feedback`).
+pub const DISCOVERY_KINDS: [MessageKind; 4] = [
+    MessageKind::Solicit,
+    MessageKind::Announce,
+    MessageKind::Withdraw,
+    MessageKind::Bye,
+];
+
+/// Any discovery kind.
+pub fn discovery_kind() -> impl Strategy<Value = MessageKind> {
+    (0..DISCOVERY_KINDS.len()).prop_map(|i| DISCOVERY_KINDS[i])
 }
