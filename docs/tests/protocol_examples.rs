@@ -1,15 +1,18 @@
 //! The worked examples of `docs/protocol.md` against what the code encodes today: every
 //! ```` ```hex example:NAME ```` block byte for byte, every ```` ```text canonical:NAME ````
-//! block, and the fingerprint table (also recomputed from the documented algorithm).
+//! block, and the fingerprint table (also recomputed from the documented algorithm). The
+//! `Data` and `Feedback` examples are also parsed back into the submessages they show.
 
-use std::borrow::Cow;
 use std::net::Ipv4Addr;
 
 use ndds_core::ipc::{self, ClientMessage, DaemonMessage, Hello, Role};
 use ndds_core::types::{TypeDescription, fingerprint_hex};
+use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Fragment, Gap, Heartbeat, Sample};
+use ndds_core::wire::feedback::{AckNack, NackFrag, encode_feedback};
 use ndds_core::wire::{
-    self, Announce, Bye, Data, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo,
-    ProducerQosWire, Reliability, Withdraw,
+    self, Announce, Bye, DataDatagram, DataSub, DataWriter, EndpointInfo, EndpointQos,
+    FeedbackDatagram, FeedbackSub, Guid, Locator, MAX_DATAGRAM, Message, NodeInfo, ProducerQosWire,
+    Reliability, SampleMeta, Withdraw,
 };
 use ndds_docs::markdown::{Doc, HexByte, hex_lines};
 use ndds_docs::report::Problems;
@@ -34,6 +37,16 @@ struct Pose {
 
 const NODE: u64 = 0x0a0b_0c0d_0e0f_1011;
 const PARTICIPANT: u64 = 0x1122_3344_5566_7788;
+/// The consuming participant of the data-plane examples.
+const CONSUMER: u64 = 0x8877_6655_4433_2211;
+const DOMAIN: u16 = 7;
+
+/// From producer entity 1 of `PARTICIPANT` to consumers 2 and 5 of `CONSUMER`.
+const TO_CONSUMERS: Addressing<'static> = Addressing {
+    reader_participant: CONSUMER,
+    writer: 1,
+    readers: &[2, 5],
+};
 
 fn localhost(port: u16) -> Locator {
     Locator {
@@ -42,7 +55,7 @@ fn localhost(port: u16) -> Locator {
     }
 }
 
-fn datagram(domain: u16, sender: u64, message: &Message<'_>) -> Vec<u8> {
+fn datagram(domain: u16, sender: u64, message: &Message) -> Vec<u8> {
     let mut out = Vec::new();
     wire::encode(domain, sender, message, &mut out).expect("example encodes");
     out
@@ -78,20 +91,79 @@ fn pose_description() -> TypeDescription {
     }
 }
 
+/// The metadata of sample `seq` of the data-plane examples' reliable producer.
+fn meta(seq: u64, timestamp_ns: u64) -> SampleMeta {
+    SampleMeta {
+        seq,
+        timestamp_ns,
+        strength: -3,
+        persistence_us: 300_000,
+        flags: FLAG_RELIABLE,
+    }
+}
+
+/// Sample 1 (the `f64` value 1.5) and a heartbeat behind it.
+fn data_example(payload: &[u8]) -> Vec<DataSub<'_>> {
+    vec![
+        DataSub::Sample(Sample {
+            meta: meta(1, 1_700_000_000_123_456_789),
+            payload,
+        }),
+        DataSub::Heartbeat(Heartbeat { first: 1, last: 1 }),
+    ]
+}
+
+/// A gap, then the last piece of a 10-byte sample cut into 4-byte pieces.
+fn fragment_example() -> Vec<DataSub<'static>> {
+    vec![
+        DataSub::Gap(Gap { from: 2, to: 4 }),
+        DataSub::Fragment(Fragment {
+            meta: meta(4, 1_700_000_000_200_000_000),
+            total_len: 10,
+            frag_size: 4,
+            index: 2,
+            chunk: &[0xaa, 0xbb],
+        }),
+    ]
+}
+
+/// Everything before 5 arrived, 5 and 7 are missing; and pieces 1 and 2 of sample 9 are.
+fn feedback_example() -> Vec<FeedbackSub<'static>> {
+    vec![
+        FeedbackSub::AckNack(AckNack {
+            reader: 2,
+            writer: 1,
+            acked: 5,
+            missing: &[0b0000_0101],
+        }),
+        FeedbackSub::NackFrag(NackFrag {
+            reader: 2,
+            writer: 1,
+            seq: 9,
+            base: 0,
+            missing: &[0b0000_0110],
+        }),
+    ]
+}
+
+fn data_datagram(subs: &[DataSub<'_>]) -> Vec<u8> {
+    let mut writer = DataWriter::new();
+    writer.begin(DOMAIN, PARTICIPANT, &TO_CONSUMERS);
+    for sub in subs {
+        assert!(writer.push(sub, MAX_DATAGRAM), "example fits a datagram");
+    }
+    writer.bytes().to_vec()
+}
+
+fn feedback_datagram(subs: &[FeedbackSub<'_>]) -> Vec<u8> {
+    let mut out = Vec::new();
+    encode_feedback(DOMAIN, CONSUMER, PARTICIPANT, subs, &mut out).expect("example encodes");
+    out
+}
+
 /// Every hex example the document must show, encoded by the code.
 fn hex_examples() -> Vec<(&'static str, Vec<u8>)> {
     let payload = postcard::to_allocvec(&1.5_f64).expect("f64 encodes");
-    let readers = [2_u32, 5];
-    let data = Data {
-        writer: 1,
-        reader_participant: 0x8877_6655_4433_2211,
-        readers: Cow::Borrowed(&readers),
-        seq: 1,
-        timestamp_ns: 1_700_000_000_123_456_789,
-        strength: -3,
-        persistence_us: 300_000,
-        payload: &payload,
-    };
     let node = NodeInfo {
         hostname: "h1".to_owned(),
         pid: 4242,
@@ -124,7 +196,9 @@ fn hex_examples() -> Vec<(&'static str, Vec<u8>)> {
             "bye",
             datagram(7, 0x0123_4567_89ab_cdef, &Message::Bye(Bye)),
         ),
-        ("data", datagram(7, PARTICIPANT, &Message::Data(data))),
+        ("data", data_datagram(&data_example(&payload))),
+        ("data-fragment", data_datagram(&fragment_example())),
+        ("feedback", feedback_datagram(&feedback_example())),
         ("announce", datagram(0, NODE, &Message::Announce(announce))),
         ("withdraw", datagram(0, NODE, &Message::Withdraw(withdraw))),
         (
@@ -245,6 +319,33 @@ fn hex_examples_are_what_the_code_encodes() {
         }
     }
     problems.finish("worked examples");
+}
+
+/// The data-plane examples say what they carry; the parsers must read that back.
+#[test]
+fn data_plane_examples_parse_back() {
+    let payload = postcard::to_allocvec(&1.5_f64).expect("f64 encodes");
+    for (bytes, subs) in [
+        (
+            data_datagram(&data_example(&payload)),
+            data_example(&payload),
+        ),
+        (data_datagram(&fragment_example()), fragment_example()),
+    ] {
+        let datagram = DataDatagram::parse(&bytes, DOMAIN).expect("example parses");
+        assert_eq!(datagram.header.sender, PARTICIPANT);
+        assert_eq!(datagram.reader_participant, CONSUMER);
+        assert_eq!(datagram.writer, TO_CONSUMERS.writer);
+        assert_eq!(datagram.readers.as_slice(), TO_CONSUMERS.readers);
+        let parsed: Result<Vec<_>, _> = datagram.subs().collect();
+        assert_eq!(parsed, Ok(subs));
+    }
+    let bytes = feedback_datagram(&feedback_example());
+    let datagram = FeedbackDatagram::parse(&bytes, DOMAIN).expect("example parses");
+    assert_eq!(datagram.header.sender, CONSUMER);
+    assert_eq!(datagram.writer_participant, PARTICIPANT);
+    let parsed: Result<Vec<_>, _> = datagram.subs().collect();
+    assert_eq!(parsed, Ok(feedback_example()));
 }
 
 #[test]

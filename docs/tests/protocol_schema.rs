@@ -9,19 +9,27 @@ use std::collections::BTreeMap;
 
 use ndds_core::ipc::{ClientMessage, DaemonMessage, Role};
 use ndds_core::types::{ContainerShape, Format, VariantShape};
-use ndds_core::wire::{
-    Announce, Bye, ConsumerMode, Data, EndpointQos, Reliability, Solicit, Withdraw,
-};
+use ndds_core::wire::data::{Addressing, Fragment, Gap, Heartbeat, Sample};
+use ndds_core::wire::feedback::{AckNack, NackFrag};
+use ndds_core::wire::{Announce, Bye, ConsumerMode, EndpointQos, Reliability, Solicit, Withdraw};
 use ndds_docs::markdown::{Doc, Heading, Table, plain};
 use ndds_docs::report::Problems;
 use serde_reflection::{
     ContainerFormat, Format as F, Named, Registry, Samples, Tracer, TracerConfig, VariantFormat,
 };
 
-/// Every structure reachable from the datagram bodies and the two frame enums.
+/// Every structure reachable from the datagram bodies, the `Data` and `Feedback` addressing
+/// and submessages, and the two frame enums.
 fn registry() -> Registry {
-    let samples = Samples::new();
+    let mut samples = Samples::new();
     let mut tracer = Tracer::new(TracerConfig::default());
+    // `Addressing` is only ever encoded (the parser reads it field by field), so it is traced
+    // from a value.
+    let addressing = Addressing {
+        reader_participant: 1,
+        writer: 2,
+        readers: &[3],
+    };
     // Enums first: one that sits behind a `Vec` or `Option` is seen completely only when
     // traced on its own.
     let traced = tracer
@@ -40,7 +48,13 @@ fn registry() -> Registry {
         .and_then(|_| tracer.trace_simple_type::<Announce>())
         .and_then(|_| tracer.trace_simple_type::<Withdraw>())
         .and_then(|_| tracer.trace_simple_type::<Bye>())
-        .and_then(|_| tracer.trace_type::<Data<'_>>(&samples));
+        .and_then(|_| tracer.trace_value(&mut samples, &addressing).map(|_| ()))
+        .and_then(|_| tracer.trace_type::<Sample<'_>>(&samples))
+        .and_then(|_| tracer.trace_type::<Fragment<'_>>(&samples))
+        .and_then(|_| tracer.trace_simple_type::<Heartbeat>())
+        .and_then(|_| tracer.trace_simple_type::<Gap>())
+        .and_then(|_| tracer.trace_type::<AckNack<'_>>(&samples))
+        .and_then(|_| tracer.trace_type::<NackFrag<'_>>(&samples));
     if let Err(err) = traced {
         panic!(
             "serde-reflection cannot trace the protocol types ({err}); if a new enum sits behind \

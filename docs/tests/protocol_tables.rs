@@ -1,5 +1,6 @@
 //! `docs/protocol.md` against the code: the message kind table and the message headings, the
-//! drop reasons, the header layout, the domain mapping, and every timer, limit and default.
+//! submessage kinds of `Data` and `Feedback`, the drop reasons, the header layout, the domain
+//! mapping, and every timer, limit and default.
 
 #[path = "support/values.rs"]
 mod values;
@@ -7,7 +8,12 @@ mod values;
 use std::collections::BTreeMap;
 
 use ndds_core::domain;
-use ndds_core::wire::{DropReason, HEADER_LEN, Header, MAGIC, MessageKind, PROTOCOL_VERSION};
+use ndds_core::wire::data::{Addressing, DataSubKind, Fragment, Gap, Heartbeat, Sample};
+use ndds_core::wire::feedback::{AckNack, FeedbackSubKind, NackFrag, encode_feedback};
+use ndds_core::wire::{
+    DataSub, DataWriter, DropReason, FeedbackSub, HEADER_LEN, Header, MAGIC, MAX_DATAGRAM,
+    MessageKind, PROTOCOL_VERSION, SampleMeta,
+};
 use ndds_docs::markdown::{Doc, Table, plain};
 use ndds_docs::report::Problems;
 
@@ -136,6 +142,142 @@ fn check_kind_headings(doc: &Doc, problems: &mut Problems) {
             );
         }
     }
+}
+
+/// The name of every `Data` submessage kind and the byte `DataWriter` writes for it.
+fn data_sub_kinds() -> Vec<(&'static str, u8)> {
+    let subs = [
+        DataSub::Sample(Sample {
+            meta: SampleMeta::default(),
+            payload: &[],
+        }),
+        DataSub::Fragment(Fragment {
+            meta: SampleMeta::default(),
+            total_len: 0,
+            frag_size: 0,
+            index: 0,
+            chunk: &[],
+        }),
+        DataSub::Heartbeat(Heartbeat { first: 0, last: 0 }),
+        DataSub::Gap(Gap { from: 0, to: 0 }),
+    ];
+    let to = Addressing {
+        reader_participant: 0,
+        writer: 0,
+        readers: &[],
+    };
+    subs.iter()
+        .map(|sub| {
+            // Exhaustive: a new submessage kind fails to compile here until it is added to the
+            // list above (and so to the document).
+            let (name, kind) = match sub {
+                DataSub::Sample(_) => ("Sample", DataSubKind::Sample),
+                DataSub::Fragment(_) => ("Fragment", DataSubKind::Fragment),
+                DataSub::Heartbeat(_) => ("Heartbeat", DataSubKind::Heartbeat),
+                DataSub::Gap(_) => ("Gap", DataSubKind::Gap),
+            };
+            let mut writer = DataWriter::new();
+            writer.begin(0, 0, &to);
+            let start = writer.bytes().len();
+            assert!(writer.push(sub, MAX_DATAGRAM));
+            assert_eq!(writer.bytes()[start], kind as u8, "DataSubKind::{name}");
+            (name, writer.bytes()[start])
+        })
+        .collect()
+}
+
+/// The name of every `Feedback` submessage kind and the byte `encode_feedback` writes for it.
+fn feedback_sub_kinds() -> Vec<(&'static str, u8)> {
+    let subs = [
+        FeedbackSub::AckNack(AckNack {
+            reader: 0,
+            writer: 0,
+            acked: 0,
+            missing: &[],
+        }),
+        FeedbackSub::NackFrag(NackFrag {
+            reader: 0,
+            writer: 0,
+            seq: 0,
+            base: 0,
+            missing: &[],
+        }),
+    ];
+    subs.iter()
+        .map(|sub| {
+            let (name, kind) = match sub {
+                FeedbackSub::AckNack(_) => ("AckNack", FeedbackSubKind::AckNack),
+                FeedbackSub::NackFrag(_) => ("NackFrag", FeedbackSubKind::NackFrag),
+            };
+            let mut out = Vec::new();
+            encode_feedback(0, 0, 0, std::slice::from_ref(sub), &mut out).expect("encodes");
+            // Header, then a one-byte participant varint, then the kind byte.
+            let byte = out[HEADER_LEN + 1];
+            assert_eq!(byte, kind as u8, "FeedbackSubKind::{name}");
+            (name, byte)
+        })
+        .collect()
+}
+
+/// The `| sub_kind | name |` table under the heading that names `datagram`.
+fn check_sub_kind_table(doc: &Doc, problems: &mut Problems, datagram: &str, kinds: &[(&str, u8)]) {
+    let tables: Vec<Table> = doc
+        .tables()
+        .into_iter()
+        .filter(|t| t.starts_with(&["sub_kind", "name"]))
+        .filter(|t| {
+            t.heading
+                .as_ref()
+                .is_some_and(|h| plain(&h.text).starts_with(&format!("{datagram} ")))
+        })
+        .collect();
+    let [table] = &tables[..] else {
+        problems.at(
+            doc,
+            tables.get(1).map_or(1, |t| t.line),
+            format!(
+                "there must be one `| sub_kind | name | meaning |` table under a heading                  `#### {datagram} submessages`; found {}",
+                tables.len()
+            ),
+        );
+        return;
+    };
+    for (name, byte) in kinds {
+        match table.rows.iter().find(|r| r.plain(1) == *name) {
+            Some(row) if row.plain(0) == byte.to_string() => {}
+            Some(row) => problems.at(
+                doc,
+                row.line,
+                format!("`{name}` is sub_kind {byte} of `{datagram}` in the code"),
+            ),
+            None => problems.at(
+                doc,
+                table.rows.last().map_or(table.line, |r| r.line),
+                format!("add the row `| {byte} | `{name}` | … |` for `{datagram}`"),
+            ),
+        }
+    }
+    for row in &table.rows {
+        if kinds.iter().all(|(name, _)| *name != row.plain(1)) {
+            problems.at(
+                doc,
+                row.line,
+                format!(
+                    "`{}` is not a submessage of `{datagram}` in the code; remove the row",
+                    row.plain(1)
+                ),
+            );
+        }
+    }
+}
+
+#[test]
+fn submessage_kind_tables_list_every_kind_with_its_byte() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    check_sub_kind_table(&doc, &mut problems, "Data", &data_sub_kinds());
+    check_sub_kind_table(&doc, &mut problems, "Feedback", &feedback_sub_kinds());
+    problems.finish("submessage kinds");
 }
 
 #[test]

@@ -16,6 +16,8 @@ use ndds_core::types::TypeDescription;
 use ndds_core::types::layout::{
     MAX_ARRAY_LEN, MAX_EXPANDED_FORMATS, MAX_FORMAT_DEPTH, MAX_FORMATS,
 };
+use ndds_core::wire::data::{FLAG_RELIABLE, FRAGMENT_OVERHEAD, MAX_READERS, SAMPLE_OVERHEAD};
+use ndds_core::wire::feedback::MAX_BITMAP_BYTES;
 use ndds_core::wire::{
     self, EndpointInfo, EndpointQos, Guid, HEADER_LEN, Locator, MAGIC, MAX_DATAGRAM, Message,
     PROTOCOL_VERSION, ProducerQosWire,
@@ -34,6 +36,11 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("PROTOCOL_VERSION", PROTOCOL_VERSION.to_string()),
         ("HEADER_LEN", HEADER_LEN.to_string()),
         ("MAX_DATAGRAM", MAX_DATAGRAM.to_string()),
+        ("MAX_READERS", MAX_READERS.to_string()),
+        ("FLAG_RELIABLE", FLAG_RELIABLE.to_string()),
+        ("SAMPLE_OVERHEAD", SAMPLE_OVERHEAD.to_string()),
+        ("FRAGMENT_OVERHEAD", FRAGMENT_OVERHEAD.to_string()),
+        ("MAX_BITMAP_BYTES", MAX_BITMAP_BYTES.to_string()),
         ("MAX_DOMAIN", domain::MAX_DOMAIN.to_string()),
         ("BASE_PORT", domain::BASE_PORT.to_string()),
         ("UNICAST_BASE_PORT", domain::UNICAST_BASE_PORT.to_string()),
@@ -263,23 +270,12 @@ fn engine_limits() -> EngineLimits {
 }
 
 /// Decodes every datagram the engine wants to send.
-fn drain(engine: &mut Engine) -> Vec<Message<'static>> {
+fn drain(engine: &mut Engine) -> Vec<Message> {
     let mut out = Vec::new();
     while let Some(transmit) = engine.poll_transmit() {
         let (_, message) =
             wire::decode(&transmit.payload).expect("the engine sends valid datagrams");
-        out.push(owned(message));
+        out.push(message);
     }
     out
-}
-
-fn owned(message: Message<'_>) -> Message<'static> {
-    match message {
-        Message::Solicit(m) => Message::Solicit(m),
-        Message::Announce(m) => Message::Announce(m),
-        Message::Withdraw(m) => Message::Withdraw(m),
-        Message::Bye(m) => Message::Bye(m),
-        // The probe never produces data; keep only its kind.
-        Message::Data(_) => Message::Bye(wire::Bye),
-    }
 }
