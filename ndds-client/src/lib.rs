@@ -35,12 +35,12 @@
 #![warn(missing_docs)]
 
 pub mod consumer;
-mod data;
 pub mod embedded;
 pub mod error;
 mod link;
 pub mod participant;
 mod peers;
+mod plane;
 pub mod producer;
 pub mod qos;
 mod router;
@@ -50,9 +50,9 @@ mod slot;
 mod sync;
 
 pub use consumer::{
-    CallbackConsumer, Consumer, ConsumerStats, EventStream, RawConsumer, SampleStream,
+    CallbackConsumer, Consumer, ConsumerStats, DirectConsumer, EventStream, RawConsumer,
+    SampleStream,
 };
-pub use data::ParticipantStats;
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
 pub use link::RECONNECT_GRACE;
@@ -61,8 +61,9 @@ pub use ndds_core::types::TypeDescription;
 pub use ndds_core::wire::{EndpointInfo, Guid};
 pub use ndds_daemon::DaemonConfig;
 pub use participant::{EmbeddedPolicy, Participant, ParticipantBuilder};
+pub use plane::{DEFAULT_MAX_SAMPLE, ParticipantStats};
 pub use producer::{Producer, RawProducer};
-pub use qos::{ConsumerMode, ConsumerQos, ProducerQos};
+pub use qos::{Batching, ConsumerMode, ConsumerQos, ProducerQos, Reliability};
 pub use sample::{
     Event, Notification, PollStatus, Polled, RawEvent, RawSample, Sample, SampleInfo, SampleStatus,
 };

@@ -21,10 +21,10 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
-use crate::data::{DataPlane, ParticipantStats};
 use crate::embedded;
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::link;
+use crate::plane::{DataPlane, Limits, ParticipantStats};
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
 use crate::router::{Endpoint, Router};
@@ -195,12 +195,6 @@ pub(crate) struct Inner {
     threads: Mutex<Vec<JoinHandle<()>>>,
 }
 
-impl Inner {
-    pub(crate) fn domain(&self) -> u16 {
-        self.welcome.domain
-    }
-}
-
 impl Drop for Inner {
     fn drop(&mut self) {
         self.session.shutdown();
@@ -220,9 +214,10 @@ pub(crate) struct EndpointHandle {
 
 impl Drop for EndpointHandle {
     fn drop(&mut self) {
-        let removed = self.inner.router.remove(self.entity);
-        if matches!(removed, Some(Endpoint::Consumer(_))) {
-            self.inner.data.remove_consumer(self.entity);
+        match self.inner.router.remove(self.entity) {
+            Some(Endpoint::Consumer(_)) => self.inner.data.remove_consumer(self.entity),
+            Some(Endpoint::Producer(_)) => self.inner.data.remove_writer(self.entity),
+            None => {}
         }
         let _ = self.inner.session.send(&ClientMessage::Undeclare {
             entity: self.entity,
@@ -278,14 +273,24 @@ impl Participant {
         };
         let (stream, welcome) = Self::reach_daemon(&settings, hello.clone())?;
         let interface = Ipv4Addr::from(welcome.interface);
-        let data = match DataPlane::open(interface, welcome.domain, participant) {
+        let data = match DataPlane::open(
+            interface,
+            welcome.domain,
+            participant,
+            Limits::for_interface(interface),
+        ) {
             Ok(data) => data,
             // A tool may reach a daemon's socket from where the daemon's interface does not
             // exist (another network namespace); listings need no data socket that works.
             Err(err) if settings.role == Role::Tool => {
                 tracing::debug!(%interface, %err, "tool without a usable data socket; using loopback");
-                DataPlane::open(Ipv4Addr::LOCALHOST, welcome.domain, participant)
-                    .map_err(|source| ConnectError::DataSocket { interface, source })?
+                DataPlane::open(
+                    Ipv4Addr::LOCALHOST,
+                    welcome.domain,
+                    participant,
+                    Limits::for_interface(Ipv4Addr::LOCALHOST),
+                )
+                .map_err(|source| ConnectError::DataSocket { interface, source })?
             }
             Err(source) => return Err(ConnectError::DataSocket { interface, source }),
         };
@@ -392,7 +397,9 @@ impl Participant {
     ) -> Result<RawProducer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
         let wire_qos = qos.to_wire();
-        let state = Arc::new(ProducerState::new(entity, topic, type_desc, wire_qos));
+        let net = self.inner.data.net.clone();
+        let state = Arc::new(ProducerState::new(entity, topic, type_desc, qos, net));
+        self.inner.data.add_writer(entity, state.clone());
         let handle = self.declare(
             entity,
             Endpoint::Producer(state.clone()),
@@ -419,7 +426,7 @@ impl Participant {
         qos: ConsumerQos,
     ) -> Result<RawConsumer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
-        let (slot, rx) = ConsumerSlot::new(qos, std::time::Instant::now());
+        let (slot, rx) = ConsumerSlot::new(entity, qos, std::time::Instant::now());
         let slot = Arc::new(slot);
         if let Some(at) = slot.timeout(std::time::Instant::now()) {
             self.inner.data.schedule(at);

@@ -3,14 +3,33 @@
 use std::time::Duration;
 
 use ndds_core::arbitration::Rules;
-use ndds_core::wire::{ConsumerQosWire, ProducerQosWire, Reliability};
+use ndds_core::wire::{ConsumerQosWire, ProducerQosWire};
 
-pub use ndds_core::wire::ConsumerMode;
+pub use ndds_core::wire::{ConsumerMode, Reliability};
 
 /// Persistence of a producer that does not set one.
 pub const DEFAULT_PERSISTENCE: Duration = Duration::from_secs(1);
+/// How long a reliable producer's `write` waits for a full window to open, by default.
+pub const DEFAULT_WRITE_TIMEOUT: Duration = Duration::from_secs(1);
 
-/// A producer's quality of service. `Default`: strength 0, persistence 1 s, best effort.
+/// Whether a producer packs small samples written close together into shared datagrams.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Batching {
+    /// Every sample leaves at once in its own datagram (lowest latency).
+    #[default]
+    Off,
+    /// Samples wait up to `max_delay` (or until `max_bytes` are pending, or
+    /// [`crate::RawProducer::flush`]) and leave together (highest throughput).
+    On {
+        /// Longest a sample may wait.
+        max_delay: Duration,
+        /// Largest batch datagram, in bytes (capped by the path's datagram size).
+        max_bytes: usize,
+    },
+}
+
+/// A producer's quality of service. `Default`: strength 0, persistence 1 s, best effort, no
+/// batching, write timeout 1 s.
 ///
 /// Consumers arbitrate per sample: a sample of another producer is accepted when that
 /// producer's strength is at least the strength of the producer in charge, or when the last
@@ -24,6 +43,15 @@ pub struct ProducerQos {
     pub strength: i32,
     /// How long the producer's last sample stays authoritative at a consumer.
     pub persistence: Duration,
+    /// Best effort, or reliable with a history of `depth` samples for repair. The depth is
+    /// also the flow-control window: a reliable producer never has more than `depth` samples
+    /// unacknowledged by its slowest reliable consumer.
+    pub reliability: Reliability,
+    /// Packing of small samples into shared datagrams.
+    pub batching: Batching,
+    /// How long `write` of a reliable producer waits for its window to open before it fails
+    /// with [`crate::WriteError::WouldBlock`].
+    pub write_timeout: Duration,
 }
 
 impl Default for ProducerQos {
@@ -31,6 +59,9 @@ impl Default for ProducerQos {
         ProducerQos {
             strength: 0,
             persistence: DEFAULT_PERSISTENCE,
+            reliability: Reliability::BestEffort,
+            batching: Batching::Off,
+            write_timeout: DEFAULT_WRITE_TIMEOUT,
         }
     }
 }
@@ -40,7 +71,7 @@ impl ProducerQos {
         ProducerQosWire {
             strength: self.strength,
             persistence_us: duration_us(self.persistence),
-            reliability: Reliability::BestEffort,
+            reliability: self.reliability,
         }
     }
 }
@@ -60,6 +91,11 @@ pub struct ConsumerQos {
     /// Notify "no new data" when no sample was accepted for this long, and again each deadline
     /// while silent ("never received" before the first sample). `None`: no deadline.
     pub deadline: Option<Duration>,
+    /// Requested reliability: a reliable consumer matches only reliable producers, receives
+    /// their samples in order without loss (or a "samples lost" notification when a producer's
+    /// history could not repair a gap), and slows its producers down instead of dropping when
+    /// it falls behind (`depth` bounds its reordering buffer per producer).
+    pub reliability: Reliability,
 }
 
 impl Default for ConsumerQos {
@@ -69,6 +105,7 @@ impl Default for ConsumerQos {
             depth: 64,
             min_separation: Duration::ZERO,
             deadline: None,
+            reliability: Reliability::BestEffort,
         }
     }
 }
@@ -79,7 +116,7 @@ impl ConsumerQos {
             min_separation_us: duration_us(self.min_separation),
             deadline_us: self.deadline.map_or(0, duration_us),
             mode: self.mode,
-            reliability: Reliability::BestEffort,
+            reliability: self.reliability,
         }
     }
 

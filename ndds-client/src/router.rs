@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, RwLock};
 
 use ndds_core::arbitration::Notification;
+use ndds_core::discovery::Incompatibility;
 use ndds_core::ipc::{DaemonMessage, EndpointDecl};
 
 use crate::consumer::ConsumerState;
@@ -119,7 +120,14 @@ impl Router {
             }
             DaemonMessage::Incompatible { remote, .. } => {
                 if let Endpoint::Consumer(state) = &endpoint {
+                    // Same type, so the daemon found the reliability wanting.
+                    let reason = if remote.fingerprint == peers.fingerprint {
+                        Incompatibility::Reliability
+                    } else {
+                        Incompatibility::Type
+                    };
                     state.slot.notify(Notification::Incompatible {
+                        reason,
                         writer: remote.guid,
                         type_name: remote.type_desc.name.clone(),
                         fingerprint: remote.fingerprint,

@@ -1,7 +1,8 @@
 //! What consumers receive: samples with their status, and notifications.
 
-use std::sync::Arc;
 use std::time::SystemTime;
+
+use bytes::Bytes;
 
 use ndds_core::wire::Guid;
 
@@ -38,7 +39,7 @@ pub struct Sample<T> {
 pub struct RawSample {
     /// postcard encoding of the value; shared by every consumer of this process that received
     /// the same datagram.
-    pub payload: Arc<[u8]>,
+    pub payload: Bytes,
     /// Its metadata.
     pub info: SampleInfo,
 }

@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use ndds_core::arbitration::{Arbiter, ArbiterStats, Incoming, Notification, Output};
 use ndds_core::wire::Guid;
+use ndds_core::wire::data::{Gap, Heartbeat};
 
+use crate::plane::{Net, Origin};
 use crate::qos::{ConsumerMode, ConsumerQos};
 use crate::sample::{PollStatus, RawEvent, RawSample};
 use crate::sync::lock;
@@ -55,11 +57,28 @@ enum Sink {
     Latest(Mutex<Latest>),
 }
 
+/// A callback run on the participant's receive or timer thread.
+pub(crate) type Direct = Box<dyn FnMut(RawEvent) + Send>;
+
+/// A [`Direct`] callback (opaque to `Debug`).
+pub(crate) struct DirectBox(Direct);
+
+impl std::fmt::Debug for DirectBox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("DirectBox")
+    }
+}
+
 /// A consumer's receiving end.
 #[derive(Debug)]
 pub(crate) struct ConsumerSlot {
+    /// The consumer's entity number.
+    pub(crate) entity: u32,
     arbiter: Mutex<Arbiter<RawSample>>,
     sink: Sink,
+    /// When set, events go to this callback instead of the queue.
+    direct: Mutex<Option<DirectBox>>,
+    has_direct: std::sync::atomic::AtomicBool,
     /// Samples that arrived for this consumer (before arbitration).
     pub(crate) arrived: AtomicU64,
     /// Events dropped because the application did not keep up.
@@ -69,7 +88,11 @@ pub(crate) struct ConsumerSlot {
 impl ConsumerSlot {
     /// A slot for a consumer created at `now`; in immediate mode, also the application's
     /// receiver.
-    pub(crate) fn new(qos: ConsumerQos, now: Instant) -> (Self, Option<flume::Receiver<RawEvent>>) {
+    pub(crate) fn new(
+        entity: u32,
+        qos: ConsumerQos,
+        now: Instant,
+    ) -> (Self, Option<flume::Receiver<RawEvent>>) {
         let (sink, rx) = match qos.mode {
             ConsumerMode::Immediate => {
                 let (tx, rx) = flume::bounded(qos.depth.max(1));
@@ -79,8 +102,11 @@ impl ConsumerSlot {
             ConsumerMode::Polled => (Sink::Latest(Mutex::default()), None),
         };
         let slot = ConsumerSlot {
+            entity,
             arbiter: Mutex::new(Arbiter::new(qos.rules(), now)),
             sink,
+            direct: Mutex::new(None),
+            has_direct: std::sync::atomic::AtomicBool::new(false),
             arrived: AtomicU64::new(0),
             overflow: AtomicU64::new(0),
         };
@@ -88,12 +114,45 @@ impl ConsumerSlot {
     }
 
     /// Offers an arriving sample; returns the arbiter's next timer.
-    pub(crate) fn offer(&self, now: Instant, meta: Incoming, sample: RawSample) -> Option<Instant> {
+    pub(crate) fn offer(
+        &self,
+        now: Instant,
+        origin: &Origin,
+        meta: Incoming,
+        flags: u8,
+        sample: RawSample,
+        net: &Net,
+    ) -> Option<Instant> {
+        let _ = (origin, flags, net);
         // Counted first, so a reader woken by the delivery sees the count.
         self.arrived.fetch_add(1, Ordering::Relaxed);
         let mut arbiter = lock(&self.arbiter);
         arbiter.handle_sample(now, meta, sample);
         self.drain(&mut arbiter)
+    }
+
+    /// A reliable writer's heartbeat.
+    pub(crate) fn on_heartbeat(
+        &self,
+        now: Instant,
+        origin: &Origin,
+        heartbeat: Heartbeat,
+        net: &Net,
+    ) -> Option<Instant> {
+        let _ = (now, origin, heartbeat, net);
+        None
+    }
+
+    /// A reliable writer's gap.
+    pub(crate) fn on_gap(
+        &self,
+        now: Instant,
+        origin: &Origin,
+        gap: Gap,
+        net: &Net,
+    ) -> Option<Instant> {
+        let _ = (now, origin, gap, net);
+        None
     }
 
     /// Runs the arbiter's due timers; returns its next timer.
@@ -143,7 +202,19 @@ impl ConsumerSlot {
         arbiter.poll_timeout()
     }
 
+    /// Sends every later event to `callback`, on the thread that produces it.
+    pub(crate) fn set_direct(&self, callback: Direct) {
+        *lock(&self.direct) = Some(DirectBox(callback));
+        self.has_direct.store(true, Ordering::Release);
+    }
+
     fn push(&self, event: RawEvent) {
+        if self.has_direct.load(Ordering::Acquire)
+            && let Some(DirectBox(callback)) = lock(&self.direct).as_mut()
+        {
+            callback(event);
+            return;
+        }
         match &self.sink {
             Sink::Queue { tx, oldest } => {
                 let mut event = event;

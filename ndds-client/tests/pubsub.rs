@@ -289,15 +289,16 @@ fn participants_share_one_embedded_daemon_which_lives_until_stopped() {
 }
 
 #[test]
-fn a_sample_too_large_for_a_datagram_is_refused_with_or_without_consumers() {
+fn large_samples_cross_in_fragments_and_oversized_ones_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
     let p = participant(&config);
     let producer = p
         .producer::<Vec<u8>>("big", ProducerQos::default())
         .unwrap();
-    let big = vec![7u8; 70_000];
-    let err = producer.write(&big).unwrap_err();
+    // Over the limit: refused whether or not a consumer is matched.
+    let oversized = vec![7u8; ndds_client::DEFAULT_MAX_SAMPLE + 1];
+    let err = producer.write(&oversized).unwrap_err();
     assert!(
         matches!(err, ndds_client::WriteError::TooLarge { .. }),
         "{err}"
@@ -306,12 +307,10 @@ fn a_sample_too_large_for_a_datagram_is_refused_with_or_without_consumers() {
         .consumer::<Vec<u8>>("big", ConsumerQos::default())
         .unwrap();
     assert!(producer.wait_for_consumers(1, WAIT));
-    assert!(matches!(
-        producer.write(&big),
-        Err(ndds_client::WriteError::TooLarge { .. })
-    ));
-    // Nothing half-sent: the next sample that fits is the first the consumer sees.
+    // Larger than one datagram: cut into fragments and put back together.
+    let big: Vec<u8> = (0..200_000u32).map(|i| (i % 251) as u8).collect();
+    producer.write(&big).unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, big);
     producer.write(&vec![1, 2, 3]).unwrap();
-    let sample = consumer.recv_timeout(WAIT).unwrap();
-    assert_eq!(sample.value, vec![1, 2, 3]);
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, vec![1, 2, 3]);
 }

@@ -55,6 +55,7 @@ fn strong_and_weak(p: &Participant, persistence: Duration) -> [ndds_client::Prod
             ProducerQos {
                 strength,
                 persistence,
+                ..ProducerQos::default()
             },
         )
         .unwrap()

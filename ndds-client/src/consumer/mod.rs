@@ -16,7 +16,7 @@ mod raw;
 mod stream;
 mod typed;
 
-pub use callback::CallbackConsumer;
+pub use callback::{CallbackConsumer, DirectConsumer};
 pub(crate) use raw::ConsumerState;
 pub use raw::{ConsumerStats, RawConsumer};
 pub use stream::{EventStream, SampleStream};

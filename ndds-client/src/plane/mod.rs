@@ -1,28 +1,56 @@
 //! The data plane of one participant: one UDP socket on the daemon's interface, through which
-//! producers send samples directly to consuming processes; a receive thread that offers each
-//! arriving sample to the consumers it is addressed to; and a timer thread that runs the
-//! consumers' deadlines and minimum-separation windows.
+//! producers send samples directly to consuming processes and consumers send feedback to
+//! reliable producers; a receive thread that hands each arriving datagram to the consumers
+//! and producers it is for; and a timer thread that runs the endpoints' timers (deadlines,
+//! separation windows, batch flushes, heartbeats, repair requests).
+
+mod net;
+mod receive;
 
 use std::collections::HashMap;
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, RwLock};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
-use ndds_core::arbitration::{Incoming, SampleStatus};
-use ndds_core::wire::{self, Data, DropReason, Guid, Locator, MAX_DATAGRAM, Message};
+use ndds_core::wire::{DropReason, FeedbackSub, Guid, Locator};
 
-use crate::sample::{RawSample, SampleInfo};
+pub(crate) use net::Net;
+pub use net::{DEFAULT_MAX_SAMPLE, Limits};
+pub(crate) use receive::Origin;
+
 use crate::slot::ConsumerSlot;
 use crate::sync::{lock, read, write};
 
-/// How often the receive thread checks for shutdown when no datagram arrives.
+/// How often the threads check for shutdown when nothing happens.
 const POLL_INTERVAL: Duration = Duration::from_millis(250);
 /// Socket buffer sizes requested.
-const SOCKET_BUFFER: usize = 4 * 1024 * 1024;
+const SOCKET_BUFFER: usize = 8 * 1024 * 1024;
+/// Receive buffer per datagram: one byte more than the largest datagram, so an oversized
+/// one is seen as such.
+const RECV_SIZE: usize = ndds_core::wire::MAX_DATAGRAM + 1;
 
-/// Counters of the receive path.
+/// An endpoint with timers, run by the participant's timer thread.
+pub(crate) trait Timed: Send + Sync + std::fmt::Debug {
+    /// Runs what is due at `now`; returns when to run next.
+    fn timeout(&self, now: Instant) -> Option<Instant>;
+}
+
+/// A producer, as the receive thread sees it: it takes feedback from reliable consumers.
+pub(crate) trait WriterSide: Timed {
+    /// Acknowledgements and repair requests from reader `reader` (sent from `from`); returns
+    /// when the writer's timers must run next, if that changed.
+    fn on_feedback(
+        &self,
+        now: Instant,
+        reader: Guid,
+        from: SocketAddrV4,
+        sub: &FeedbackSub<'_>,
+    ) -> Option<Instant>;
+}
+
+/// Counters of the data socket.
 #[derive(Debug, Default)]
 pub(crate) struct DataStats {
     pub(crate) received: AtomicU64,
@@ -32,6 +60,8 @@ pub(crate) struct DataStats {
     pub(crate) misaddressed: AtomicU64,
     /// Addressed to a consumer that no longer exists.
     pub(crate) unknown_reader: AtomicU64,
+    /// Fragments refused by reassembly (inconsistent, too large, over budget).
+    pub(crate) fragments_refused: AtomicU64,
 }
 
 /// A snapshot of a participant's data-socket counters.
@@ -39,12 +69,14 @@ pub(crate) struct DataStats {
 pub struct ParticipantStats {
     /// Datagrams received on the data socket.
     pub received: u64,
-    /// Samples handed to consumer queues.
+    /// Samples handed to consumers (before arbitration).
     pub delivered: u64,
     /// Datagrams addressed to another participant.
     pub misaddressed: u64,
     /// Samples addressed to a consumer that no longer exists.
     pub unknown_reader: u64,
+    /// Fragments of large samples refused by reassembly.
+    pub fragments_refused: u64,
     /// Dropped datagrams by reason name (see `DropReason::name`).
     pub dropped: Vec<(&'static str, u64)>,
 }
@@ -59,24 +91,30 @@ impl ParticipantStats {
     }
 }
 
-/// The participant's data socket and consumer table.
+/// The participant's data socket, endpoint tables and timer.
 #[derive(Debug)]
 pub(crate) struct DataPlane {
-    pub(crate) socket: UdpSocket,
+    socket: UdpSocket,
+    pub(crate) net: Arc<Net>,
     pub(crate) locator: Locator,
-    domain: u16,
-    participant: u64,
     consumers: RwLock<HashMap<u32, Arc<ConsumerSlot>>>,
+    writers: RwLock<HashMap<u32, Arc<dyn WriterSide>>>,
+    reassembly: receive::Reassembly,
     pub(crate) stats: DataStats,
     closed: AtomicBool,
-    /// When the timer thread must next run the consumers' timers.
+    /// When the timer thread must next run the endpoints' timers.
     timer: Mutex<Option<Instant>>,
     timer_changed: Condvar,
 }
 
 impl DataPlane {
     /// Binds the data socket to `interface` on any free port.
-    pub(crate) fn open(interface: Ipv4Addr, domain: u16, participant: u64) -> io::Result<Self> {
+    pub(crate) fn open(
+        interface: Ipv4Addr,
+        domain: u16,
+        participant: u64,
+        limits: Limits,
+    ) -> io::Result<Self> {
         let socket = UdpSocket::bind(SocketAddrV4::new(interface, 0))?;
         socket.set_read_timeout(Some(POLL_INTERVAL))?;
         set_buffers(&socket);
@@ -84,12 +122,14 @@ impl DataPlane {
             SocketAddr::V4(addr) => Locator::from(addr),
             SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
         };
+        let net = Net::new(socket.try_clone()?, domain, participant, limits);
         Ok(DataPlane {
             socket,
+            net: Arc::new(net),
             locator,
-            domain,
-            participant,
             consumers: RwLock::new(HashMap::new()),
+            writers: RwLock::new(HashMap::new()),
+            reassembly: receive::Reassembly::new(limits),
             stats: DataStats::default(),
             closed: AtomicBool::new(false),
             timer: Mutex::new(None),
@@ -104,6 +144,7 @@ impl DataPlane {
             delivered: load(&self.stats.delivered),
             misaddressed: load(&self.stats.misaddressed),
             unknown_reader: load(&self.stats.unknown_reader),
+            fragments_refused: load(&self.stats.fragments_refused),
             dropped: DropReason::ALL
                 .iter()
                 .map(|reason| (reason.name(), load(&self.stats.dropped[reason.index()])))
@@ -119,12 +160,32 @@ impl DataPlane {
         write(&self.consumers).remove(&entity);
     }
 
+    pub(crate) fn add_writer(&self, entity: u32, writer: Arc<dyn WriterSide>) {
+        write(&self.writers).insert(entity, writer);
+    }
+
+    pub(crate) fn remove_writer(&self, entity: u32) {
+        write(&self.writers).remove(&entity);
+    }
+
     /// Receives until [`DataPlane::close`]. Runs on its own thread.
     pub(crate) fn run(&self) {
-        let mut buf = vec![0u8; MAX_DATAGRAM + 1];
+        let socket = socket2::SockRef::from(&self.socket);
+        let mut buf = bytes::BytesMut::new();
         while !self.closed.load(Ordering::Acquire) {
-            match self.socket.recv_from(&mut buf) {
-                Ok((len, _from)) => self.on_datagram(&buf[..len]),
+            // Reuses the allocation once every sample cut from it has been dropped.
+            buf.reserve(RECV_SIZE);
+            let received = socket.recv_from(&mut buf.spare_capacity_mut()[..RECV_SIZE]);
+            match received {
+                Ok((len, from)) => {
+                    // SAFETY: `recv_from` initialised the first `len` bytes of the spare
+                    // capacity it was given.
+                    unsafe { buf.set_len(len) };
+                    let datagram = buf.split_to(len).freeze();
+                    if let Some(from) = from.as_socket_ipv4() {
+                        self.on_datagram(datagram, from);
+                    }
+                }
                 Err(err)
                     if matches!(
                         err.kind(),
@@ -140,7 +201,7 @@ impl DataPlane {
         }
     }
 
-    /// Runs the consumers' timers until [`DataPlane::close`]. Runs on its own thread.
+    /// Runs the endpoints' timers until [`DataPlane::close`]. Runs on its own thread.
     pub(crate) fn run_timers(&self) {
         let mut next = lock(&self.timer);
         while !self.closed.load(Ordering::Acquire) {
@@ -149,10 +210,7 @@ impl DataPlane {
                 Some(at) if at <= now => {
                     *next = None;
                     drop(next);
-                    let earliest = read(&self.consumers)
-                        .values()
-                        .filter_map(|slot| slot.timeout(now))
-                        .min();
+                    let earliest = self.fire(now);
                     next = lock(&self.timer);
                     if let Some(at) = earliest
                         && next.is_none_or(|n| at < n)
@@ -173,6 +231,21 @@ impl DataPlane {
         }
     }
 
+    /// Runs every endpoint's due timers; returns the earliest next one.
+    fn fire(&self, now: Instant) -> Option<Instant> {
+        let consumers: Vec<Arc<ConsumerSlot>> = read(&self.consumers).values().cloned().collect();
+        let writers: Vec<Arc<dyn WriterSide>> = read(&self.writers).values().cloned().collect();
+        let mut earliest = self.reassembly.timeout(now, &self.net);
+        for at in consumers
+            .iter()
+            .filter_map(|slot| slot.timeout(now))
+            .chain(writers.iter().filter_map(|w| w.timeout(now)))
+        {
+            earliest = Some(earliest.map_or(at, |e: Instant| e.min(at)));
+        }
+        earliest
+    }
+
     /// Makes the timer thread run no later than `at`.
     pub(crate) fn schedule(&self, at: Instant) {
         let mut next = lock(&self.timer);
@@ -190,68 +263,8 @@ impl DataPlane {
         let _ = self.socket.send_to(&[], SocketAddrV4::from(self.locator));
     }
 
-    fn on_datagram(&self, bytes: &[u8]) {
-        if self.closed.load(Ordering::Acquire) {
-            return;
-        }
-        self.stats.received.fetch_add(1, Ordering::Relaxed);
-        match wire::decode_for_domain(bytes, self.domain) {
-            Ok((header, Message::Data(data))) => self.deliver(header.sender, data),
-            Ok(_) => self.count_drop(DropReason::Unexpected),
-            Err(reason) => self.count_drop(reason),
-        }
-    }
-
     fn count_drop(&self, reason: DropReason) {
         self.stats.dropped[reason.index()].fetch_add(1, Ordering::Relaxed);
-    }
-
-    fn deliver(&self, sender: u64, data: Data<'_>) {
-        if data.reader_participant != self.participant {
-            self.stats.misaddressed.fetch_add(1, Ordering::Relaxed);
-            return;
-        }
-        let writer = Guid {
-            participant: sender,
-            entity: data.writer,
-        };
-        let meta = Incoming {
-            writer,
-            seq: data.seq,
-            strength: data.strength,
-            persistence: Duration::from_micros(data.persistence_us),
-            source_ns: data.timestamp_ns,
-        };
-        let info = SampleInfo {
-            writer,
-            seq: data.seq,
-            source_timestamp: SystemTime::UNIX_EPOCH + Duration::from_nanos(data.timestamp_ns),
-            reception_timestamp: SystemTime::now(),
-            strength: data.strength,
-            status: SampleStatus::Fresh,
-        };
-        // Each reader once, however often the datagram names it; one copy of the payload for
-        // all of them.
-        let mut readers = data.readers.into_owned();
-        readers.sort_unstable();
-        readers.dedup();
-        let payload: Arc<[u8]> = Arc::from(data.payload);
-        let now = Instant::now();
-        let consumers = read(&self.consumers);
-        for reader in &readers {
-            let Some(slot) = consumers.get(reader) else {
-                self.stats.unknown_reader.fetch_add(1, Ordering::Relaxed);
-                continue;
-            };
-            self.stats.delivered.fetch_add(1, Ordering::Relaxed);
-            let sample = RawSample {
-                payload: payload.clone(),
-                info,
-            };
-            if let Some(at) = slot.offer(now, meta, sample) {
-                self.schedule(at);
-            }
-        }
     }
 }
 

@@ -1,0 +1,91 @@
+//! Sending on the participant's data socket, and the datagram size of the path.
+
+use std::io;
+use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
+
+use ndds_core::wire::MAX_DATAGRAM;
+
+/// IPv4 and UDP headers.
+const IP_UDP_HEADERS: usize = 28;
+/// Largest sample a participant accepts by default (fragmented over datagrams).
+pub const DEFAULT_MAX_SAMPLE: usize = 16 * 1024 * 1024;
+
+/// How large datagrams and samples may be.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest datagram sent: the interface's MTU minus the IP and UDP headers, so no
+    /// datagram is fragmented by IP (one lost IP fragment would lose it all); 65 507 bytes on
+    /// loopback.
+    pub max_datagram: usize,
+    /// Largest sample accepted, in encoded bytes.
+    pub max_sample: usize,
+}
+
+impl Limits {
+    /// The limits for a data socket bound to `interface`.
+    pub fn for_interface(interface: Ipv4Addr) -> Self {
+        Limits {
+            max_datagram: datagram_size(interface),
+            max_sample: DEFAULT_MAX_SAMPLE,
+        }
+    }
+}
+
+/// The datagram size that avoids IP fragmentation on the interface with this address.
+fn datagram_size(interface: Ipv4Addr) -> usize {
+    if interface.is_loopback() {
+        return MAX_DATAGRAM;
+    }
+    let mtu = if_addrs::get_if_addrs()
+        .ok()
+        .and_then(|all| {
+            all.into_iter()
+                .find(|i| i.ip() == std::net::IpAddr::V4(interface))
+        })
+        .and_then(|i| std::fs::read_to_string(format!("/sys/class/net/{}/mtu", i.name)).ok())
+        .and_then(|text| text.trim().parse::<usize>().ok())
+        .unwrap_or(1500);
+    mtu.saturating_sub(IP_UDP_HEADERS).clamp(576, MAX_DATAGRAM)
+}
+
+/// The sending side of the data socket, shared by the participant's producers and consumers.
+#[derive(Debug)]
+pub(crate) struct Net {
+    socket: UdpSocket,
+    pub(crate) domain: u16,
+    pub(crate) participant: u64,
+    pub(crate) limits: Limits,
+}
+
+impl Net {
+    pub(crate) fn new(socket: UdpSocket, domain: u16, participant: u64, limits: Limits) -> Self {
+        Net {
+            socket,
+            domain,
+            participant,
+            limits,
+        }
+    }
+
+    /// Sends one datagram; a full socket buffer is retried briefly rather than dropped.
+    pub(crate) fn send(&self, bytes: &[u8], to: SocketAddrV4) -> io::Result<()> {
+        let mut attempts = 0;
+        loop {
+            match self.socket.send_to(bytes, to) {
+                Ok(_) => return Ok(()),
+                Err(err)
+                    if err.kind() == io::ErrorKind::WouldBlock
+                        || err.raw_os_error() == Some(105) =>
+                {
+                    // ENOBUFS (105) or a full buffer: give the kernel a moment.
+                    attempts += 1;
+                    if attempts > 100 {
+                        return Err(err);
+                    }
+                    std::thread::yield_now();
+                }
+                Err(err) => return Err(err),
+            }
+        }
+    }
+}

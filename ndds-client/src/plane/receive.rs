@@ -1,0 +1,334 @@
+//! What the receive thread does with a datagram: `Data` goes to the consumers it addresses
+//! (whole samples, pieces of large samples through reassembly, reliable-stream control);
+//! `Feedback` goes to the producer it addresses.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddrV4;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use bytes::Bytes;
+use ndds_core::arbitration::{Incoming, SampleStatus};
+use ndds_core::fragment::{FragmentResult, Mode, Piece, Reassembler, ReassemblyConfig};
+use ndds_core::wire::data::{FLAG_RELIABLE, Fragment};
+use ndds_core::wire::feedback::{NackFrag, encode_feedback};
+use ndds_core::wire::{
+    self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MessageKind,
+    SampleMeta,
+};
+use smallvec::SmallVec;
+
+use super::{DataPlane, Limits, Net};
+use crate::sample::{RawSample, SampleInfo};
+use crate::slot::ConsumerSlot;
+use crate::sync::{lock, read};
+
+/// The consumers one datagram addresses.
+type Slots = SmallVec<[Arc<ConsumerSlot>; 8]>;
+
+/// Where a sample came from and what it says about itself, for the consumers it reaches.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Origin {
+    /// The writer.
+    pub(crate) writer: Guid,
+    /// The writer's data socket (feedback goes there).
+    pub(crate) from: SocketAddrV4,
+}
+
+impl Origin {
+    /// The arbiter's view and the application's view of a sample.
+    pub(crate) fn describe(&self, meta: &SampleMeta) -> (Incoming, SampleInfo) {
+        let incoming = Incoming {
+            writer: self.writer,
+            seq: meta.seq,
+            strength: meta.strength,
+            persistence: Duration::from_micros(meta.persistence_us),
+            source_ns: meta.timestamp_ns,
+        };
+        let info = SampleInfo {
+            writer: self.writer,
+            seq: meta.seq,
+            source_timestamp: SystemTime::UNIX_EPOCH + Duration::from_nanos(meta.timestamp_ns),
+            reception_timestamp: SystemTime::now(),
+            strength: meta.strength,
+            status: SampleStatus::Fresh,
+        };
+        (incoming, info)
+    }
+}
+
+/// How long after the last piece of an incomplete sample its missing pieces are requested,
+/// and how often again while they stay missing.
+const NACK_FRAG_DELAY: Duration = Duration::from_millis(5);
+const NACK_FRAG_RETRY: Duration = Duration::from_millis(20);
+
+/// A partial sample whose missing pieces will be requested.
+#[derive(Clone, Copy, Debug)]
+struct Wanted {
+    from: SocketAddrV4,
+    reader: u32,
+    due: Instant,
+}
+
+#[derive(Debug)]
+struct ReassemblyState {
+    reassembler: Reassembler<Guid>,
+    wanted: BTreeMap<(Guid, u64), Wanted>,
+    feedback: Vec<u8>,
+}
+
+/// Reassembly of large samples for all writers of the participant, and the requests for
+/// missing pieces.
+#[derive(Debug)]
+pub(crate) struct Reassembly {
+    state: Mutex<ReassemblyState>,
+}
+
+impl Reassembly {
+    pub(crate) fn new(limits: Limits) -> Self {
+        let config = ReassemblyConfig {
+            max_sample_bytes: limits.max_sample,
+            ..ReassemblyConfig::default()
+        };
+        Reassembly {
+            state: Mutex::new(ReassemblyState {
+                reassembler: Reassembler::new(config),
+                wanted: BTreeMap::new(),
+                feedback: Vec::new(),
+            }),
+        }
+    }
+
+    /// Takes one piece; returns the whole sample once it is complete.
+    fn piece(
+        &self,
+        now: Instant,
+        origin: &Origin,
+        reader: u32,
+        fragment: &Fragment<'_>,
+    ) -> Result<Option<Vec<u8>>, ()> {
+        let mode = if fragment.meta.flags & FLAG_RELIABLE != 0 {
+            Mode::reliable()
+        } else {
+            Mode::LastIsBest
+        };
+        let mut state = lock(&self.state);
+        let key = (origin.writer, fragment.meta.seq);
+        match state
+            .reassembler
+            .handle_fragment(now, origin.writer, mode, &Piece::from(fragment))
+        {
+            FragmentResult::Complete(bytes) => {
+                state.wanted.remove(&key);
+                Ok(Some(bytes))
+            }
+            FragmentResult::Pending => {
+                if mode == Mode::LastIsBest {
+                    // Only the newest sample of a best-effort writer is worth repairing.
+                    state.wanted.retain(|(w, _), _| *w != origin.writer);
+                }
+                state.wanted.insert(
+                    key,
+                    Wanted {
+                        from: origin.from,
+                        reader,
+                        due: now + NACK_FRAG_DELAY,
+                    },
+                );
+                Ok(None)
+            }
+            FragmentResult::Ignored(_) => Ok(None),
+            FragmentResult::Rejected(_) => Err(()),
+        }
+    }
+
+    /// Asks for the missing pieces of samples that stopped progressing; drops partial samples
+    /// that timed out. Returns when to run again.
+    pub(crate) fn timeout(&self, now: Instant, net: &Net) -> Option<Instant> {
+        let mut state = lock(&self.state);
+        let ReassemblyState {
+            reassembler,
+            wanted,
+            feedback,
+        } = &mut *state;
+        reassembler.handle_timeout(now);
+        wanted.retain(|(writer, seq), want| {
+            if want.due > now {
+                return true;
+            }
+            let Some(missing) = reassembler.missing(*writer, *seq) else {
+                return false;
+            };
+            let nack = FeedbackSub::NackFrag(NackFrag {
+                reader: want.reader,
+                writer: writer.entity,
+                seq: *seq,
+                base: missing.base,
+                missing: missing.bitmap(),
+            });
+            let encoded = encode_feedback(
+                net.domain,
+                net.participant,
+                writer.participant,
+                &[nack],
+                feedback,
+            );
+            if encoded.is_ok() {
+                let _ = net.send(feedback, want.from);
+            }
+            want.due = now + NACK_FRAG_RETRY;
+            true
+        });
+        let next = wanted.values().map(|w| w.due).min();
+        match (next, reassembler.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+}
+
+impl DataPlane {
+    pub(super) fn on_datagram(&self, datagram: Bytes, from: SocketAddrV4) {
+        if self.closed.load(Ordering::Acquire) {
+            return;
+        }
+        self.stats.received.fetch_add(1, Ordering::Relaxed);
+        let kind = match wire::Header::parse(&datagram) {
+            Ok((header, _)) => header.kind,
+            Err(reason) => return self.count_drop(reason),
+        };
+        let result = match kind {
+            MessageKind::Data => self.on_data(&datagram, from),
+            MessageKind::Feedback => self.on_feedback(&datagram, from),
+            _ => Err(DropReason::Unexpected),
+        };
+        if let Err(reason) = result {
+            self.count_drop(reason);
+        }
+    }
+
+    fn on_data(&self, datagram: &Bytes, from: SocketAddrV4) -> Result<(), DropReason> {
+        let parsed = DataDatagram::parse(datagram, self.net.domain)?;
+        if parsed.reader_participant != self.net.participant {
+            self.stats.misaddressed.fetch_add(1, Ordering::Relaxed);
+            return Ok(());
+        }
+        let origin = Origin {
+            writer: Guid {
+                participant: parsed.header.sender,
+                entity: parsed.writer,
+            },
+            from,
+        };
+        let slots = self.slots(&parsed.readers);
+        if slots.is_empty() {
+            return Ok(());
+        }
+        let now = Instant::now();
+        for sub in parsed.subs() {
+            match sub? {
+                DataSub::Sample(sample) => {
+                    let (meta, info) = origin.describe(&sample.meta);
+                    let raw = RawSample {
+                        payload: datagram.slice_ref(sample.payload),
+                        info,
+                    };
+                    self.offer(&slots, now, &origin, meta, sample.meta.flags, raw);
+                }
+                DataSub::Fragment(fragment) => {
+                    let reader = slots.first().map_or(0, |s| s.entity);
+                    match self.reassembly.piece(now, &origin, reader, &fragment) {
+                        Ok(Some(whole)) => {
+                            let (meta, info) = origin.describe(&fragment.meta);
+                            let raw = RawSample {
+                                payload: Bytes::from(whole),
+                                info,
+                            };
+                            self.offer(&slots, now, &origin, meta, fragment.meta.flags, raw);
+                        }
+                        Ok(None) => self.schedule(now + NACK_FRAG_DELAY),
+                        Err(()) => {
+                            self.stats.fragments_refused.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                }
+                DataSub::Heartbeat(heartbeat) => {
+                    for slot in &slots {
+                        if let Some(at) = slot.on_heartbeat(now, &origin, heartbeat, &self.net) {
+                            self.schedule(at);
+                        }
+                    }
+                }
+                DataSub::Gap(gap) => {
+                    for slot in &slots {
+                        if let Some(at) = slot.on_gap(now, &origin, gap, &self.net) {
+                            self.schedule(at);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Offers one sample to every addressed consumer.
+    pub(crate) fn offer(
+        &self,
+        slots: &Slots,
+        now: Instant,
+        origin: &Origin,
+        meta: Incoming,
+        flags: u8,
+        raw: RawSample,
+    ) {
+        for slot in slots {
+            self.stats.delivered.fetch_add(1, Ordering::Relaxed);
+            if let Some(at) = slot.offer(now, origin, meta, flags, raw.clone(), &self.net) {
+                self.schedule(at);
+            }
+        }
+    }
+
+    /// The consumers named by a datagram; unknown ones are counted.
+    fn slots(&self, readers: &[u32]) -> Slots {
+        let consumers = read(&self.consumers);
+        let mut slots = Slots::new();
+        for reader in readers {
+            match consumers.get(reader) {
+                Some(slot) => slots.push(slot.clone()),
+                None => {
+                    self.stats.unknown_reader.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+        slots
+    }
+
+    fn on_feedback(&self, datagram: &Bytes, from: SocketAddrV4) -> Result<(), DropReason> {
+        let parsed = FeedbackDatagram::parse(datagram, self.net.domain)?;
+        if parsed.writer_participant != self.net.participant {
+            self.stats.misaddressed.fetch_add(1, Ordering::Relaxed);
+            return Ok(());
+        }
+        let now = Instant::now();
+        for sub in parsed.subs() {
+            let sub = sub?;
+            let (reader, writer) = match &sub {
+                wire::FeedbackSub::AckNack(a) => (a.reader, a.writer),
+                wire::FeedbackSub::NackFrag(n) => (n.reader, n.writer),
+            };
+            let Some(side) = read(&self.writers).get(&writer).cloned() else {
+                continue;
+            };
+            let reader = Guid {
+                participant: parsed.header.sender,
+                entity: reader,
+            };
+            if let Some(at) = side.on_feedback(now, reader, from, &sub) {
+                self.schedule(at);
+            }
+        }
+        Ok(())
+    }
+}
