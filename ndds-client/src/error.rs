@@ -83,6 +83,18 @@ pub enum WriteError {
         /// The largest encoded sample that is accepted.
         max: usize,
     },
+    /// A reliable producer's flow-control window stayed closed for its whole write timeout:
+    /// its slowest reliable consumer has not taken (and acknowledged) the samples written
+    /// before. Nothing was sent; the sample can be written again later.
+    #[error(
+        "reliable write blocked for {waited:?}: the slowest reliable consumer has {unacknowledged} samples not yet acknowledged"
+    )]
+    WouldBlock {
+        /// How long the write waited.
+        waited: std::time::Duration,
+        /// Samples written but not acknowledged by every reliable consumer.
+        unacknowledged: usize,
+    },
     /// Sending failed for every destination; the last OS error.
     #[error("send failed: {0}")]
     Io(#[from] std::io::Error),

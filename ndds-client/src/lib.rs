@@ -56,6 +56,7 @@ pub use consumer::{
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
 pub use link::RECONNECT_GRACE;
+pub use ndds_core::discovery::Incompatibility;
 pub use ndds_core::ipc::Graph;
 pub use ndds_core::types::TypeDescription;
 pub use ndds_core::wire::{EndpointInfo, Guid};
@@ -63,7 +64,7 @@ pub use ndds_daemon::DaemonConfig;
 pub use participant::{EmbeddedPolicy, Participant, ParticipantBuilder};
 pub use plane::{DEFAULT_MAX_SAMPLE, ParticipantStats};
 pub use producer::{Producer, RawProducer};
-pub use qos::{Batching, ConsumerMode, ConsumerQos, ProducerQos, Reliability};
+pub use qos::{Batching, ConsumerMode, ConsumerQos, ProducerQos, Reliability, WhenFull};
 pub use sample::{
     Event, Notification, PollStatus, Polled, RawEvent, RawSample, Sample, SampleInfo, SampleStatus,
 };

@@ -212,6 +212,16 @@ pub(crate) struct EndpointHandle {
     entity: u32,
 }
 
+impl EndpointHandle {
+    /// The endpoint's global id.
+    pub(crate) fn guid(&self) -> ndds_core::wire::Guid {
+        ndds_core::wire::Guid {
+            participant: self.inner.participant,
+            entity: self.entity,
+        }
+    }
+}
+
 impl Drop for EndpointHandle {
     fn drop(&mut self) {
         match self.inner.router.remove(self.entity) {
@@ -398,7 +408,10 @@ impl Participant {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
         let wire_qos = qos.to_wire();
         let net = self.inner.data.net.clone();
-        let state = Arc::new(ProducerState::new(entity, topic, type_desc, qos, net));
+        let timer = self.inner.data.timer.clone();
+        let state = Arc::new(ProducerState::new(
+            entity, topic, type_desc, qos, net, timer,
+        ));
         self.inner.data.add_writer(entity, state.clone());
         let handle = self.declare(
             entity,
@@ -426,7 +439,13 @@ impl Participant {
         qos: ConsumerQos,
     ) -> Result<RawConsumer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
-        let (slot, rx) = ConsumerSlot::new(entity, qos, std::time::Instant::now());
+        let (slot, rx) = ConsumerSlot::new(
+            entity,
+            qos,
+            std::time::Instant::now(),
+            self.inner.data.net.clone(),
+            self.inner.data.timer.clone(),
+        );
         let slot = Arc::new(slot);
         if let Some(at) = slot.timeout(std::time::Instant::now()) {
             self.inner.data.schedule(at);

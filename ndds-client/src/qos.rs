@@ -28,8 +28,24 @@ pub enum Batching {
     },
 }
 
+/// What a reliable producer's `write` does while its flow-control window is full (its
+/// slowest reliable consumer has `depth` samples not yet taken and acknowledged).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum WhenFull {
+    /// Wait for the window to open, up to the write timeout, then fail with
+    /// [`crate::WriteError::WouldBlock`] without sending. Nothing is ever lost; a consumer
+    /// that stops taking samples stops its producers.
+    #[default]
+    Block,
+    /// Never wait: the oldest samples not yet acknowledged leave the history to make room,
+    /// and each reliable consumer that still needed them receives a
+    /// [`crate::Notification::SamplesLost`] in their place. For producers that must not be
+    /// held up (a control loop), at the price of gaps for consumers that fall behind.
+    DropOldest,
+}
+
 /// A producer's quality of service. `Default`: strength 0, persistence 1 s, best effort, no
-/// batching, write timeout 1 s.
+/// batching; when reliable, a full window blocks `write` for up to 1 s.
 ///
 /// Consumers arbitrate per sample: a sample of another producer is accepted when that
 /// producer's strength is at least the strength of the producer in charge, or when the last
@@ -49,8 +65,10 @@ pub struct ProducerQos {
     pub reliability: Reliability,
     /// Packing of small samples into shared datagrams.
     pub batching: Batching,
+    /// What `write` of a reliable producer does while its window is full.
+    pub when_full: WhenFull,
     /// How long `write` of a reliable producer waits for its window to open before it fails
-    /// with [`crate::WriteError::WouldBlock`].
+    /// with [`crate::WriteError::WouldBlock`] ([`WhenFull::Block`]).
     pub write_timeout: Duration,
 }
 
@@ -61,6 +79,7 @@ impl Default for ProducerQos {
             persistence: DEFAULT_PERSISTENCE,
             reliability: Reliability::BestEffort,
             batching: Batching::Off,
+            when_full: WhenFull::Block,
             write_timeout: DEFAULT_WRITE_TIMEOUT,
         }
     }

@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 use std::thread::JoinHandle;
+use std::time::Instant;
 
 use serde::de::DeserializeOwned;
 
@@ -35,10 +36,16 @@ impl<T: DeserializeOwned> Consumer<T> {
     {
         let rx = self.raw.queue()?.clone();
         let decoder = Arc::clone(&self.raw.state.decoder);
+        // Weak: the slot holds the queue's sender, which must go when the consumer does.
+        let slot = Arc::downgrade(&self.raw.state.slot);
         let thread = std::thread::Builder::new()
             .name(format!("ndds-cb-{}", decoder.topic))
             .spawn(move || {
                 while let Ok(event) = rx.recv() {
+                    // Room was made: a reliable stream waiting for it moves on.
+                    if let Some(slot) = slot.upgrade() {
+                        slot.resume(Instant::now());
+                    }
                     callback(decode_event(&decoder, event));
                 }
             })

@@ -99,6 +99,13 @@ impl RawConsumer {
     }
 
     pub(crate) fn next_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
+        let event = self.take_event(wait)?;
+        // Room was made: a reliable stream waiting for it moves on.
+        self.state.slot.resume(Instant::now());
+        Ok(event)
+    }
+
+    fn take_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
         let rx = self.queue()?;
         match wait {
             Wait::Block => rx.recv().map_err(|_| RecvError::Closed),
@@ -146,6 +153,7 @@ impl RawConsumer {
         let latest = self
             .state
             .slot
+            .sink
             .latest()
             .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
         Ok(lock(latest).take_view())
@@ -156,6 +164,7 @@ impl RawConsumer {
         let latest = self
             .state
             .slot
+            .sink
             .latest()
             .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
         Ok(lock(latest).take_notifications())
@@ -164,6 +173,11 @@ impl RawConsumer {
     /// The topic name.
     pub fn topic(&self) -> &str {
         &self.state.peers.topic
+    }
+
+    /// This consumer's global id.
+    pub fn guid(&self) -> ndds_core::wire::Guid {
+        self._handle.guid()
     }
 
     /// The type description announced with this consumer.
@@ -198,7 +212,7 @@ impl RawConsumer {
             old_data: arbiter.old_data,
             superseded: arbiter.superseded,
             deadline_misses: arbiter.deadline_misses,
-            overflow: slot.overflow.load(Ordering::Relaxed),
+            overflow: slot.sink.overflow.load(Ordering::Relaxed),
             decode_errors: self.state.decoder.errors.load(Ordering::Relaxed),
         }
     }

@@ -3,6 +3,7 @@
 use std::marker::PhantomData;
 use std::pin::Pin;
 use std::task::{Context, Poll};
+use std::time::Instant;
 
 use futures_core::Stream;
 use serde::de::DeserializeOwned;
@@ -10,6 +11,7 @@ use serde::de::DeserializeOwned;
 use super::raw::Decoder;
 use super::typed::{decode, decode_event};
 use crate::sample::{Event, RawEvent, Sample};
+use crate::slot::ConsumerSlot;
 
 type Inner<'a> = flume::r#async::RecvStream<'a, RawEvent>;
 
@@ -19,14 +21,17 @@ type Inner<'a> = flume::r#async::RecvStream<'a, RawEvent>;
 pub struct SampleStream<'a, T> {
     inner: Inner<'a>,
     decoder: &'a Decoder,
+    /// Told when an event was taken (a reliable stream may be waiting for room).
+    slot: &'a ConsumerSlot,
     _type: PhantomData<fn() -> T>,
 }
 
 impl<'a, T> SampleStream<'a, T> {
-    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder) -> Self {
+    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, slot: &'a ConsumerSlot) -> Self {
         SampleStream {
             inner,
             decoder,
+            slot,
             _type: PhantomData,
         }
     }
@@ -37,7 +42,11 @@ impl<T: DeserializeOwned> Stream for SampleStream<'_, T> {
 
     fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Sample<T>>> {
         loop {
-            match Pin::new(&mut self.inner).poll_next(cx) {
+            let event = Pin::new(&mut self.inner).poll_next(cx);
+            if let Poll::Ready(Some(_)) = event {
+                self.slot.resume(Instant::now());
+            }
+            match event {
                 Poll::Ready(Some(RawEvent::Sample(raw))) => {
                     if let Ok(sample) = decode(self.decoder, raw) {
                         return Poll::Ready(Some(sample));
@@ -56,14 +65,17 @@ impl<T: DeserializeOwned> Stream for SampleStream<'_, T> {
 pub struct EventStream<'a, T> {
     inner: Inner<'a>,
     decoder: &'a Decoder,
+    /// Told when an event was taken (a reliable stream may be waiting for room).
+    slot: &'a ConsumerSlot,
     _type: PhantomData<fn() -> T>,
 }
 
 impl<'a, T> EventStream<'a, T> {
-    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder) -> Self {
+    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, slot: &'a ConsumerSlot) -> Self {
         EventStream {
             inner,
             decoder,
+            slot,
             _type: PhantomData,
         }
     }
@@ -74,8 +86,10 @@ impl<T: DeserializeOwned> Stream for EventStream<'_, T> {
 
     fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Event<T>>> {
         let decoder = self.decoder;
-        Pin::new(&mut self.inner)
-            .poll_next(cx)
-            .map(|event| event.map(|event| decode_event(decoder, event)))
+        let event = Pin::new(&mut self.inner).poll_next(cx);
+        if let Poll::Ready(Some(_)) = event {
+            self.slot.resume(Instant::now());
+        }
+        event.map(|event| event.map(|event| decode_event(decoder, event)))
     }
 }

@@ -94,6 +94,7 @@ impl<T: DeserializeOwned> Consumer<T> {
         Ok(SampleStream::new(
             self.raw.queue()?.stream(),
             &self.raw.state.decoder,
+            &self.raw.state.slot,
         ))
     }
 
@@ -102,6 +103,7 @@ impl<T: DeserializeOwned> Consumer<T> {
         Ok(EventStream::new(
             self.raw.queue()?.stream(),
             &self.raw.state.decoder,
+            &self.raw.state.slot,
         ))
     }
 }

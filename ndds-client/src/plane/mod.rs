@@ -102,9 +102,25 @@ pub(crate) struct DataPlane {
     reassembly: receive::Reassembly,
     pub(crate) stats: DataStats,
     closed: AtomicBool,
-    /// When the timer thread must next run the endpoints' timers.
-    timer: Mutex<Option<Instant>>,
-    timer_changed: Condvar,
+    pub(crate) timer: Arc<Timer>,
+}
+
+/// When the timer thread must next run the endpoints' timers; anyone may bring it forward.
+#[derive(Debug, Default)]
+pub(crate) struct Timer {
+    next: Mutex<Option<Instant>>,
+    changed: Condvar,
+}
+
+impl Timer {
+    /// Makes the timer thread run no later than `at`.
+    pub(crate) fn schedule(&self, at: Instant) {
+        let mut next = lock(&self.next);
+        if next.is_none_or(|n| at < n) {
+            *next = Some(at);
+            self.changed.notify_one();
+        }
+    }
 }
 
 impl DataPlane {
@@ -132,8 +148,7 @@ impl DataPlane {
             reassembly: receive::Reassembly::new(limits),
             stats: DataStats::default(),
             closed: AtomicBool::new(false),
-            timer: Mutex::new(None),
-            timer_changed: Condvar::new(),
+            timer: Arc::new(Timer::default()),
         })
     }
 
@@ -203,7 +218,8 @@ impl DataPlane {
 
     /// Runs the endpoints' timers until [`DataPlane::close`]. Runs on its own thread.
     pub(crate) fn run_timers(&self) {
-        let mut next = lock(&self.timer);
+        let timer = &self.timer;
+        let mut next = lock(&timer.next);
         while !self.closed.load(Ordering::Acquire) {
             let now = Instant::now();
             match *next {
@@ -211,7 +227,7 @@ impl DataPlane {
                     *next = None;
                     drop(next);
                     let earliest = self.fire(now);
-                    next = lock(&self.timer);
+                    next = lock(&timer.next);
                     if let Some(at) = earliest
                         && next.is_none_or(|n| at < n)
                     {
@@ -221,8 +237,8 @@ impl DataPlane {
                 pending => {
                     let wait =
                         pending.map_or(POLL_INTERVAL, |at| at.saturating_duration_since(now));
-                    next = self
-                        .timer_changed
+                    next = timer
+                        .changed
                         .wait_timeout(next, wait.min(POLL_INTERVAL))
                         .map(|(guard, _)| guard)
                         .unwrap_or_else(|poison| poison.into_inner().0);
@@ -248,18 +264,14 @@ impl DataPlane {
 
     /// Makes the timer thread run no later than `at`.
     pub(crate) fn schedule(&self, at: Instant) {
-        let mut next = lock(&self.timer);
-        if next.is_none_or(|n| at < n) {
-            *next = Some(at);
-            self.timer_changed.notify_one();
-        }
+        self.timer.schedule(at);
     }
 
     /// Stops the receive and timer threads promptly (the receive thread is woken with an
     /// empty datagram).
     pub(crate) fn close(&self) {
         self.closed.store(true, Ordering::Release);
-        self.timer_changed.notify_all();
+        self.timer.changed.notify_all();
         let _ = self.socket.send_to(&[], SocketAddrV4::from(self.locator));
     }
 

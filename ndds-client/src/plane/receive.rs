@@ -143,6 +143,13 @@ impl Reassembly {
         }
     }
 
+    /// Forgets partial samples of `writer` below `seq` and ignores their pieces from now on.
+    fn skip_before(&self, writer: Guid, seq: u64) {
+        let mut state = lock(&self.state);
+        state.reassembler.skip_before(writer, seq);
+        state.wanted.retain(|(w, s), _| *w != writer || *s >= seq);
+    }
+
     /// Asks for the missing pieces of samples that stopped progressing; drops partial samples
     /// that timed out. Returns when to run again.
     pub(crate) fn timeout(&self, now: Instant, net: &Net) -> Option<Instant> {
@@ -246,6 +253,14 @@ impl DataPlane {
                                 info,
                             };
                             self.offer(&slots, now, &origin, meta, fragment.meta.flags, raw);
+                            if fragment.meta.flags & FLAG_RELIABLE != 0 {
+                                // Pieces of samples every reliable consumer here has moved
+                                // past are stale: they must not start a partial sample again.
+                                let floor = slots.iter().filter_map(|s| s.next_seq(origin.writer)).min();
+                                if let Some(floor) = floor {
+                                    self.reassembly.skip_before(origin.writer, floor);
+                                }
+                            }
                         }
                         Ok(None) => self.schedule(now + NACK_FRAG_DELAY),
                         Err(()) => {
@@ -255,16 +270,12 @@ impl DataPlane {
                 }
                 DataSub::Heartbeat(heartbeat) => {
                     for slot in &slots {
-                        if let Some(at) = slot.on_heartbeat(now, &origin, heartbeat, &self.net) {
-                            self.schedule(at);
-                        }
+                        slot.on_heartbeat(now, &origin, heartbeat);
                     }
                 }
                 DataSub::Gap(gap) => {
                     for slot in &slots {
-                        if let Some(at) = slot.on_gap(now, &origin, gap, &self.net) {
-                            self.schedule(at);
-                        }
+                        slot.on_gap(now, &origin, gap);
                     }
                 }
             }
@@ -284,9 +295,7 @@ impl DataPlane {
     ) {
         for slot in slots {
             self.stats.delivered.fetch_add(1, Ordering::Relaxed);
-            if let Some(at) = slot.offer(now, origin, meta, flags, raw.clone(), &self.net) {
-                self.schedule(at);
-            }
+            slot.offer(now, origin, meta, flags, raw.clone());
         }
     }
 

@@ -7,29 +7,44 @@ mod outbox;
 use std::marker::PhantomData;
 use std::net::SocketAddrV4;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
+use bytes::Bytes;
+use ndds_core::reliability::{ReliableWriter, WriterConfig, WriterOutput};
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::data::FLAG_RELIABLE;
-use ndds_core::wire::{EndpointInfo, FeedbackSub, Guid, Reliability, SampleMeta};
+use ndds_core::wire::data::{FLAG_RELIABLE, Gap, Heartbeat, Sample};
+use ndds_core::wire::feedback::bit;
+use ndds_core::wire::{
+    DataSub, EndpointInfo, EndpointQos, FeedbackSub, Guid, Reliability, SampleMeta,
+};
 use serde::Serialize;
 
-use self::outbox::{Kept, Outbox, send_fragments};
+use self::outbox::{Kept, Outbox, whole_limit};
 use crate::error::WriteError;
 use crate::participant::EndpointHandle;
 use crate::peers::{Matched, Peers};
-use crate::plane::{Net, Timed, WriterSide};
-use crate::qos::{ProducerQos, duration_us};
+use crate::plane::{Net, Timed, Timer, WriterSide};
+use crate::qos::{ProducerQos, WhenFull, duration_us};
 use crate::sync::lock;
+
+/// The reliable side of a reliable producer.
+#[derive(Debug)]
+struct Reliable {
+    writer: ReliableWriter<Guid, Kept>,
+    /// What the writer asked to send, drained into this reused buffer.
+    outputs: Vec<WriterOutput<Guid, Kept>>,
+}
 
 /// Everything a write changes, under one lock.
 #[derive(Debug, Default)]
 struct Out {
     outbox: Outbox,
     seq: u64,
-    /// The newest fragmented sample, for readers that ask for missing pieces.
+    /// The newest fragmented sample, for best-effort readers that ask for missing pieces.
     kept: Option<Kept>,
+    /// `Some` for a reliable producer.
+    reliable: Option<Reliable>,
 }
 
 /// State of one producer shared with the participant's router, receive and timer threads.
@@ -39,7 +54,10 @@ pub(crate) struct ProducerState {
     qos: ProducerQos,
     pub(crate) peers: Peers,
     net: Arc<Net>,
+    timer: Arc<Timer>,
     out: Mutex<Out>,
+    /// Signalled when a reliable producer's window may have opened.
+    window: Condvar,
     written: AtomicU64,
 }
 
@@ -50,20 +68,67 @@ impl ProducerState {
         type_desc: TypeDescription,
         qos: ProducerQos,
         net: Arc<Net>,
+        timer: Arc<Timer>,
     ) -> Self {
+        let reliable = match qos.reliability {
+            Reliability::Reliable { depth } => Some(Reliable {
+                writer: ReliableWriter::new(WriterConfig {
+                    depth: usize::try_from(depth).unwrap_or(usize::MAX).max(1),
+                    ..WriterConfig::default()
+                }),
+                outputs: Vec::new(),
+            }),
+            Reliability::BestEffort => None,
+        };
         ProducerState {
             entity,
             qos,
             peers: Peers::new(topic, type_desc),
             net,
-            out: Mutex::new(Out::default()),
+            timer,
+            out: Mutex::new(Out {
+                reliable,
+                ..Out::default()
+            }),
+            window: Condvar::new(),
             written: AtomicU64::new(0),
         }
     }
 
-    /// Rebuilds the destinations from the matched consumers.
+    /// Rebuilds the destinations from the matched consumers; a reliable producer starts
+    /// serving the reliable consumers that appeared and forgets those that left.
     pub(crate) fn set_matched(&self, matched: Matched<'_>) {
-        lock(&self.out).outbox.set_matched(&self.net, matched);
+        let mut out = lock(&self.out);
+        out.outbox.set_matched(&self.net, matched.clone());
+        let Some(reliable) = out.reliable.as_mut() else {
+            return;
+        };
+        let now = Instant::now();
+        let wanted: Vec<Guid> = matched
+            .filter(|info| {
+                matches!(
+                    &info.qos,
+                    EndpointQos::Consumer(c) if matches!(c.reliability, Reliability::Reliable { .. })
+                )
+            })
+            .map(|info| info.guid)
+            .collect();
+        let gone: Vec<Guid> = reliable
+            .writer
+            .readers()
+            .filter(|reader| !wanted.contains(reader))
+            .collect();
+        for reader in gone {
+            reliable.writer.remove_reader(reader);
+        }
+        for reader in wanted {
+            reliable.writer.add_reader(now, reader);
+        }
+        self.window.notify_all();
+        self.drain(&mut out);
+        if let Some(at) = self.next_timer(&out) {
+            self.timer.schedule(at);
+        }
     }
 
     fn flags(&self) -> u8 {
@@ -73,17 +138,47 @@ impl ProducerState {
         }
     }
 
-    /// Encodes with `encode` into the reused buffer and sends.
+    /// Encodes with `encode` into the reused buffer and sends; returns when the producer's
+    /// timers must run next.
     fn write_with(
         &self,
         encode: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
     ) -> Result<Option<Instant>, WriteError> {
-        let mut out = lock(&self.out);
+        let mut out = self.wait_for_window(lock(&self.out))?;
         let mut payload = std::mem::take(&mut out.outbox.payload);
         payload.clear();
         let result = encode(&mut payload).and_then(|()| self.send_locked(&mut out, &payload));
         out.outbox.payload = payload;
         result
+    }
+
+    /// Waits (up to the write timeout) until a reliable producer's window is open.
+    fn wait_for_window<'a>(
+        &self,
+        mut out: MutexGuard<'a, Out>,
+    ) -> Result<MutexGuard<'a, Out>, WriteError> {
+        let started = Instant::now();
+        loop {
+            let Some(reliable) = &out.reliable else {
+                return Ok(out);
+            };
+            if reliable.writer.window_open() || self.qos.when_full == WhenFull::DropOldest {
+                return Ok(out);
+            }
+            let waited = started.elapsed();
+            let Some(left) = self.qos.write_timeout.checked_sub(waited).filter(|l| !l.is_zero())
+            else {
+                return Err(WriteError::WouldBlock {
+                    waited,
+                    unacknowledged: reliable.writer.history_len(),
+                });
+            };
+            out = self
+                .window
+                .wait_timeout(out, left)
+                .map(|(guard, _)| guard)
+                .unwrap_or_else(|poison| poison.into_inner().0);
+        }
     }
 
     fn send_locked(&self, out: &mut Out, payload: &[u8]) -> Result<Option<Instant>, WriteError> {
@@ -103,6 +198,21 @@ impl ProducerState {
             flags: self.flags(),
         };
         let now = Instant::now();
+        let fragmented = payload.len() > whole_limit(&self.net);
+        // Kept for repairs: every sample of a reliable producer (its history), the newest
+        // fragmented one of a best-effort producer.
+        let kept = (out.reliable.is_some() || fragmented).then(|| Kept {
+            meta,
+            bytes: Bytes::copy_from_slice(payload),
+        });
+        if let Some(reliable) = &mut out.reliable
+            && let Some(kept) = &kept
+        {
+            // Recorded before sending, so an acknowledgement racing the send finds it.
+            let _ = reliable
+                .writer
+                .write(now, meta.seq, kept.clone(), payload.len());
+        }
         let result = out.outbox.send(
             &self.net,
             self.entity,
@@ -111,27 +221,115 @@ impl ProducerState {
             now,
             self.qos.batching,
         );
-        if out
-            .outbox
-            .dests
-            .iter()
-            .any(|d| payload.len() > d.whole_limit(&self.net))
-        {
-            out.kept = Some(Kept {
-                meta,
-                bytes: bytes::Bytes::copy_from_slice(payload),
-            });
+        if fragmented {
+            out.kept = kept;
         }
         self.written.fetch_add(1, Ordering::Relaxed);
-        result.map(|()| out.outbox.next_due(self.qos.batching))
+        self.drain(out);
+        result.map(|()| self.next_timer(out))
+    }
+
+    /// When the producer's timers (batch flush, heartbeats) must run next.
+    fn next_timer(&self, out: &Out) -> Option<Instant> {
+        let batch = out.outbox.next_due(self.qos.batching);
+        let reliable = out.reliable.as_ref().and_then(|r| r.writer.poll_timeout());
+        match (batch, reliable) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Sends what the reliable writer asked for: per reader, its gaps, resends and heartbeat,
+    /// in datagrams addressed to that reader only.
+    fn drain(&self, out: &mut Out) {
+        let Out {
+            outbox, reliable, ..
+        } = out;
+        let Some(reliable) = reliable else {
+            return;
+        };
+        reliable.outputs.clear();
+        while let Some(output) = reliable.writer.poll_output() {
+            reliable.outputs.push(output);
+        }
+        let net = &self.net;
+        let mut rest = &reliable.outputs[..];
+        while let Some(first) = rest.first() {
+            let reader = output_reader(first);
+            let count = rest
+                .iter()
+                .take_while(|o| output_reader(o) == reader)
+                .count();
+            let (group, tail) = rest.split_at(count);
+            rest = tail;
+            let Some(dest) = outbox.dest_of(reader) else {
+                continue;
+            };
+            // Large samples asked for again: one piece goes, and the reader's requests for
+            // the pieces it lacks (NackFrag) do the rest. Resending all of them on every
+            // AckNack would resend what already arrived.
+            for output in group {
+                if let WriterOutput::Resend { sample, .. } = output
+                    && sample.bytes.len() > whole_limit(net)
+                {
+                    let last = outbox::split(net, sample.bytes.len())
+                        .map_or(0, |s| s.count().saturating_sub(1));
+                    let _ = dest.send_fragments(
+                        net,
+                        self.entity,
+                        Some(reader.entity),
+                        sample.meta,
+                        &sample.bytes,
+                        Some(&mut std::iter::once(last)),
+                    );
+                }
+            }
+            let subs = group.iter().filter_map(|output| match output {
+                WriterOutput::Resend { sample, .. } => (sample.bytes.len() <= whole_limit(net))
+                    .then(|| {
+                        DataSub::Sample(Sample {
+                            meta: sample.meta,
+                            payload: &sample.bytes,
+                        })
+                    }),
+                WriterOutput::Gap { from, to, .. } => Some(DataSub::Gap(Gap {
+                    from: *from,
+                    to: *to,
+                })),
+                WriterOutput::Heartbeat { first, last, .. } => {
+                    Some(DataSub::Heartbeat(Heartbeat {
+                        first: *first,
+                        last: *last,
+                    }))
+                }
+            });
+            if let Err(err) = dest.send_now(net, self.entity, Some(reader.entity), subs) {
+                tracing::debug!(to = %dest.addr, %err, "reliable control send failed");
+            }
+        }
+        reliable.outputs.clear();
+    }
+}
+
+fn output_reader(output: &WriterOutput<Guid, Kept>) -> Guid {
+    match output {
+        WriterOutput::Resend { reader, .. }
+        | WriterOutput::Gap { reader, .. }
+        | WriterOutput::Heartbeat { reader, .. } => *reader,
     }
 }
 
 impl Timed for ProducerState {
     fn timeout(&self, now: Instant) -> Option<Instant> {
-        lock(&self.out)
-            .outbox
-            .flush_due(&self.net, now, self.qos.batching)
+        let mut out = lock(&self.out);
+        out.outbox.flush_due(&self.net, now, self.qos.batching);
+        if let Some(reliable) = &mut out.reliable
+            && reliable.writer.poll_timeout().is_some_and(|due| due <= now)
+        {
+            reliable.writer.handle_timeout(now);
+            self.drain(&mut out);
+        }
+        self.next_timer(&out)
     }
 }
 
@@ -140,32 +338,47 @@ impl WriterSide for ProducerState {
         &self,
         now: Instant,
         reader: Guid,
-        from: SocketAddrV4,
+        _from: SocketAddrV4,
         sub: &FeedbackSub<'_>,
     ) -> Option<Instant> {
-        let _ = (now, from);
-        let FeedbackSub::NackFrag(nack) = sub else {
-            return None;
-        };
         let mut out = lock(&self.out);
-        let kept = out.kept.clone().filter(|k| k.meta.seq == nack.seq)?;
-        let dest = out
-            .outbox
-            .dests
-            .iter_mut()
-            .find(|d| d.participant == reader.participant)?;
-        let mut missing = (0..nack.missing.len() * 8)
-            .filter(|i| ndds_core::wire::feedback::bit(nack.missing, *i))
-            .filter_map(|i| nack.base.checked_add(i as u32));
-        let _ = send_fragments(
-            dest,
-            &self.net,
-            self.entity,
-            kept.meta,
-            &kept.bytes,
-            Some(&mut missing),
-        );
-        None
+        match sub {
+            FeedbackSub::AckNack(ack) => {
+                let reliable = out.reliable.as_mut()?;
+                let was_open = reliable.writer.window_open();
+                reliable
+                    .writer
+                    .handle_acknack(now, reader, ack.acked, ack.missing);
+                if !was_open && reliable.writer.window_open() {
+                    self.window.notify_all();
+                }
+                self.drain(&mut out);
+                self.next_timer(&out)
+            }
+            FeedbackSub::NackFrag(nack) => {
+                // The history of a reliable producer, else the newest fragmented sample.
+                let kept = out
+                    .reliable
+                    .as_ref()
+                    .and_then(|r| r.writer.sample(nack.seq))
+                    .or(out.kept.as_ref())
+                    .filter(|k| k.meta.seq == nack.seq)?
+                    .clone();
+                let dest = out.outbox.dest_of(reader)?;
+                let mut missing = (0..nack.missing.len() * 8)
+                    .filter(|i| bit(nack.missing, *i))
+                    .filter_map(|i| nack.base.checked_add(u32::try_from(i).ok()?));
+                let _ = dest.send_fragments(
+                    &self.net,
+                    self.entity,
+                    Some(reader.entity),
+                    kept.meta,
+                    &kept.bytes,
+                    Some(&mut missing),
+                );
+                None
+            }
+        }
     }
 }
 
@@ -251,6 +464,11 @@ impl RawProducer {
     /// The topic name.
     pub fn topic(&self) -> &str {
         &self.state.peers.topic
+    }
+
+    /// This producer's global id (the `writer` of its samples at consumers).
+    pub fn guid(&self) -> Guid {
+        self.handle.guid()
     }
 
     /// The type description announced with this producer.

@@ -1,5 +1,7 @@
-//! A producer's outgoing side: its destinations (one per consuming participant), the batch
-//! being filled for each, and the cutting of large samples into fragments.
+//! A producer's outgoing side: its destinations (one per group of consumers in one
+//! participant), the batch being filled for each, the cutting of large samples into
+//! fragments, and datagrams addressed to a single consumer (repairs and reliable-stream
+//! control).
 
 use std::net::SocketAddrV4;
 use std::time::Instant;
@@ -9,13 +11,39 @@ use ndds_core::fragment::Split;
 use ndds_core::wire::data::{
     Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample, prefix_overhead,
 };
-use ndds_core::wire::{DataSub, DataWriter, EndpointInfo, SampleMeta};
+use ndds_core::wire::{DataSub, DataWriter, EndpointInfo, Guid, SampleMeta};
 
 use crate::error::WriteError;
 use crate::plane::Net;
 use crate::qos::Batching;
 
-/// One consuming participant: where its samples go, and the batch being filled for it.
+/// Most consumers one datagram names. A participant with more consumers of the topic gets
+/// one destination per group. Sizes are computed for a full group, so a sample is cut the
+/// same way (same piece size) whichever destination or single reader it is sent to, and
+/// resent pieces always match the first ones.
+pub(crate) const GROUP: usize = 8;
+
+/// Largest sample sent whole, in one datagram.
+pub(crate) fn whole_limit(net: &Net) -> usize {
+    net.limits
+        .max_datagram
+        .saturating_sub(prefix_overhead(GROUP) + SAMPLE_OVERHEAD)
+}
+
+/// The piece size of fragmented samples.
+fn frag_size(net: &Net) -> usize {
+    net.limits
+        .max_datagram
+        .saturating_sub(prefix_overhead(GROUP) + FRAGMENT_OVERHEAD)
+}
+
+/// The pieces of a large sample.
+pub(crate) fn split(net: &Net, len: usize) -> std::io::Result<Split> {
+    Split::new(len, frag_size(net)).map_err(|err| std::io::Error::other(err.to_string()))
+}
+
+/// A group of consumers in one participant: where their samples go, and the batch being
+/// filled for them.
 #[derive(Debug)]
 pub(crate) struct Dest {
     pub(crate) addr: SocketAddrV4,
@@ -36,45 +64,60 @@ impl Dest {
         }
     }
 
-    /// Starts a datagram to this destination in its batch buffer.
-    fn begin(&mut self, net: &Net, writer: u32) {
+    /// True when this destination names `reader`.
+    pub(crate) fn has(&self, reader: Guid) -> bool {
+        self.participant == reader.participant && self.readers.contains(&reader.entity)
+    }
+
+    /// Starts a datagram in the batch buffer, to all readers or to `only`.
+    fn begin(&mut self, net: &Net, writer: u32, only: Option<u32>) {
+        let one;
+        let readers = match only {
+            Some(reader) => {
+                one = [reader];
+                &one[..]
+            }
+            None => &self.readers[..],
+        };
         let to = Addressing {
             reader_participant: self.participant,
             writer,
-            readers: &self.readers,
+            readers,
         };
         self.batch.begin(net.domain, net.participant, &to);
     }
 
-    /// Largest whole sample this destination takes in one datagram.
-    pub(crate) fn whole_limit(&self, net: &Net) -> usize {
-        net.limits
-            .max_datagram
-            .saturating_sub(prefix_overhead(self.readers.len()) + SAMPLE_OVERHEAD)
-    }
-
-    /// Fragment size for this destination.
-    pub(crate) fn frag_size(&self, net: &Net) -> usize {
-        net.limits
-            .max_datagram
-            .saturating_sub(prefix_overhead(self.readers.len()) + FRAGMENT_OVERHEAD)
-    }
-
-    /// Sends one submessage now, in a datagram of its own (after any pending batch).
-    pub(crate) fn send_now(
+    /// Sends submessages now (after any pending batch), to all readers or to `only`, packed
+    /// into as few datagrams as they fit.
+    pub(crate) fn send_now<'a>(
         &mut self,
         net: &Net,
         writer: u32,
-        sub: &DataSub<'_>,
+        only: Option<u32>,
+        subs: impl IntoIterator<Item = DataSub<'a>>,
     ) -> std::io::Result<()> {
         self.flush(net)?;
-        let to = self.addr;
-        self.begin(net, writer);
-        self.batch.push(sub, net.limits.max_datagram);
-        net.send(self.batch.bytes(), to)
+        let max = net.limits.max_datagram;
+        self.begin(net, writer, only);
+        for sub in subs {
+            if !self.batch.push(&sub, max) {
+                if !self.batch.is_empty() {
+                    net.send(self.batch.bytes(), self.addr)?;
+                }
+                self.begin(net, writer, only);
+                if !self.batch.push(&sub, max) {
+                    // Cannot happen for the sizes used here; never loop on it.
+                    return Err(std::io::Error::other("submessage larger than a datagram"));
+                }
+            }
+        }
+        if self.batch.is_empty() {
+            return Ok(());
+        }
+        net.send(self.batch.bytes(), self.addr)
     }
 
-    /// Adds a submessage to the batch; returns when the batch must leave at the latest.
+    /// Adds a submessage to the batch.
     fn batch(
         &mut self,
         net: &Net,
@@ -85,16 +128,16 @@ impl Dest {
     ) -> std::io::Result<()> {
         let limit = max_bytes.min(net.limits.max_datagram);
         if self.opened.is_none() {
-            self.begin(net, writer);
+            self.begin(net, writer, None);
             self.opened = Some(now);
         }
         if !self.batch.push(sub, limit) {
             self.flush(net)?;
-            self.begin(net, writer);
+            self.begin(net, writer, None);
             self.opened = Some(now);
             if !self.batch.push(sub, limit) {
                 // Larger than a batch but fits a datagram: it leaves alone.
-                return self.send_now(net, writer, sub);
+                return self.send_now(net, writer, None, [sub.clone()]);
             }
         }
         if self.batch.bytes().len() >= limit {
@@ -117,6 +160,42 @@ impl Dest {
             Batching::On { max_delay, .. } => self.opened.and_then(|at| at.checked_add(max_delay)),
             Batching::Off => None,
         }
+    }
+
+    /// Sends the pieces of a large sample (all, or those listed), to all readers or to
+    /// `only`. Pieces go in order, one per datagram.
+    pub(crate) fn send_fragments(
+        &mut self,
+        net: &Net,
+        writer: u32,
+        only: Option<u32>,
+        meta: SampleMeta,
+        payload: &[u8],
+        pieces: Option<&mut dyn Iterator<Item = u32>>,
+    ) -> std::io::Result<()> {
+        let split = split(net, payload.len())?;
+        let mut all = 0..split.count();
+        let indices: &mut dyn Iterator<Item = u32> = match pieces {
+            Some(listed) => listed,
+            None => &mut all,
+        };
+        self.flush(net)?;
+        for index in indices {
+            let Some(range) = split.range(index) else {
+                continue;
+            };
+            let sub = DataSub::Fragment(Fragment {
+                meta,
+                total_len: split.total_len() as u32,
+                frag_size: split.frag_size() as u32,
+                index,
+                chunk: &payload[range],
+            });
+            self.begin(net, writer, only);
+            self.batch.push(&sub, net.limits.max_datagram);
+            net.send(self.batch.bytes(), self.addr)?;
+        }
+        Ok(())
     }
 }
 
@@ -142,10 +221,9 @@ impl Outbox {
         for consumer in matched {
             let addr = SocketAddrV4::from(consumer.locator);
             let participant = consumer.guid.participant;
-            let index = match dests
-                .iter()
-                .position(|d| d.addr == addr && d.participant == participant)
-            {
+            let index = match dests.iter().position(|d| {
+                d.addr == addr && d.participant == participant && d.readers.len() < GROUP
+            }) {
                 Some(index) => index,
                 None => {
                     dests.push(Dest::new(addr, participant));
@@ -155,6 +233,11 @@ impl Outbox {
             dests[index].readers.push(consumer.guid.entity);
         }
         self.dests = dests;
+    }
+
+    /// The destination that names `reader`.
+    pub(crate) fn dest_of(&mut self, reader: Guid) -> Option<&mut Dest> {
+        self.dests.iter_mut().find(|d| d.has(reader))
     }
 
     /// Sends one sample to every destination, whole or in fragments; returns the last send
@@ -170,15 +253,16 @@ impl Outbox {
     ) -> Result<(), WriteError> {
         let mut last_error = None;
         let mut delivered = 0usize;
+        let whole = payload.len() <= whole_limit(net);
         for dest in &mut self.dests {
-            let result = if payload.len() <= dest.whole_limit(net) {
+            let result = if whole {
                 let sub = DataSub::Sample(Sample { meta, payload });
                 match batching {
-                    Batching::Off => dest.send_now(net, writer, &sub),
+                    Batching::Off => dest.send_now(net, writer, None, [sub]),
                     Batching::On { max_bytes, .. } => dest.batch(net, writer, &sub, now, max_bytes),
                 }
             } else {
-                send_fragments(dest, net, writer, meta, payload, None)
+                dest.send_fragments(net, writer, None, meta, payload, None)
             };
             match result {
                 Ok(()) => delivered += 1,
@@ -231,46 +315,7 @@ impl Outbox {
     }
 }
 
-/// Sends the pieces of a large sample to one destination (all pieces, or only those listed).
-pub(crate) fn send_fragments(
-    dest: &mut Dest,
-    net: &Net,
-    writer: u32,
-    meta: SampleMeta,
-    payload: &[u8],
-    only: Option<&mut dyn Iterator<Item = u32>>,
-) -> std::io::Result<()> {
-    let split = Split::new(payload.len(), dest.frag_size(net))
-        .map_err(|err| std::io::Error::other(err.to_string()))?;
-    let send_piece = |dest: &mut Dest, index: u32| -> std::io::Result<()> {
-        let Some(range) = split.range(index) else {
-            return Ok(());
-        };
-        let sub = DataSub::Fragment(Fragment {
-            meta,
-            total_len: split.total_len() as u32,
-            frag_size: split.frag_size() as u32,
-            index,
-            chunk: &payload[range],
-        });
-        dest.send_now(net, writer, &sub)
-    };
-    match only {
-        Some(indices) => {
-            for index in indices {
-                send_piece(dest, index)?;
-            }
-        }
-        None => {
-            for index in 0..split.count() {
-                send_piece(dest, index)?;
-            }
-        }
-    }
-    Ok(())
-}
-
-/// A sample kept so readers can ask for its missing pieces.
+/// A sample as written: its metadata and encoded bytes. Cheap to clone (shared bytes).
 #[derive(Clone, Debug)]
 pub(crate) struct Kept {
     pub(crate) meta: SampleMeta,

@@ -62,6 +62,16 @@ pub enum Notification {
         /// This consumer's fingerprint.
         local_fingerprint: u64,
     },
+    /// A reliable producer's samples `from..to` will never arrive: its history no longer
+    /// held them when they were found missing.
+    SamplesLost {
+        /// The producer.
+        writer: Guid,
+        /// First lost sequence number.
+        from: u64,
+        /// One past the last lost sequence number.
+        to: u64,
+    },
     /// A sample did not decode as the consumer's type; it was not delivered.
     DeserializationError {
         /// Its producer.

@@ -397,6 +397,12 @@ where
         }
     }
 
+    /// The sample `seq`, while the history holds it (for repairs finer than a whole resend,
+    /// such as the missing pieces of a large sample).
+    pub fn sample(&self, seq: u64) -> Option<&S> {
+        self.history.get(seq)
+    }
+
     /// The next output. For each reader: gaps first, then resends in seq order, then the
     /// heartbeat (computed now, so it carries the newest range).
     pub fn poll_output(&mut self) -> Option<WriterOutput<K, S>> {

@@ -203,7 +203,9 @@ impl<'a> Iterator for FeedbackIter<'a> {
 
 /// Bit `i` of a bitmap.
 pub fn bit(bitmap: &[u8], i: usize) -> bool {
-    bitmap.get(i / 8).is_some_and(|byte| byte & (1 << (i % 8)) != 0)
+    bitmap
+        .get(i / 8)
+        .is_some_and(|byte| byte & (1 << (i % 8)) != 0)
 }
 
 /// Sets bit `i`, growing the bitmap as needed (up to [`MAX_BITMAP_BYTES`]); returns false

@@ -67,6 +67,7 @@ pub fn notification(topic: &str, notification: &Notification) -> Value {
             json!({"writer": writer.to_string(), "was_current": was_current}),
         ),
         Notification::Incompatible {
+            reason,
             writer,
             type_name,
             fingerprint,
@@ -75,12 +76,17 @@ pub fn notification(topic: &str, notification: &Notification) -> Value {
         } => (
             "Incompatible",
             json!({
+                "reason": format!("{reason:?}"),
                 "writer": writer.to_string(),
                 "type_name": type_name,
                 "fingerprint": format!("{fingerprint:016x}"),
                 "local_type": local_type,
                 "local_fingerprint": format!("{local_fingerprint:016x}"),
             }),
+        ),
+        Notification::SamplesLost { writer, from, to } => (
+            "SamplesLost",
+            json!({"writer": writer.to_string(), "from": from, "to": to}),
         ),
         Notification::DeserializationError { writer, seq, error } => (
             "DeserializationError",

@@ -1,0 +1,182 @@
+//! Where a consumer's accepted samples and notifications go: a bounded queue (immediate
+//! mode), a latest-sample cell (polled mode), or a callback on the producing thread (direct).
+
+use std::collections::VecDeque;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use ndds_core::arbitration::Notification;
+
+use crate::qos::{ConsumerMode, ConsumerQos};
+use crate::sample::{PollStatus, RawEvent, RawSample};
+use crate::sync::lock;
+
+/// Notifications a polled consumer keeps until it takes them.
+const POLLED_NOTIFICATIONS: usize = 64;
+
+/// A callback run on the participant's receive or timer thread.
+pub(crate) type Direct = Box<dyn FnMut(RawEvent) + Send>;
+
+/// A [`Direct`] callback (opaque to `Debug`).
+struct DirectBox(Direct);
+
+impl std::fmt::Debug for DirectBox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("DirectBox")
+    }
+}
+
+/// The latest accepted sample of a polled consumer.
+#[derive(Debug, Default)]
+pub(crate) struct Latest {
+    sample: Option<RawSample>,
+    fresh: bool,
+    stale: bool,
+    notifications: VecDeque<Notification>,
+}
+
+impl Latest {
+    /// The latest sample and its status; marks it as seen.
+    pub(crate) fn take_view(&mut self) -> (Option<RawSample>, PollStatus) {
+        let status = match (&self.sample, self.fresh, self.stale) {
+            (None, _, _) => PollStatus::NeverReceived,
+            (Some(_), true, _) => PollStatus::Fresh,
+            (Some(_), false, true) => PollStatus::NoNewData,
+            (Some(_), false, false) => PollStatus::Unchanged,
+        };
+        self.fresh = false;
+        (self.sample.clone(), status)
+    }
+
+    /// The notifications kept since the last call.
+    pub(crate) fn take_notifications(&mut self) -> Vec<Notification> {
+        self.notifications.drain(..).collect()
+    }
+}
+
+#[derive(Debug)]
+enum Kind {
+    Queue {
+        tx: flume::Sender<RawEvent>,
+        /// A second receiver, used only to drop the oldest event when a best-effort queue is
+        /// full.
+        oldest: flume::Receiver<RawEvent>,
+        capacity: usize,
+    },
+    Latest(Mutex<Latest>),
+}
+
+/// A consumer's sink.
+#[derive(Debug)]
+pub(crate) struct Sink {
+    kind: Kind,
+    direct: Mutex<Option<DirectBox>>,
+    has_direct: AtomicBool,
+    /// Events dropped because the application did not keep up.
+    pub(crate) overflow: AtomicU64,
+}
+
+impl Sink {
+    /// A sink for `qos`; in immediate mode, also the application's receiver.
+    pub(crate) fn new(qos: &ConsumerQos) -> (Self, Option<flume::Receiver<RawEvent>>) {
+        let (kind, rx) = match qos.mode {
+            ConsumerMode::Immediate => {
+                let capacity = qos.depth.max(1);
+                let (tx, rx) = flume::bounded(capacity);
+                let oldest = rx.clone();
+                let kind = Kind::Queue {
+                    tx,
+                    oldest,
+                    capacity,
+                };
+                (kind, Some(rx))
+            }
+            ConsumerMode::Polled => (Kind::Latest(Mutex::default()), None),
+        };
+        let sink = Sink {
+            kind,
+            direct: Mutex::new(None),
+            has_direct: AtomicBool::new(false),
+            overflow: AtomicU64::new(0),
+        };
+        (sink, rx)
+    }
+
+    /// Sends every later event to `callback`, on the thread that produces it.
+    pub(crate) fn set_direct(&self, callback: Direct) {
+        *lock(&self.direct) = Some(DirectBox(callback));
+        self.has_direct.store(true, Ordering::Release);
+    }
+
+    /// How many more events fit without dropping any.
+    pub(crate) fn room(&self) -> usize {
+        match &self.kind {
+            Kind::Queue { tx, capacity, .. } if !self.has_direct.load(Ordering::Acquire) => {
+                capacity.saturating_sub(tx.len())
+            }
+            _ => usize::MAX,
+        }
+    }
+
+    /// The latest-sample cell (polled mode only).
+    pub(crate) fn latest(&self) -> Option<&Mutex<Latest>> {
+        match &self.kind {
+            Kind::Latest(latest) => Some(latest),
+            Kind::Queue { .. } => None,
+        }
+    }
+
+    /// Hands over one event; a full best-effort queue drops its oldest.
+    pub(crate) fn push(&self, event: RawEvent) {
+        if self.has_direct.load(Ordering::Acquire)
+            && let Some(DirectBox(callback)) = lock(&self.direct).as_mut()
+        {
+            callback(event);
+            return;
+        }
+        match &self.kind {
+            Kind::Queue { tx, oldest, .. } => self.enqueue(tx, oldest, event),
+            Kind::Latest(latest) => self.replace(&mut lock(latest), event),
+        }
+    }
+
+    fn enqueue(
+        &self,
+        tx: &flume::Sender<RawEvent>,
+        oldest: &flume::Receiver<RawEvent>,
+        mut event: RawEvent,
+    ) {
+        loop {
+            match tx.try_send(event) {
+                Ok(()) => return,
+                Err(flume::TrySendError::Full(back)) => {
+                    event = back;
+                    if oldest.try_recv().is_ok() {
+                        self.overflow.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(flume::TrySendError::Disconnected(_)) => return,
+            }
+        }
+    }
+
+    fn replace(&self, latest: &mut Latest, event: RawEvent) {
+        match event {
+            RawEvent::Sample(sample) => {
+                latest.sample = Some(sample);
+                latest.fresh = true;
+                latest.stale = false;
+            }
+            RawEvent::Notification(notification) => {
+                if matches!(notification, Notification::NoNewData { .. }) {
+                    latest.stale = true;
+                }
+                if latest.notifications.len() == POLLED_NOTIFICATIONS {
+                    latest.notifications.pop_front();
+                    self.overflow.fetch_add(1, Ordering::Relaxed);
+                }
+                latest.notifications.push_back(notification);
+            }
+        }
+    }
+}

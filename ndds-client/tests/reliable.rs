@@ -1,0 +1,276 @@
+//! Reliable streams through the SDK with real daemons on loopback: ordering and completeness
+//! under a slow consumer, flow control (blocking with a timeout, or dropping the oldest with a
+//! `samples lost` status), matching rules, and large reliable samples.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::{participant, sibling, unique_config};
+use ndds_client::{
+    ConsumerQos, Event, Notification, ProducerQos, RecvError, Reliability, WhenFull, WriteError,
+};
+
+const WAIT: Duration = Duration::from_secs(5);
+
+fn reliable(depth: u32) -> Reliability {
+    Reliability::Reliable { depth }
+}
+
+#[test]
+fn a_slow_reliable_consumer_gets_every_sample_in_order_and_slows_its_producer() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    let consumer = reader_side
+        .consumer::<u64>(
+            "cmd",
+            ConsumerQos {
+                depth: 4,
+                reliability: reliable(16),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = writer_side
+        .producer::<u64>(
+            "cmd",
+            ProducerQos {
+                reliability: reliable(16),
+                write_timeout: Duration::from_secs(10),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    const COUNT: u64 = 600;
+    let writer = std::thread::spawn(move || {
+        for i in 1..=COUNT {
+            producer.write(&i).unwrap();
+        }
+        producer
+    });
+    let mut got = Vec::new();
+    while got.len() < COUNT as usize {
+        match consumer.recv_event_timeout(WAIT).unwrap() {
+            Event::Sample(sample) => got.push(sample.value),
+            Event::Notification(n) => panic!("unexpected notification {n:?}"),
+        }
+        if got.len() % 50 == 0 {
+            // A consumer that stops now and then: the producer must wait, not drop.
+            std::thread::sleep(Duration::from_millis(30));
+        }
+    }
+    let _producer = writer.join().unwrap();
+    assert_eq!(got, (1..=COUNT).collect::<Vec<_>>());
+    let stats = consumer.stats();
+    assert_eq!(stats.overflow, 0, "nothing dropped at the queue");
+}
+
+#[test]
+fn a_consumer_that_takes_nothing_blocks_its_producer_until_the_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    let consumer = reader_side
+        .consumer::<u64>(
+            "cmd",
+            ConsumerQos {
+                depth: 4,
+                reliability: reliable(8),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = writer_side
+        .producer::<u64>(
+            "cmd",
+            ProducerQos {
+                reliability: reliable(8),
+                write_timeout: Duration::from_millis(300),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    // The window (8) fills once the consumer's queue (4) is full and nothing is taken.
+    let mut written = 0u64;
+    let blocked = loop {
+        let started = Instant::now();
+        match producer.write(&(written + 1)) {
+            Ok(()) => written += 1,
+            Err(err) => break (err, started.elapsed()),
+        }
+        assert!(written <= 64, "the producer never blocked");
+    };
+    let (err, waited) = blocked;
+    match err {
+        WriteError::WouldBlock { unacknowledged, .. } => assert_eq!(unacknowledged, 8),
+        other => panic!("expected WouldBlock, got {other}"),
+    }
+    assert!(waited >= Duration::from_millis(250), "waited {waited:?}");
+    assert!(written >= 8, "wrote {written} before blocking");
+    // Taking samples opens the window again; every sample written arrives once, in order.
+    let mut got = Vec::new();
+    for i in written + 1..=written + 20 {
+        while producer.write(&i).is_err() {
+            got.push(consumer.recv_timeout(WAIT).unwrap().value);
+        }
+    }
+    while let Ok(sample) = consumer.recv_timeout(Duration::from_millis(300)) {
+        got.push(sample.value);
+    }
+    assert_eq!(got, (1..=written + 20).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_producer_that_drops_the_oldest_never_waits_and_reports_samples_lost() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    let consumer = reader_side
+        .consumer::<u64>(
+            "state",
+            ConsumerQos {
+                depth: 4,
+                reliability: reliable(8),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = writer_side
+        .producer::<u64>(
+            "state",
+            ProducerQos {
+                reliability: reliable(8),
+                when_full: WhenFull::DropOldest,
+                write_timeout: Duration::from_secs(10),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    const COUNT: u64 = 200;
+    let started = Instant::now();
+    for i in 1..=COUNT {
+        producer.write(&i).unwrap();
+    }
+    assert!(started.elapsed() < Duration::from_secs(5), "writes waited");
+    // Every seq is accounted for exactly once, in order: delivered, or inside a lost run.
+    let mut next = 1u64;
+    let mut lost_runs = 0;
+    while next <= COUNT {
+        match consumer.recv_event_timeout(WAIT).unwrap() {
+            Event::Sample(sample) => {
+                assert_eq!(sample.info.seq, next, "in order, no duplicate");
+                assert_eq!(sample.value, next);
+                next += 1;
+            }
+            Event::Notification(Notification::SamplesLost { writer, from, to }) => {
+                assert_eq!(writer, producer.guid());
+                assert_eq!(from, next, "a lost run starts where delivery stopped");
+                assert!(to > from);
+                lost_runs += 1;
+                next = to;
+            }
+            Event::Notification(other) => panic!("unexpected {other:?}"),
+        }
+    }
+    assert!(lost_runs >= 1, "a consumer that fell behind must be told");
+    assert_eq!(next, COUNT + 1);
+}
+
+#[test]
+fn a_reliable_consumer_does_not_match_a_best_effort_producer() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let p = participant(&config);
+    let consumer = p
+        .consumer::<u64>(
+            "mixed",
+            ConsumerQos {
+                reliability: reliable(16),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = p.producer::<u64>("mixed", ProducerQos::default()).unwrap();
+    // Both sides see the other as incompatible, and the consumer is told why.
+    let reason = loop {
+        match consumer.recv_event_timeout(WAIT) {
+            Ok(Event::Notification(Notification::Incompatible { reason, .. })) => break reason,
+            Ok(other) => panic!("unexpected {other:?}"),
+            Err(err) => panic!("no incompatibility reported: {err}"),
+        }
+    };
+    assert_eq!(reason, ndds_client::Incompatibility::Reliability);
+    assert!(common::eventually(WAIT, || consumer.incompatible().len() == 1));
+    assert!(common::eventually(WAIT, || producer.incompatible().len() == 1));
+    assert!(producer.matched().is_empty() && consumer.matched().is_empty());
+    producer.write(&1).unwrap();
+    assert_eq!(
+        consumer
+            .recv_timeout(Duration::from_millis(200))
+            .unwrap_err(),
+        RecvError::Timeout
+    );
+    // A best-effort consumer of a reliable producer matches: it takes what arrives.
+    let reliable_producer = p
+        .producer::<u64>(
+            "offered",
+            ProducerQos {
+                reliability: reliable(16),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    let best_effort = p.consumer::<u64>("offered", ConsumerQos::default()).unwrap();
+    assert!(reliable_producer.wait_for_consumers(1, WAIT));
+    reliable_producer.write(&5).unwrap();
+    assert_eq!(best_effort.recv_timeout(WAIT).unwrap().value, 5);
+}
+
+#[test]
+fn large_reliable_samples_cross_between_two_daemons_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let host_a = unique_config(dir.path(), "host-a");
+    let host_b = sibling(&host_a, dir.path(), "host-b");
+    let (writer_side, reader_side) = (participant(&host_a), participant(&host_b));
+    let consumer = reader_side
+        .consumer::<Vec<u8>>(
+            "frames",
+            ConsumerQos {
+                depth: 2,
+                reliability: reliable(4),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = writer_side
+        .producer::<Vec<u8>>(
+            "frames",
+            ProducerQos {
+                reliability: reliable(4),
+                write_timeout: Duration::from_secs(20),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, Duration::from_secs(10)));
+    let frame = |i: u32| -> Vec<u8> {
+        let len = 3_000_000 + i as usize * 1000;
+        (0..len).map(|b| (b as u32 ^ i) as u8).collect()
+    };
+    let writer = std::thread::spawn(move || {
+        for i in 0..6 {
+            producer.write(&frame(i)).unwrap();
+        }
+        producer
+    });
+    for i in 0..6 {
+        let sample = consumer.recv_timeout(Duration::from_secs(20)).unwrap();
+        assert_eq!(sample.info.seq, u64::from(i) + 1);
+        assert!(sample.value == frame(i), "frame {i} intact");
+    }
+    let _producer = writer.join().unwrap();
+}
