@@ -68,7 +68,14 @@ pub struct ParticipantBuilder {
     embedded_config: Option<DaemonConfig>,
     name: Option<String>,
     role: Option<Role>,
+    max_sample: Option<usize>,
 }
+
+/// Smallest accepted [`ParticipantBuilder::max_sample_size`].
+const MIN_MAX_SAMPLE: usize = 1024;
+/// Largest accepted [`ParticipantBuilder::max_sample_size`] (a fragment's `total_len` is a
+/// `u32`).
+const MAX_MAX_SAMPLE: usize = u32::MAX as usize;
 
 impl ParticipantBuilder {
     /// Domain id (default: `NDDS_DOMAIN`, else 0).
@@ -100,6 +107,16 @@ impl ParticipantBuilder {
     /// Process name shown by `ndds nodes` (default: the executable's name).
     pub fn name(mut self, name: impl Into<String>) -> Self {
         self.name = Some(name.into());
+        self
+    }
+
+    /// Largest sample, in encoded bytes, this participant's producers write and its consumers
+    /// accept (default: `NDDS_MAX_SAMPLE`, else [`crate::DEFAULT_MAX_SAMPLE`], 16 MiB). Larger
+    /// writes fail with [`crate::WriteError::TooLarge`]; larger incoming samples are refused
+    /// and counted. Up to four samples of this size may be held in reassembly at once. Accepted
+    /// range: 1 KiB to 4 GiB − 1.
+    pub fn max_sample_size(mut self, bytes: usize) -> Self {
+        self.max_sample = Some(bytes);
         self
     }
 
@@ -154,12 +171,25 @@ impl ParticipantBuilder {
             config.socket = socket.clone();
             config
         });
+        let max_sample = match (self.max_sample, env("NDDS_MAX_SAMPLE")) {
+            (Some(bytes), _) => bytes,
+            (None, Some(text)) => text.parse().map_err(|_| {
+                ConnectError::Setting(format!("NDDS_MAX_SAMPLE={text:?} is not a number of bytes"))
+            })?,
+            (None, None) => crate::DEFAULT_MAX_SAMPLE,
+        };
+        if !(MIN_MAX_SAMPLE..=MAX_MAX_SAMPLE).contains(&max_sample) {
+            return Err(ConnectError::Setting(format!(
+                "maximum sample size {max_sample} is outside {MIN_MAX_SAMPLE}..={MAX_MAX_SAMPLE} bytes"
+            )));
+        }
         Ok(Settings {
             socket,
             embedded,
             embedded_config,
             name: self.name.unwrap_or_else(process_name),
             role: self.role.unwrap_or(Role::Client),
+            max_sample,
         })
     }
 }
@@ -171,6 +201,7 @@ struct Settings {
     embedded_config: DaemonConfig,
     name: String,
     role: Role,
+    max_sample: usize,
 }
 
 fn process_name() -> String {
@@ -283,12 +314,12 @@ impl Participant {
         };
         let (stream, welcome) = Self::reach_daemon(&settings, hello.clone())?;
         let interface = Ipv4Addr::from(welcome.interface);
-        let data = match DataPlane::open(
-            interface,
-            welcome.domain,
-            participant,
-            Limits::for_interface(interface),
-        ) {
+        let limits = |interface| Limits {
+            max_sample: settings.max_sample,
+            ..Limits::for_interface(interface)
+        };
+        let data = match DataPlane::open(interface, welcome.domain, participant, limits(interface))
+        {
             Ok(data) => data,
             // A tool may reach a daemon's socket from where the daemon's interface does not
             // exist (another network namespace); listings need no data socket that works.
@@ -298,7 +329,7 @@ impl Participant {
                     Ipv4Addr::LOCALHOST,
                     welcome.domain,
                     participant,
-                    Limits::for_interface(Ipv4Addr::LOCALHOST),
+                    limits(Ipv4Addr::LOCALHOST),
                 )
                 .map_err(|source| ConnectError::DataSocket { interface, source })?
             }

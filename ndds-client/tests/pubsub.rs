@@ -314,3 +314,45 @@ fn large_samples_cross_in_fragments_and_oversized_ones_are_refused() {
     producer.write(&vec![1, 2, 3]).unwrap();
     assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, vec![1, 2, 3]);
 }
+
+#[test]
+fn the_maximum_sample_size_is_configurable_on_both_sides() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let small = |bytes| {
+        Participant::builder()
+            .embedded(EmbeddedPolicy::Auto)
+            .embedded_config(config.clone())
+            .max_sample_size(bytes)
+            .connect()
+    };
+    let err = small(10).unwrap_err();
+    assert!(err.to_string().contains("outside"), "{err}");
+    let writer_side = participant(&config);
+    let reader_side = small(100_000).unwrap();
+    let consumer = reader_side
+        .consumer::<Vec<u8>>("big", ConsumerQos::default())
+        .unwrap();
+    let producer = writer_side
+        .producer::<Vec<u8>>("big", ProducerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    // Sent (the writer allows 16 MiB) but refused piece by piece by the reader.
+    producer.write(&vec![9u8; 300_000]).unwrap();
+    assert!(eventually(WAIT, || reader_side.stats().fragments_refused > 0));
+    assert_eq!(
+        consumer
+            .recv_timeout(Duration::from_millis(200))
+            .unwrap_err(),
+        RecvError::Timeout
+    );
+    // Within both limits: delivered.
+    producer.write(&vec![8u8; 90_000]).unwrap();
+    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, vec![8u8; 90_000]);
+    // The writer's own limit.
+    let limited = reader_side
+        .producer::<Vec<u8>>("big", ProducerQos::default())
+        .unwrap();
+    let err = limited.write(&vec![0u8; 200_000]).unwrap_err();
+    assert!(matches!(err, ndds_client::WriteError::TooLarge { max: 100_000, .. }), "{err}");
+}

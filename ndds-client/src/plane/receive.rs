@@ -87,8 +87,14 @@ pub(crate) struct Reassembly {
 
 impl Reassembly {
     pub(crate) fn new(limits: Limits) -> Self {
+        // Room for four samples of the largest size being put together at once.
         let config = ReassemblyConfig {
             max_sample_bytes: limits.max_sample,
+            max_total_bytes: limits
+                .max_sample
+                .saturating_mul(4)
+                .saturating_add(1 << 20)
+                .max(ReassemblyConfig::default().max_total_bytes),
             ..ReassemblyConfig::default()
         };
         Reassembly {

@@ -136,6 +136,9 @@ impl DataSub<'_> {
 pub struct DataWriter {
     buf: Vec<u8>,
     subs: usize,
+    /// False when the addressing cannot be sent (more than [`MAX_READERS`] readers): every
+    /// push is refused.
+    valid: bool,
 }
 
 impl DataWriter {
@@ -145,10 +148,13 @@ impl DataWriter {
     }
 
     /// Starts a datagram from `writer` of participant `sender` to `readers` of
-    /// `reader_participant`, discarding anything begun before.
+    /// `reader_participant`, discarding anything begun before. A datagram names at most
+    /// [`MAX_READERS`] readers: with more, every [`DataWriter::push`] is refused (split the
+    /// readers into groups).
     pub fn begin(&mut self, domain: u16, sender: u64, to: &Addressing<'_>) {
         self.buf.clear();
         self.subs = 0;
+        self.valid = to.readers.len() <= MAX_READERS;
         Header {
             kind: MessageKind::Data,
             domain,
@@ -164,6 +170,16 @@ impl DataWriter {
     /// was appended (the datagram is unchanged otherwise).
     pub fn push(&mut self, sub: &DataSub<'_>, limit: usize) -> bool {
         let mark = self.buf.len();
+        // Refused before encoding when the bytes carried alone are too many, so offering a
+        // large sample costs no buffer growth.
+        let carried = match sub {
+            DataSub::Sample(s) => s.payload.len(),
+            DataSub::Fragment(f) => f.chunk.len(),
+            DataSub::Heartbeat(_) | DataSub::Gap(_) => 0,
+        };
+        if !self.valid || mark + 1 + carried > limit.min(MAX_DATAGRAM) {
+            return false;
+        }
         self.buf.push(sub.kind() as u8);
         let buf = std::mem::take(&mut self.buf);
         let result = match sub {
@@ -245,8 +261,10 @@ pub struct DataDatagram<'a> {
 }
 
 impl<'a> DataDatagram<'a> {
-    /// Parses the header and the reader participant; submessages are decoded by iterating.
-    /// The domain is checked against `domain`.
+    /// Parses the header and the addressing (reader participant, writer, readers); the
+    /// submessages are decoded by iterating [`DataDatagram::subs`]. The domain is checked
+    /// against `domain`; a datagram without submessages, or naming more than
+    /// [`MAX_READERS`] readers, is malformed.
     pub fn parse(bytes: &'a [u8], domain: u16) -> Result<Self, DropReason> {
         let (header, body) = Header::parse(bytes)?;
         if header.domain != domain {
@@ -325,8 +343,9 @@ fn take<'a, T: Deserialize<'a>>(body: &'a [u8]) -> Result<(T, &'a [u8]), DropRea
     postcard::take_from_bytes(body).map_err(|_| DropReason::Malformed)
 }
 
-/// The smallest possible `Data` datagram: header, participant, one submessage kind byte.
-pub const MIN_DATA_LEN: usize = HEADER_LEN + 2;
+/// The smallest `Data` datagram the parser accepts: header, reader participant, writer and
+/// reader count (one byte each when zero), and one submessage kind byte.
+pub const MIN_DATA_LEN: usize = HEADER_LEN + 4;
 
 #[cfg(test)]
 mod tests {

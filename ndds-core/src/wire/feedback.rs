@@ -88,8 +88,10 @@ impl FeedbackSub<'_> {
     }
 }
 
-/// Encodes a whole `Feedback` datagram into `out` (cleared first). Submessages whose bitmap is
-/// too long are refused.
+/// Encodes a whole `Feedback` datagram into `out` (cleared first). A datagram needs at least
+/// one submessage and every bitmap at most [`MAX_BITMAP_BYTES`]; otherwise, or when the
+/// result would exceed [`MAX_DATAGRAM`], nothing is encoded (`out` is left empty) and
+/// [`DropReason::Invalid`] is returned.
 pub fn encode_feedback(
     domain: u16,
     sender: u64,
@@ -98,29 +100,28 @@ pub fn encode_feedback(
     out: &mut Vec<u8>,
 ) -> Result<(), DropReason> {
     out.clear();
+    if subs.is_empty() || subs.iter().any(|s| s.bitmap().len() > MAX_BITMAP_BYTES) {
+        return Err(DropReason::Invalid);
+    }
     Header {
         kind: MessageKind::Feedback,
         domain,
         sender,
     }
     .emit(out);
-    let mut buf = postcard::to_extend(&writer_participant, std::mem::take(out))
-        .map_err(|_| DropReason::Malformed)?;
+    // Encoding integers and byte strings into a Vec cannot fail.
+    let mut buf = postcard::to_extend(&writer_participant, std::mem::take(out)).unwrap_or_default();
     for sub in subs {
-        if sub.bitmap().len() > MAX_BITMAP_BYTES {
-            *out = buf;
-            return Err(DropReason::Invalid);
-        }
         buf.push(sub.kind() as u8);
         buf = match sub {
             FeedbackSub::AckNack(a) => postcard::to_extend(a, buf),
             FeedbackSub::NackFrag(n) => postcard::to_extend(n, buf),
         }
-        .map_err(|_| DropReason::Malformed)?;
+        .unwrap_or_default();
     }
-    let too_large = buf.len() > MAX_DATAGRAM;
     *out = buf;
-    if too_large {
+    if out.len() > MAX_DATAGRAM {
+        out.clear();
         return Err(DropReason::Invalid);
     }
     Ok(())

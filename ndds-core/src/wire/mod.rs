@@ -61,8 +61,9 @@ pub enum DropReason {
     /// Our own datagram, looped back by multicast.
     #[error("own datagram")]
     Own,
-    /// A well-formed message this receiver does not handle: `Data` on a discovery socket,
-    /// discovery messages on a data socket, anything reaching an engine after `close`.
+    /// A well-formed message this receiver does not handle: `Data` or `Feedback` on a
+    /// discovery socket, discovery messages on a data socket, anything reaching an engine
+    /// after `close`.
     #[error("message kind not handled by this receiver")]
     Unexpected,
 }

@@ -335,9 +335,6 @@ fn warm_builders_allocate_nothing() {
 /// A push that is refused because the datagram would exceed its limit should not cost more
 /// memory than the limit: the fragmenter offers whole samples to find out whether they fit.
 #[test]
-#[ignore = "inefficiency in ndds-core/src/wire/data.rs: DataWriter::push encodes the whole \
-            submessage before checking the limit, so refusing a 1 MiB sample grows the writer's \
-            buffer to 1 MiB (and keeps it)"]
 fn a_refused_push_allocates_no_more_than_its_limit() {
     let big = vec![0_u8; 1 << 20];
     let to = Addressing {
