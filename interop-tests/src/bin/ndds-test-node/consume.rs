@@ -4,7 +4,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use ndds_client::{Consumer, ConsumerQos, Event, Participant, RecvError};
+use ndds_client::{Consumer, ConsumerQos, Event, Participant, RecvError, Reliability};
 use serde_json::json;
 
 use crate::produce::topic_names;
@@ -39,6 +39,9 @@ pub struct Args {
     /// Queue depth of each consumer.
     #[arg(long, default_value_t = 64)]
     pub depth: usize,
+    /// Request reliability, holding up to this many out-of-order samples per producer.
+    #[arg(long)]
+    pub reliable: Option<u32>,
 }
 
 impl Args {
@@ -46,6 +49,9 @@ impl Args {
         ConsumerQos {
             deadline: self.deadline_ms.map(Duration::from_millis),
             depth: self.depth,
+            reliability: self
+                .reliable
+                .map_or(Reliability::BestEffort, |depth| Reliability::Reliable { depth }),
             ..ConsumerQos::default()
         }
     }

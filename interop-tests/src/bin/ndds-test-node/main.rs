@@ -11,6 +11,9 @@
 //!   `OldData`, `DeserializationError`, with the variant's fields), and `done` with the
 //!   participant's data-socket counters.
 //!
+//! `--reliable DEPTH` makes either side reliable; `--type blob --payload BYTES` writes samples
+//! of any size whose bytes a consumer checks (`len`, `intact`).
+//!
 //! Layout: `produce.rs` and `consume.rs` (one role each), `samples.rs` (the sample types),
 //! `report.rs` (the JSON lines).
 
@@ -23,7 +26,7 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use ndds_client::Participant;
 
-use samples::{SampleType, Telemetry, TelemetryV2};
+use samples::{Blob, SampleType, Telemetry, TelemetryV2};
 
 #[derive(Debug, Parser)]
 struct Cli {
@@ -58,5 +61,7 @@ fn main() -> anyhow::Result<()> {
         (Role::Consume(args), SampleType::TelemetryV2) => {
             consume::run::<TelemetryV2>(&participant, args)
         }
+        (Role::Produce(args), SampleType::Blob) => produce::run::<Blob>(&participant, args),
+        (Role::Consume(args), SampleType::Blob) => consume::run::<Blob>(&participant, args),
     }
 }

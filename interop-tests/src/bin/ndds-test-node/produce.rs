@@ -4,7 +4,7 @@
 use std::collections::HashSet;
 use std::time::{Duration, Instant};
 
-use ndds_client::{Guid, Participant, Producer, ProducerQos};
+use ndds_client::{Guid, Participant, Producer, ProducerQos, Reliability};
 use serde_json::json;
 
 use crate::report::{self, emit};
@@ -44,6 +44,18 @@ pub struct Args {
     /// Seconds `--wait-consumers` may take.
     #[arg(long, default_value_t = 10.0)]
     pub wait_timeout: f64,
+    /// Offer reliability with a history of this many samples.
+    #[arg(long)]
+    pub reliable: Option<u32>,
+    /// How long a reliable write may wait for a full window, in seconds.
+    #[arg(long, default_value_t = 30.0)]
+    pub write_timeout: f64,
+    /// Seconds to stay after the last write (a reliable producer repairs meanwhile).
+    #[arg(long, default_value_t = 0.0)]
+    pub linger: f64,
+    /// Payload bytes of each sample (`--type blob`).
+    #[arg(long, default_value_t = 0)]
+    pub payload: usize,
     /// Exit after this many seconds whatever happens (an orphaned node never lingers).
     #[arg(long, default_value_t = 300.0)]
     pub max_seconds: f64,
@@ -63,6 +75,10 @@ impl Args {
         if let Some(ms) = self.persistence_ms {
             qos.persistence = Duration::from_millis(ms);
         }
+        if let Some(depth) = self.reliable {
+            qos.reliability = Reliability::Reliable { depth };
+        }
+        qos.write_timeout = Duration::from_secs_f64(self.write_timeout.max(0.0));
         qos
     }
 }
@@ -108,14 +124,20 @@ pub fn run<T: TestSample>(participant: &Participant, args: &Args) -> anyhow::Res
             continue;
         };
         seq += 1;
-        let sample = T::make(seq, args.value);
+        let sample = T::make(seq, args.value, args.payload);
         for producer in &producers {
             producer.write(&sample)?;
         }
         let due = started + period.mul_f64(seq as f64);
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
     }
-    emit(json!({"event": "done", "sent": seq}));
+    emit(json!({"event": "done", "sent": seq, "elapsed_ms": started.elapsed().as_secs_f64() * 1000.0}));
+    // A reliable producer stays until its consumers have everything (or `--linger` passes):
+    // its history is what repairs their losses.
+    let linger = Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));
+    while Instant::now() < linger && started.elapsed() < max {
+        std::thread::sleep(CHECK_EVERY);
+    }
     Ok(())
 }
 
