@@ -3,6 +3,7 @@
 mod echo;
 mod hz;
 mod nodes;
+mod perf;
 mod publish;
 mod topics;
 
@@ -32,6 +33,8 @@ enum Command {
     Pub(publish::Args),
     /// Measure the sample rate of a topic.
     Hz(hz::Args),
+    /// Measure latency (ping/pong) and throughput (pub/sub), or the raw-UDP baseline.
+    Perf(perf::Args),
 }
 
 /// Runs the parsed command line.
@@ -42,5 +45,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Echo(args) => echo::run(&cli.daemon, &args),
         Command::Pub(args) => publish::run(&cli.daemon, &args),
         Command::Hz(args) => hz::run(&cli.daemon, &args),
+        Command::Perf(args) => perf::run(&cli.daemon, &args),
     }
 }
