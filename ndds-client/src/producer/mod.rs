@@ -10,7 +10,6 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::Bytes;
 use ndds_core::reliability::{ReliableWriter, WriterConfig, WriterOutput};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::data::{FLAG_RELIABLE, Gap, Heartbeat, Sample};
@@ -20,7 +19,7 @@ use ndds_core::wire::{
 };
 use serde::Serialize;
 
-use self::outbox::{Kept, Outbox, whole_limit};
+use self::outbox::{Kept, KeptPool, Outbox, whole_limit};
 use crate::error::WriteError;
 use crate::participant::EndpointHandle;
 use crate::peers::{Matched, Peers};
@@ -45,6 +44,8 @@ struct Out {
     kept: Option<Kept>,
     /// `Some` for a reliable producer.
     reliable: Option<Reliable>,
+    /// Buffers of kept samples.
+    pool: KeptPool,
 }
 
 /// State of one producer shared with the participant's router, receive and timer threads.
@@ -87,6 +88,9 @@ impl ProducerState {
             net,
             timer,
             out: Mutex::new(Out {
+                pool: KeptPool::new(reliable.as_ref().map_or(2, |r| {
+                    r.writer.config().depth.saturating_add(2)
+                })),
                 reliable,
                 ..Out::default()
             }),
@@ -203,7 +207,7 @@ impl ProducerState {
         // fragmented one of a best-effort producer.
         let kept = (out.reliable.is_some() || fragmented).then(|| Kept {
             meta,
-            bytes: Bytes::copy_from_slice(payload),
+            bytes: out.pool.copy(payload),
         });
         if let Some(reliable) = &mut out.reliable
             && let Some(kept) = &kept

@@ -4,9 +4,9 @@
 //! control).
 
 use std::net::SocketAddrV4;
+use std::sync::Arc;
 use std::time::Instant;
 
-use bytes::Bytes;
 use ndds_core::fragment::Split;
 use ndds_core::wire::data::{
     Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample, prefix_overhead,
@@ -319,5 +319,45 @@ impl Outbox {
 #[derive(Clone, Debug)]
 pub(crate) struct Kept {
     pub(crate) meta: SampleMeta,
-    pub(crate) bytes: Bytes,
+    pub(crate) bytes: Arc<Vec<u8>>,
+}
+
+/// Buffers for kept samples, reused once nothing holds them any more (the history let go of
+/// the sample), so a reliable producer allocates nothing per sample in a steady state.
+#[derive(Debug, Default)]
+pub(crate) struct KeptPool {
+    buffers: Vec<Arc<Vec<u8>>>,
+    /// Where the search for a free buffer starts: buffers come free in the order they were
+    /// taken (the history is first in, first out), so the next one is usually free.
+    next: usize,
+}
+
+impl KeptPool {
+    /// At most this many buffers are kept for reuse (a history of `depth` samples needs
+    /// `depth + 1`).
+    pub(crate) fn new(capacity: usize) -> Self {
+        KeptPool {
+            buffers: Vec::with_capacity(capacity.min(4096)),
+            next: 0,
+        }
+    }
+
+    /// A buffer holding a copy of `payload`.
+    pub(crate) fn copy(&mut self, payload: &[u8]) -> Arc<Vec<u8>> {
+        let len = self.buffers.len();
+        for step in 0..len {
+            let index = (self.next + step) % len;
+            if let Some(buffer) = Arc::get_mut(&mut self.buffers[index]) {
+                buffer.clear();
+                buffer.extend_from_slice(payload);
+                self.next = (index + 1) % len;
+                return self.buffers[index].clone();
+            }
+        }
+        let buffer = Arc::new(payload.to_vec());
+        if self.buffers.len() < self.buffers.capacity() {
+            self.buffers.push(buffer.clone());
+        }
+        buffer
+    }
 }

@@ -164,6 +164,35 @@ impl ReaderState {
     }
 }
 
+/// An ordered set of reader keys in a sorted vector: unlike a `BTreeSet`, it keeps its
+/// allocation when emptied, so marking readers dirty write after write allocates nothing.
+#[derive(Debug)]
+struct KeySet<K>(Vec<K>);
+
+impl<K> Default for KeySet<K> {
+    fn default() -> Self {
+        KeySet(Vec::new())
+    }
+}
+
+impl<K: Ord + Copy> KeySet<K> {
+    fn insert(&mut self, key: K) {
+        if let Err(at) = self.0.binary_search(&key) {
+            self.0.insert(at, key);
+        }
+    }
+
+    fn remove(&mut self, key: &K) {
+        if let Ok(at) = self.0.binary_search(key) {
+            self.0.remove(at);
+        }
+    }
+
+    fn first(&self) -> Option<&K> {
+        self.0.first()
+    }
+}
+
 /// A reliable writer: `K` names a reader, `S` is a stored sample (cheap to clone, e.g. an
 /// `Arc`'d encoding).
 #[derive(Debug)]
@@ -173,7 +202,7 @@ pub struct ReliableWriter<K, S> {
     history: History<S>,
     readers: BTreeMap<K, ReaderState>,
     /// Readers with queued output.
-    dirty: BTreeSet<K>,
+    dirty: KeySet<K>,
     period_due: Option<Instant>,
     idle_due: Option<Instant>,
     /// Samples and bytes written since the last heartbeat to the readers behind.
@@ -199,7 +228,7 @@ where
             last: 0,
             history: History::new(),
             readers: BTreeMap::new(),
-            dirty: BTreeSet::new(),
+            dirty: KeySet::default(),
             period_due: None,
             idle_due: None,
             since_heartbeat: (0, 0),
