@@ -313,18 +313,27 @@ fn a_datagram_naming_one_reader_many_times_delivers_once() {
     assert!(producer.wait_for_consumers(1, WAIT));
     let reader = producer.matched()[0].clone();
     let payload = postcard::to_allocvec(&5u32).unwrap();
-    let data = Message::Data(ndds_core::wire::Data {
-        writer: 1,
-        reader_participant: reader.guid.participant,
-        readers: vec![reader.guid.entity; 10_000].into(),
-        seq: 1,
-        timestamp_ns: 0,
-        strength: 0,
-        persistence_us: 0,
+    // The most readers a datagram may name, all the same one.
+    let readers = vec![reader.guid.entity; ndds_core::wire::data::MAX_READERS];
+    let mut writer = ndds_core::wire::DataWriter::new();
+    writer.begin(
+        domain.domain,
+        0xfeed,
+        &ndds_core::wire::data::Addressing {
+            reader_participant: reader.guid.participant,
+            writer: 1,
+            readers: &readers,
+        },
+    );
+    let sample = ndds_core::wire::DataSub::Sample(ndds_core::wire::data::Sample {
+        meta: ndds_core::wire::SampleMeta {
+            seq: 1,
+            ..ndds_core::wire::SampleMeta::default()
+        },
         payload: &payload,
     });
-    let mut bytes = Vec::new();
-    wire::encode(domain.domain, 0xfeed, &data, &mut bytes).unwrap();
+    assert!(writer.push(&sample, wire::MAX_DATAGRAM));
+    let bytes = writer.bytes().to_vec();
     loopback_sender()
         .send_to(&bytes, SocketAddrV4::from(reader.locator))
         .unwrap();

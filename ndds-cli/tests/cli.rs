@@ -191,6 +191,7 @@ fn topics_lists_a_typed_producer_and_consumer() {
             ProducerQos {
                 strength: 3,
                 persistence: Duration::from_millis(250),
+                ..ProducerQos::default()
             },
         )
         .unwrap();

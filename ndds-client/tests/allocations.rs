@@ -98,7 +98,12 @@ const WAIT: Duration = Duration::from_secs(10);
 
 /// Writes `count` samples starting at `first`, never more than 32 ahead of `received`, so no
 /// socket buffer overflows and the run is a steady flow.
-fn write_paced(producer: &ndds_client::Producer<Pose>, first: u64, count: u64, received: &dyn Fn() -> u64) {
+fn write_paced(
+    producer: &ndds_client::Producer<Pose>,
+    first: u64,
+    count: u64,
+    received: &dyn Fn() -> u64,
+) {
     for seq in first..first + count {
         producer.write(&pose(seq)).unwrap();
         let deadline = Instant::now() + WAIT;
@@ -187,7 +192,7 @@ fn a_queued_consumer_taking_without_blocking_allocates_nothing_per_sample() {
         .producer::<Pose>("alloc-queue", ProducerQos::default())
         .unwrap();
     assert!(producer.wait_for_consumers(1, WAIT));
-    let mut run = |first: u64, count: u64| {
+    let run = |first: u64, count: u64| {
         for seq in first..first + count {
             producer.write(&pose(seq)).unwrap();
             let deadline = Instant::now() + WAIT;
@@ -237,7 +242,9 @@ fn reliable_publishing_and_delivery_allocate_at_most_one_buffer_per_history_slot
             ..ConsumerQos::default()
         },
     );
-    eprintln!("reliable (depth {DEPTH}), direct delivery: {allocations} allocations for {MEASURED} samples");
+    eprintln!(
+        "reliable (depth {DEPTH}), direct delivery: {allocations} allocations for {MEASURED} samples"
+    );
     assert!(
         allocations <= u64::from(DEPTH) + 2,
         "{allocations} allocations: more than the history's buffers"

@@ -348,11 +348,17 @@ fn the_maximum_sample_size_is_configurable_on_both_sides() {
     );
     // Within both limits: delivered.
     producer.write(&vec![8u8; 90_000]).unwrap();
-    assert_eq!(consumer.recv_timeout(WAIT).unwrap().value, vec![8u8; 90_000]);
+    assert_eq!(
+        consumer.recv_timeout(WAIT).unwrap().value,
+        vec![8u8; 90_000]
+    );
     // The writer's own limit.
     let limited = reader_side
         .producer::<Vec<u8>>("big", ProducerQos::default())
         .unwrap();
     let err = limited.write(&vec![0u8; 200_000]).unwrap_err();
-    assert!(matches!(err, ndds_client::WriteError::TooLarge { max: 100_000, .. }), "{err}");
+    assert!(
+        matches!(err, ndds_client::WriteError::TooLarge { max: 100_000, .. }),
+        "{err}"
+    );
 }

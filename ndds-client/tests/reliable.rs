@@ -196,12 +196,10 @@ fn a_reliable_consumer_does_not_match_a_best_effort_producer() {
         .unwrap();
     let producer = p.producer::<u64>("mixed", ProducerQos::default()).unwrap();
     // Both sides see the other as incompatible, and the consumer is told why.
-    let reason = loop {
-        match consumer.recv_event_timeout(WAIT) {
-            Ok(Event::Notification(Notification::Incompatible { reason, .. })) => break reason,
-            Ok(other) => panic!("unexpected {other:?}"),
-            Err(err) => panic!("no incompatibility reported: {err}"),
-        }
+    let reason = match consumer.recv_event_timeout(WAIT) {
+        Ok(Event::Notification(Notification::Incompatible { reason, .. })) => reason,
+        Ok(other) => panic!("unexpected {other:?}"),
+        Err(err) => panic!("no incompatibility reported: {err}"),
     };
     assert_eq!(reason, ndds_client::Incompatibility::Reliability);
     assert!(common::eventually(WAIT, || consumer.incompatible().len() == 1));
@@ -224,7 +222,9 @@ fn a_reliable_consumer_does_not_match_a_best_effort_producer() {
             },
         )
         .unwrap();
-    let best_effort = p.consumer::<u64>("offered", ConsumerQos::default()).unwrap();
+    let best_effort = p
+        .consumer::<u64>("offered", ConsumerQos::default())
+        .unwrap();
     assert!(reliable_producer.wait_for_consumers(1, WAIT));
     reliable_producer.write(&5).unwrap();
     assert_eq!(best_effort.recv_timeout(WAIT).unwrap().value, 5);

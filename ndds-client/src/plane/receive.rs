@@ -262,7 +262,8 @@ impl DataPlane {
                             if fragment.meta.flags & FLAG_RELIABLE != 0 {
                                 // Pieces of samples every reliable consumer here has moved
                                 // past are stale: they must not start a partial sample again.
-                                let floor = slots.iter().filter_map(|s| s.next_seq(origin.writer)).min();
+                                let floor =
+                                    slots.iter().filter_map(|s| s.next_seq(origin.writer)).min();
                                 if let Some(floor) = floor {
                                     self.reassembly.skip_before(origin.writer, floor);
                                 }

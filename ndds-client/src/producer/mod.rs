@@ -88,9 +88,11 @@ impl ProducerState {
             net,
             timer,
             out: Mutex::new(Out {
-                pool: KeptPool::new(reliable.as_ref().map_or(2, |r| {
-                    r.writer.config().depth.saturating_add(2)
-                })),
+                pool: KeptPool::new(
+                    reliable
+                        .as_ref()
+                        .map_or(2, |r| r.writer.config().depth.saturating_add(2)),
+                ),
                 reliable,
                 ..Out::default()
             }),
@@ -170,7 +172,11 @@ impl ProducerState {
                 return Ok(out);
             }
             let waited = started.elapsed();
-            let Some(left) = self.qos.write_timeout.checked_sub(waited).filter(|l| !l.is_zero())
+            let Some(left) = self
+                .qos
+                .write_timeout
+                .checked_sub(waited)
+                .filter(|l| !l.is_zero())
             else {
                 return Err(WriteError::WouldBlock {
                     waited,

@@ -125,9 +125,11 @@ impl ConsumerSlot {
             return;
         };
         let mut state = lock(&self.state);
-        stream(&mut state, config, origin)
-            .reader
-            .handle_heartbeat(now, heartbeat.first, heartbeat.last);
+        stream(&mut state, config, origin).reader.handle_heartbeat(
+            now,
+            heartbeat.first,
+            heartbeat.last,
+        );
         self.pump(&mut state, now);
         self.reschedule(&state);
     }

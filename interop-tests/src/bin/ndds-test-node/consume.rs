@@ -49,9 +49,9 @@ impl Args {
         ConsumerQos {
             deadline: self.deadline_ms.map(Duration::from_millis),
             depth: self.depth,
-            reliability: self
-                .reliable
-                .map_or(Reliability::BestEffort, |depth| Reliability::Reliable { depth }),
+            reliability: self.reliable.map_or(Reliability::BestEffort, |depth| {
+                Reliability::Reliable { depth }
+            }),
             ..ConsumerQos::default()
         }
     }

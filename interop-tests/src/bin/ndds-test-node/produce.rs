@@ -131,7 +131,9 @@ pub fn run<T: TestSample>(participant: &Participant, args: &Args) -> anyhow::Res
         let due = started + period.mul_f64(seq as f64);
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
     }
-    emit(json!({"event": "done", "sent": seq, "elapsed_ms": started.elapsed().as_secs_f64() * 1000.0}));
+    emit(
+        json!({"event": "done", "sent": seq, "elapsed_ms": started.elapsed().as_secs_f64() * 1000.0}),
+    );
     // A reliable producer stays until its consumers have everything (or `--linger` passes):
     // its history is what repairs their losses.
     let linger = Instant::now() + Duration::from_secs_f64(args.linger.max(0.0));

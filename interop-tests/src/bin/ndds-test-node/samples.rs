@@ -89,7 +89,9 @@ pub struct Blob {
 
 /// Byte `i` of the payload of sample `seq`.
 fn blob_byte(seq: u64, i: usize) -> u8 {
-    (i as u64).wrapping_mul(31).wrapping_add(seq.wrapping_mul(7)) as u8
+    (i as u64)
+        .wrapping_mul(31)
+        .wrapping_add(seq.wrapping_mul(7)) as u8
 }
 
 impl TestSample for Blob {
