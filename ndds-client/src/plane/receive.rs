@@ -208,13 +208,21 @@ impl DataPlane {
         }
         self.stats.received.fetch_add(1, Ordering::Relaxed);
         let kind = match wire::Header::parse(&datagram) {
+            Ok((header, _)) if header.domain != self.net.domain => {
+                return self.count_drop(DropReason::OtherDomain);
+            }
             Ok((header, _)) => header.kind,
             Err(reason) => return self.count_drop(reason),
         };
         let result = match kind {
             MessageKind::Data => self.on_data(&datagram, from),
             MessageKind::Feedback => self.on_feedback(&datagram, from),
-            _ => Err(DropReason::Unexpected),
+            // A discovery message: counted as malformed when its body does not decode (the
+            // receive checks of protocol.md section 4 come first), else as unexpected here.
+            _ => match wire::decode_for_domain(&datagram, self.net.domain) {
+                Ok(_) => Err(DropReason::Unexpected),
+                Err(reason) => Err(reason),
+            },
         };
         if let Err(reason) = result {
             self.count_drop(reason);
