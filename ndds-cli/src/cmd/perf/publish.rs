@@ -109,7 +109,9 @@ fn publish_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Published> {
         args.rate,
         |seq| {
             sample.seq = seq;
-            sample.sent_ns = wall_ns();
+            if throughput::stamp_due(seq, args.rate) {
+                sample.sent_ns = wall_ns();
+            }
             producer.write(&sample)
         },
         || !producer.matched().is_empty(),

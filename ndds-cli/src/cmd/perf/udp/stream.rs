@@ -33,6 +33,7 @@ pub fn publish(
     // has gone.
     // Sends from then on are not counted.
     let (gone, wasted) = (Cell::new(false), Cell::new(0u64));
+    let mut sent_ns = 0;
     let mut out = throughput::publish_for(
         duration,
         rate,
@@ -41,7 +42,10 @@ pub fn publish(
                 wasted.set(wasted.get() + 1);
                 return Ok(());
             }
-            let sent = send_sample(&socket, seq, wall_ns(), &payload);
+            if throughput::stamp_due(seq, rate) {
+                sent_ns = wall_ns();
+            }
+            let sent = send_sample(&socket, seq, sent_ns, &payload);
             if sent
                 .as_ref()
                 .is_err_and(|err| err.kind() == ErrorKind::ConnectionRefused)
