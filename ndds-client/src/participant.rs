@@ -230,8 +230,13 @@ impl Drop for Inner {
     fn drop(&mut self) {
         self.session.shutdown();
         self.data.close();
+        let current = std::thread::current().id();
         for thread in lock(&self.threads).drain(..) {
-            let _ = thread.join();
+            // The last handle may go on one of the participant's own threads (a direct
+            // callback that owned an endpoint): that thread ends by itself once it returns.
+            if thread.thread().id() != current {
+                let _ = thread.join();
+            }
         }
     }
 }

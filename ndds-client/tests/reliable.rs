@@ -159,8 +159,11 @@ fn a_producer_that_drops_the_oldest_never_waits_and_reports_samples_lost() {
     // Every seq is accounted for exactly once, in order: delivered, or inside a lost run.
     let mut next = 1u64;
     let mut lost_runs = 0;
+    let mut trace = Vec::new();
     while next <= COUNT {
-        match consumer.recv_event_timeout(WAIT).unwrap() {
+        let event = consumer.recv_event_timeout(WAIT).unwrap();
+        trace.push(format!("{event:?}").chars().take(120).collect::<String>());
+        match event {
             Event::Sample(sample) => {
                 assert_eq!(sample.info.seq, next, "in order, no duplicate");
                 assert_eq!(sample.value, next);
@@ -176,7 +179,11 @@ fn a_producer_that_drops_the_oldest_never_waits_and_reports_samples_lost() {
             Event::Notification(other) => panic!("unexpected {other:?}"),
         }
     }
-    assert!(lost_runs >= 1, "a consumer that fell behind must be told");
+    assert!(
+        lost_runs >= 1,
+        "a consumer that fell behind must be told: {:?} {trace:#?}",
+        consumer.stats()
+    );
     assert_eq!(next, COUNT + 1);
 }
 
@@ -273,4 +280,59 @@ fn large_reliable_samples_cross_between_two_daemons_in_order() {
         assert!(sample.value == frame(i), "frame {i} intact");
     }
     let _producer = writer.join().unwrap();
+}
+
+#[test]
+fn a_relay_in_a_direct_callback_is_told_at_once_when_its_window_is_full() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (relay_side, edge) = (participant(&config), participant(&config));
+    // The far end takes nothing: the relay's reliable window (4) fills.
+    let stuck = edge
+        .consumer::<u64>(
+            "out",
+            ConsumerQos {
+                depth: 1,
+                reliability: reliable(4),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let relay_out = relay_side
+        .producer::<u64>(
+            "out",
+            ProducerQos {
+                reliability: reliable(4),
+                write_timeout: Duration::from_secs(30),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(relay_out.wait_for_consumers(1, WAIT));
+    let (tx, results) = std::sync::mpsc::channel();
+    let _relay = relay_side
+        .consumer::<u64>("in", ConsumerQos::default())
+        .unwrap()
+        .on_sample_direct(move |sample| {
+            let started = Instant::now();
+            let result = relay_out.write(&sample.value);
+            let _ = tx.send((result.map_err(|e| e.to_string()), started.elapsed()));
+        })
+        .unwrap();
+    let source = edge.producer::<u64>("in", ProducerQos::default()).unwrap();
+    assert!(source.wait_for_consumers(1, WAIT));
+    let mut blocked = None;
+    for i in 1..=20 {
+        source.write(&i).unwrap();
+        let (result, took) = results.recv_timeout(WAIT).unwrap();
+        if let Err(message) = result {
+            blocked = Some((i, message, took));
+            break;
+        }
+    }
+    let (at, message, took) = blocked.expect("the window filled");
+    assert!(message.contains("blocked"), "{message}");
+    assert!(took < Duration::from_secs(1), "waited {took:?} on the receive thread");
+    assert!(at > 4, "the window holds 4 samples and the consumer's queue 1; blocked at {at}");
+    drop(stuck);
 }

@@ -62,7 +62,10 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
     /// thread, for samples released by a minimum-separation window), with no thread switch:
     /// the lowest latency ndds offers, as NDDS's immediate consumers had. The callback must be
     /// quick and must not block: every consumer of the participant waits while it runs. It
-    /// must not call back into this consumer. Fails in polled mode.
+    /// must not call back into this consumer. It may write with producers (a relay, a pong);
+    /// a reliable producer whose window is full then fails at once with
+    /// [`crate::WriteError::WouldBlock`] instead of waiting, since the acknowledgements that
+    /// would open it arrive on this very thread. Fails in polled mode.
     pub fn on_sample_direct<F>(self, mut callback: F) -> Result<DirectConsumer, RecvError>
     where
         F: FnMut(Sample<T>) + Send + 'static,
@@ -74,7 +77,7 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
                 callback(sample);
             }
         }));
-        Ok(DirectConsumer { _raw: self.raw })
+        Ok(DirectConsumer { raw: self.raw })
     }
 }
 
@@ -82,7 +85,14 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
 /// consumer (see [`Consumer::on_sample_direct`]).
 #[derive(Debug)]
 pub struct DirectConsumer {
-    _raw: RawConsumer,
+    raw: RawConsumer,
+}
+
+impl DirectConsumer {
+    /// The consumer underneath (topic, matches, counters).
+    pub fn consumer(&self) -> &RawConsumer {
+        &self.raw
+    }
 }
 
 /// A consumer delivering to a callback; dropping it withdraws the consumer and stops the

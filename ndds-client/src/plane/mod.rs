@@ -31,6 +31,16 @@ const SOCKET_BUFFER: usize = 8 * 1024 * 1024;
 /// one is seen as such.
 const RECV_SIZE: usize = ndds_core::wire::MAX_DATAGRAM + 1;
 
+thread_local! {
+    /// Set on a participant's receive and timer threads.
+    static PLANE_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// True on a participant's receive or timer thread (where direct callbacks run).
+pub(crate) fn on_plane_thread() -> bool {
+    PLANE_THREAD.with(std::cell::Cell::get)
+}
+
 /// An endpoint with timers, run by the participant's timer thread.
 pub(crate) trait Timed: Send + Sync + std::fmt::Debug {
     /// Runs what is due at `now`; returns when to run next.
@@ -185,6 +195,7 @@ impl DataPlane {
 
     /// Receives until [`DataPlane::close`]. Runs on its own thread.
     pub(crate) fn run(&self) {
+        PLANE_THREAD.with(|t| t.set(true));
         let socket = socket2::SockRef::from(&self.socket);
         let mut buf = bytes::BytesMut::new();
         while !self.closed.load(Ordering::Acquire) {
@@ -218,6 +229,7 @@ impl DataPlane {
 
     /// Runs the endpoints' timers until [`DataPlane::close`]. Runs on its own thread.
     pub(crate) fn run_timers(&self) {
+        PLANE_THREAD.with(|t| t.set(true));
         let timer = &self.timer;
         let mut next = lock(&timer.next);
         while !self.closed.load(Ordering::Acquire) {

@@ -34,6 +34,8 @@ pub(crate) struct Origin {
     pub(crate) writer: Guid,
     /// The writer's data socket (feedback goes there).
     pub(crate) from: SocketAddrV4,
+    /// When the datagram arrived (read once per datagram).
+    pub(crate) received: SystemTime,
 }
 
 impl Origin {
@@ -50,7 +52,7 @@ impl Origin {
             writer: self.writer,
             seq: meta.seq,
             source_timestamp: SystemTime::UNIX_EPOCH + Duration::from_nanos(meta.timestamp_ns),
-            reception_timestamp: SystemTime::now(),
+            reception_timestamp: self.received,
             strength: meta.strength,
             status: SampleStatus::Fresh,
         };
@@ -241,6 +243,7 @@ impl DataPlane {
                 entity: parsed.writer,
             },
             from,
+            received: SystemTime::now(),
         };
         let slots = self.slots(&parsed.readers);
         if slots.is_empty() {
@@ -308,10 +311,17 @@ impl DataPlane {
         flags: u8,
         raw: RawSample,
     ) {
-        for slot in slots {
-            self.stats.delivered.fetch_add(1, Ordering::Relaxed);
+        let Some((last, others)) = slots.split_last() else {
+            return;
+        };
+        self.stats
+            .delivered
+            .fetch_add(slots.len() as u64, Ordering::Relaxed);
+        for slot in others {
             slot.offer(now, origin, meta, flags, raw.clone());
         }
+        // The last one takes the sample itself: no reference count traffic for one consumer.
+        last.offer(now, origin, meta, flags, raw);
     }
 
     /// The consumers named by a datagram; unknown ones are counted.

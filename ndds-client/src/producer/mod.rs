@@ -24,7 +24,7 @@ use crate::error::WriteError;
 use crate::participant::EndpointHandle;
 use crate::peers::{Matched, Peers};
 use crate::plane::{Net, Timed, Timer, WriterSide};
-use crate::qos::{ProducerQos, WhenFull, duration_us};
+use crate::qos::{Batching, ProducerQos, WhenFull, duration_us};
 use crate::sync::lock;
 
 /// The reliable side of a reliable producer.
@@ -46,6 +46,9 @@ struct Out {
     reliable: Option<Reliable>,
     /// Buffers of kept samples.
     pool: KeptPool,
+    /// The time the timer thread will run this producer's timers at the latest (what was last
+    /// handed to it), so a write schedules the timer only when it needs it earlier.
+    armed: Option<Instant>,
 }
 
 /// State of one producer shared with the participant's router, receive and timer threads.
@@ -132,7 +135,7 @@ impl ProducerState {
         }
         self.window.notify_all();
         self.drain(&mut out);
-        if let Some(at) = self.next_timer(&out) {
+        if let Some(at) = self.arm(&mut out) {
             self.timer.schedule(at);
         }
     }
@@ -158,12 +161,14 @@ impl ProducerState {
         result
     }
 
-    /// Waits (up to the write timeout) until a reliable producer's window is open.
+    /// Waits (up to the write timeout) until a reliable producer's window is open. On the
+    /// participant's own receive or timer thread (a direct callback writing) it never waits:
+    /// the acknowledgements that would open the window arrive on that very thread.
     fn wait_for_window<'a>(
         &self,
         mut out: MutexGuard<'a, Out>,
     ) -> Result<MutexGuard<'a, Out>, WriteError> {
-        let started = Instant::now();
+        let mut started = None;
         loop {
             let Some(reliable) = &out.reliable else {
                 return Ok(out);
@@ -171,13 +176,14 @@ impl ProducerState {
             if reliable.writer.window_open() || self.qos.when_full == WhenFull::DropOldest {
                 return Ok(out);
             }
+            let started = *started.get_or_insert_with(Instant::now);
             let waited = started.elapsed();
-            let Some(left) = self
+            let left = self
                 .qos
                 .write_timeout
                 .checked_sub(waited)
-                .filter(|l| !l.is_zero())
-            else {
+                .filter(|l| !l.is_zero() && !crate::plane::on_plane_thread());
+            let Some(left) = left else {
                 return Err(WriteError::WouldBlock {
                     waited,
                     unacknowledged: reliable.writer.history_len(),
@@ -207,7 +213,9 @@ impl ProducerState {
             persistence_us: duration_us(self.qos.persistence),
             flags: self.flags(),
         };
-        let now = Instant::now();
+        // The monotonic clock only where something is timed: reliable streams and batches.
+        let now = (out.reliable.is_some() || self.qos.batching != Batching::Off)
+            .then(Instant::now);
         let fragmented = payload.len() > whole_limit(&self.net);
         // Kept for repairs: every sample of a reliable producer (its history), the newest
         // fragmented one of a best-effort producer.
@@ -217,6 +225,7 @@ impl ProducerState {
         });
         if let Some(reliable) = &mut out.reliable
             && let Some(kept) = &kept
+            && let Some(now) = now
         {
             // Recorded before sending, so an acknowledgement racing the send finds it.
             let _ = reliable
@@ -236,7 +245,18 @@ impl ProducerState {
         }
         self.written.fetch_add(1, Ordering::Relaxed);
         self.drain(out);
-        result.map(|()| self.next_timer(out))
+        result.map(|()| self.arm(out))
+    }
+
+    /// The time the timer thread must be told about: the next timer, when it is earlier than
+    /// what the timer thread already has for this producer.
+    fn arm(&self, out: &mut Out) -> Option<Instant> {
+        let at = self.next_timer(out)?;
+        if out.armed.is_some_and(|armed| armed <= at) {
+            return None;
+        }
+        out.armed = Some(at);
+        Some(at)
     }
 
     /// When the producer's timers (batch flush, heartbeats) must run next.
@@ -339,7 +359,8 @@ impl Timed for ProducerState {
             reliable.writer.handle_timeout(now);
             self.drain(&mut out);
         }
-        self.next_timer(&out)
+        out.armed = self.next_timer(&out);
+        out.armed
     }
 }
 
@@ -363,7 +384,7 @@ impl WriterSide for ProducerState {
                     self.window.notify_all();
                 }
                 self.drain(&mut out);
-                self.next_timer(&out)
+                self.arm(&mut out)
             }
             FeedbackSub::NackFrag(nack) => {
                 // The history of a reliable producer, else the newest fragmented sample.

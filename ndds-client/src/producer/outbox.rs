@@ -248,7 +248,7 @@ impl Outbox {
         writer: u32,
         meta: SampleMeta,
         payload: &[u8],
-        now: Instant,
+        now: Option<Instant>,
         batching: Batching,
     ) -> Result<(), WriteError> {
         let mut last_error = None;
@@ -257,9 +257,11 @@ impl Outbox {
         for dest in &mut self.dests {
             let result = if whole {
                 let sub = DataSub::Sample(Sample { meta, payload });
-                match batching {
-                    Batching::Off => dest.send_now(net, writer, None, [sub]),
-                    Batching::On { max_bytes, .. } => dest.batch(net, writer, &sub, now, max_bytes),
+                match (batching, now) {
+                    (Batching::On { max_bytes, .. }, Some(now)) => {
+                        dest.batch(net, writer, &sub, now, max_bytes)
+                    }
+                    _ => dest.send_now(net, writer, None, [sub]),
                 }
             } else {
                 dest.send_fragments(net, writer, None, meta, payload, None)

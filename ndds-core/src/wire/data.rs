@@ -66,8 +66,9 @@ pub struct SampleMeta {
 pub struct Sample<'a> {
     /// Sequence number, timestamp, strength, persistence, flags.
     pub meta: SampleMeta,
-    /// postcard encoding of the value.
-    #[serde(borrow)]
+    /// postcard encoding of the value. (Encoded as a byte string, the same bytes as a
+    /// sequence of `u8` but copied at once rather than byte by byte.)
+    #[serde(borrow, with = "serde_bytes")]
     pub payload: &'a [u8],
 }
 
@@ -83,8 +84,8 @@ pub struct Fragment<'a> {
     pub frag_size: u32,
     /// Index of this piece.
     pub index: u32,
-    /// Its bytes.
-    #[serde(borrow)]
+    /// Its bytes (a byte string, like [`Sample::payload`]).
+    #[serde(borrow, with = "serde_bytes")]
     pub chunk: &'a [u8],
 }
 
@@ -139,6 +140,30 @@ pub struct DataWriter {
     /// False when the addressing cannot be sent (more than [`MAX_READERS`] readers): every
     /// push is refused.
     valid: bool,
+    /// What the prefix in `buf[..prefix_len]` was encoded for, so beginning the next datagram
+    /// for the same destination reuses it instead of encoding it again.
+    prefix: Option<PrefixKey>,
+    prefix_len: usize,
+}
+
+/// The inputs of an encoded header and addressing.
+#[derive(Debug, PartialEq, Eq)]
+struct PrefixKey {
+    domain: u16,
+    sender: u64,
+    reader_participant: u64,
+    writer: u32,
+    readers: SmallVec<[u32; 8]>,
+}
+
+impl PrefixKey {
+    fn matches(&self, domain: u16, sender: u64, to: &Addressing<'_>) -> bool {
+        self.domain == domain
+            && self.sender == sender
+            && self.reader_participant == to.reader_participant
+            && self.writer == to.writer
+            && self.readers[..] == *to.readers
+    }
 }
 
 impl DataWriter {
@@ -152,9 +177,25 @@ impl DataWriter {
     /// [`MAX_READERS`] readers: with more, every [`DataWriter::push`] is refused (split the
     /// readers into groups).
     pub fn begin(&mut self, domain: u16, sender: u64, to: &Addressing<'_>) {
-        self.buf.clear();
         self.subs = 0;
+        if self
+            .prefix
+            .as_ref()
+            .is_some_and(|key| key.matches(domain, sender, to))
+        {
+            self.buf.truncate(self.prefix_len);
+            return;
+        }
+        self.buf.clear();
         self.valid = to.readers.len() <= MAX_READERS;
+        // Remembered only for small reader lists (the common case), so this never allocates.
+        self.prefix = (to.readers.len() <= 8).then(|| PrefixKey {
+            domain,
+            sender,
+            reader_participant: to.reader_participant,
+            writer: to.writer,
+            readers: SmallVec::from_slice(to.readers),
+        });
         Header {
             kind: MessageKind::Data,
             domain,
@@ -164,6 +205,7 @@ impl DataWriter {
         let buf = std::mem::take(&mut self.buf);
         // Encoding integers into a Vec cannot fail.
         self.buf = postcard::to_extend(to, buf).unwrap_or_default();
+        self.prefix_len = self.buf.len();
     }
 
     /// Appends a submessage if the datagram stays within `limit` bytes; returns whether it
