@@ -332,7 +332,13 @@ fn a_relay_in_a_direct_callback_is_told_at_once_when_its_window_is_full() {
     }
     let (at, message, took) = blocked.expect("the window filled");
     assert!(message.contains("blocked"), "{message}");
-    assert!(took < Duration::from_secs(1), "waited {took:?} on the receive thread");
-    assert!(at > 4, "the window holds 4 samples and the consumer's queue 1; blocked at {at}");
+    assert!(
+        took < Duration::from_secs(1),
+        "waited {took:?} on the receive thread"
+    );
+    assert!(
+        at > 4,
+        "the window holds 4 samples and the consumer's queue 1; blocked at {at}"
+    );
     drop(stuck);
 }

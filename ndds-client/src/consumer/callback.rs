@@ -9,7 +9,7 @@ use serde::de::DeserializeOwned;
 use super::raw::RawConsumer;
 use super::typed::{Consumer, decode_event};
 use crate::error::RecvError;
-use crate::sample::{Event, Sample};
+use crate::sample::{Event, RawEvent, RawSample, Sample};
 
 impl<T: DeserializeOwned> Consumer<T> {
     /// Hands every sample to `callback` on a thread of its own until the returned handle is
@@ -78,6 +78,26 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
             }
         }));
         Ok(DirectConsumer { raw: self.raw })
+    }
+}
+
+impl RawConsumer {
+    /// Hands every sample, still encoded, to `callback` on the participant's receive thread:
+    /// [`Consumer::on_sample_direct`] without decoding, for tools that forward, record or
+    /// decode samples their own way (the payload is a view into the received datagram, not a
+    /// copy). Notifications are skipped. The same rules as for `on_sample_direct` apply.
+    /// Fails in polled mode.
+    pub fn on_raw_sample_direct<F>(self, mut callback: F) -> Result<DirectConsumer, RecvError>
+    where
+        F: FnMut(RawSample) + Send + 'static,
+    {
+        self.queue()?;
+        self.state.slot.set_direct(Box::new(move |event| {
+            if let RawEvent::Sample(sample) = event {
+                callback(sample);
+            }
+        }));
+        Ok(DirectConsumer { raw: self })
     }
 }
 

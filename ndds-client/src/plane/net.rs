@@ -69,9 +69,23 @@ impl Net {
 
     /// Sends one datagram; a full socket buffer is retried briefly rather than dropped.
     pub(crate) fn send(&self, bytes: &[u8], to: SocketAddrV4) -> io::Result<()> {
+        self.send_parts(bytes, &[], to)
+    }
+
+    /// Sends one datagram made of `head` followed by `tail`, gathered by the kernel (the tail,
+    /// a sample's payload, is not copied into a buffer first).
+    pub(crate) fn send_parts(&self, head: &[u8], tail: &[u8], to: SocketAddrV4) -> io::Result<()> {
+        let socket = socket2::SockRef::from(&self.socket);
+        let address = socket2::SockAddr::from(to);
+        let parts = [io::IoSlice::new(head), io::IoSlice::new(tail)];
+        let parts = if tail.is_empty() {
+            &parts[..1]
+        } else {
+            &parts[..]
+        };
         let mut attempts = 0;
         loop {
-            match self.socket.send_to(bytes, to) {
+            match socket.send_to_vectored(parts, &address) {
                 Ok(_) => return Ok(()),
                 Err(err)
                     if err.kind() == io::ErrorKind::WouldBlock

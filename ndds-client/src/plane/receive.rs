@@ -2,7 +2,7 @@
 //! (whole samples, pieces of large samples through reassembly, reliable-stream control);
 //! `Feedback` goes to the producer it addresses.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddrV4;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -11,6 +11,7 @@ use std::time::{Duration, Instant, SystemTime};
 use bytes::Bytes;
 use ndds_core::arbitration::{Incoming, SampleStatus};
 use ndds_core::fragment::{FragmentResult, Mode, Piece, Reassembler, ReassemblyConfig};
+use ndds_core::reliability::RttEstimate;
 use ndds_core::wire::data::{FLAG_RELIABLE, Fragment};
 use ndds_core::wire::feedback::{NackFrag, encode_feedback};
 use ndds_core::wire::{
@@ -60,10 +61,14 @@ impl Origin {
     }
 }
 
+/// Partial samples held per reliable writer.
+const RELIABLE_PARTIALS: usize = 4096;
+
 /// How long after the last piece of an incomplete sample its missing pieces are requested,
 /// and how often again while they stay missing.
 const NACK_FRAG_DELAY: Duration = Duration::from_millis(5);
 const NACK_FRAG_RETRY: Duration = Duration::from_millis(20);
+const NACK_FRAG_RETRY_MIN: Duration = Duration::from_millis(1);
 
 /// A partial sample whose missing pieces will be requested.
 #[derive(Clone, Copy, Debug)]
@@ -71,13 +76,66 @@ struct Wanted {
     from: SocketAddrV4,
     reader: u32,
     due: Instant,
+    /// When its pieces were first asked for, and whether they were asked for again since
+    /// (only an answer to a single request measures a round trip).
+    asked: Option<(Instant, bool)>,
+}
+
+/// What became of one piece.
+#[derive(Debug)]
+enum PieceOutcome {
+    /// The sample is whole.
+    Complete { bytes: Vec<u8>, ask_now: bool },
+    /// The sample still lacks pieces.
+    Pending { ask_now: bool },
+    /// Nothing to do (a duplicate, a stale piece).
+    Ignored,
+    /// Refused by reassembly (counted).
+    Refused,
+}
+
+/// A piece of sample `key.1` arrived: a writer sends the pieces of one sample before those of
+/// the next, so earlier samples of the same writer that are still incomplete will get no
+/// more pieces of their first sending: their missing pieces are asked for now rather than
+/// after the quiet delay. Returns whether any request became due.
+fn ask_earlier(state: &mut ReassemblyState, key: (Guid, u64), now: Instant) -> bool {
+    let (writer, seq) = key;
+    let mut any = false;
+    while let Some(&earlier) = state.unasked.range((writer, 0)..(writer, seq)).next() {
+        state.unasked.remove(&earlier);
+        if let Some(want) = state.wanted.get_mut(&earlier) {
+            want.due = want.due.min(now);
+            any = true;
+        }
+    }
+    any
 }
 
 #[derive(Debug)]
 struct ReassemblyState {
     reassembler: Reassembler<Guid>,
     wanted: BTreeMap<(Guid, u64), Wanted>,
+    /// The keys of `wanted` never asked for nor made due yet.
+    unasked: BTreeSet<(Guid, u64)>,
     feedback: Vec<u8>,
+    /// Round trip from a piece request to the first piece answering it.
+    rtt: RttEstimate,
+}
+
+impl ReassemblyState {
+    /// Stops asking for the pieces of `writer`'s samples `from..to`.
+    fn forget(&mut self, writer: Guid, from: u64, to: u64) {
+        while let Some((&key, _)) = self.wanted.range((writer, from)..(writer, to)).next() {
+            self.wanted.remove(&key);
+            self.unasked.remove(&key);
+        }
+    }
+
+    /// How long a piece request stands before it is repeated: adapted to the measured round
+    /// trip, like a reliable reader's requests.
+    fn retry(&self) -> Duration {
+        self.rtt.timeout(NACK_FRAG_RETRY_MIN, NACK_FRAG_RETRY)
+    }
 }
 
 /// Reassembly of large samples for all writers of the participant, and the requests for
@@ -103,7 +161,9 @@ impl Reassembly {
             state: Mutex::new(ReassemblyState {
                 reassembler: Reassembler::new(config),
                 wanted: BTreeMap::new(),
+                unasked: BTreeSet::new(),
                 feedback: Vec::new(),
+                rtt: RttEstimate::default(),
             }),
         }
     }
@@ -115,9 +175,13 @@ impl Reassembly {
         origin: &Origin,
         reader: u32,
         fragment: &Fragment<'_>,
-    ) -> Result<Option<Vec<u8>>, ()> {
+    ) -> PieceOutcome {
         let mode = if fragment.meta.flags & FLAG_RELIABLE != 0 {
-            Mode::reliable()
+            // A reliable writer has a whole window of samples in flight, and under loss many
+            // of them are incomplete at once: hold as many (the byte budget still bounds them).
+            Mode::KeepAll {
+                max_partials: RELIABLE_PARTIALS,
+            }
         } else {
             Mode::LastIsBest
         };
@@ -128,26 +192,49 @@ impl Reassembly {
             .handle_fragment(now, origin.writer, mode, &Piece::from(fragment))
         {
             FragmentResult::Complete(bytes) => {
-                state.wanted.remove(&key);
-                Ok(Some(bytes))
+                if let Some(Wanted {
+                    asked: Some((at, false)),
+                    ..
+                }) = state.wanted.remove(&key)
+                {
+                    state.rtt.sample(now.saturating_duration_since(at));
+                }
+                state.unasked.remove(&key);
+                let ask_now = ask_earlier(&mut state, key, now);
+                PieceOutcome::Complete { bytes, ask_now }
             }
             FragmentResult::Pending => {
                 if mode == Mode::LastIsBest {
                     // Only the newest sample of a best-effort writer is worth repairing.
-                    state.wanted.retain(|(w, _), _| *w != origin.writer);
+                    state.forget(origin.writer, 0, key.1);
+                    state.forget(origin.writer, key.1.saturating_add(1), u64::MAX);
                 }
+                let asked = state.wanted.get(&key).and_then(|w| w.asked);
+                if let Some((at, false)) = asked {
+                    state.rtt.sample(now.saturating_duration_since(at));
+                }
+                let wait = match asked {
+                    Some(_) => state.retry(),
+                    None => NACK_FRAG_DELAY,
+                };
                 state.wanted.insert(
                     key,
                     Wanted {
                         from: origin.from,
                         reader,
-                        due: now + NACK_FRAG_DELAY,
+                        due: now + wait,
+                        // Measured once: later pieces of the same answer are no round trip.
+                        asked: asked.map(|(at, _)| (at, true)),
                     },
                 );
-                Ok(None)
+                if asked.is_none() {
+                    state.unasked.insert(key);
+                }
+                let ask_now = ask_earlier(&mut state, key, now);
+                PieceOutcome::Pending { ask_now }
             }
-            FragmentResult::Ignored(_) => Ok(None),
-            FragmentResult::Rejected(_) => Err(()),
+            FragmentResult::Ignored(_) => PieceOutcome::Ignored,
+            FragmentResult::Rejected(_) => PieceOutcome::Refused,
         }
     }
 
@@ -155,23 +242,27 @@ impl Reassembly {
     fn skip_before(&self, writer: Guid, seq: u64) {
         let mut state = lock(&self.state);
         state.reassembler.skip_before(writer, seq);
-        state.wanted.retain(|(w, s), _| *w != writer || *s >= seq);
+        state.forget(writer, 0, seq);
     }
 
     /// Asks for the missing pieces of samples that stopped progressing; drops partial samples
     /// that timed out. Returns when to run again.
     pub(crate) fn timeout(&self, now: Instant, net: &Net) -> Option<Instant> {
         let mut state = lock(&self.state);
+        let retry = state.retry();
         let ReassemblyState {
             reassembler,
             wanted,
+            unasked,
             feedback,
+            ..
         } = &mut *state;
         reassembler.handle_timeout(now);
         wanted.retain(|(writer, seq), want| {
             if want.due > now {
                 return true;
             }
+            unasked.remove(&(*writer, *seq));
             let Some(missing) = reassembler.missing(*writer, *seq) else {
                 return false;
             };
@@ -192,7 +283,11 @@ impl Reassembly {
             if encoded.is_ok() {
                 let _ = net.send(feedback, want.from);
             }
-            want.due = now + NACK_FRAG_RETRY;
+            want.due = now + retry;
+            want.asked = Some(match want.asked {
+                Some((first, _)) => (first, true),
+                None => (now, false),
+            });
             true
         });
         let next = wanted.values().map(|w| w.due).min();
@@ -263,7 +358,13 @@ impl DataPlane {
                 DataSub::Fragment(fragment) => {
                     let reader = slots.first().map_or(0, |s| s.entity);
                     match self.reassembly.piece(now, &origin, reader, &fragment) {
-                        Ok(Some(whole)) => {
+                        PieceOutcome::Complete {
+                            bytes: whole,
+                            ask_now,
+                        } => {
+                            if ask_now {
+                                self.schedule(now);
+                            }
                             let (meta, info) = origin.describe(&fragment.meta);
                             let raw = RawSample {
                                 payload: Bytes::from(whole),
@@ -280,8 +381,16 @@ impl DataPlane {
                                 }
                             }
                         }
-                        Ok(None) => self.schedule(now + NACK_FRAG_DELAY),
-                        Err(()) => {
+                        PieceOutcome::Pending { ask_now } => {
+                            if fragment.meta.flags & FLAG_RELIABLE != 0 {
+                                for slot in &slots {
+                                    slot.on_partial(now, &origin, fragment.meta.seq);
+                                }
+                            }
+                            self.schedule(if ask_now { now } else { now + NACK_FRAG_DELAY });
+                        }
+                        PieceOutcome::Ignored => {}
+                        PieceOutcome::Refused => {
                             self.stats.fragments_refused.fetch_add(1, Ordering::Relaxed);
                         }
                     }

@@ -27,6 +27,10 @@ use crate::plane::{Net, Timed, Timer, WriterSide};
 use crate::qos::{Batching, ProducerQos, WhenFull, duration_us};
 use crate::sync::lock;
 
+/// A fragmented sample of at most this many pieces is resent whole when a reader asks for it
+/// again; a larger one is repaired piece by piece.
+const FULL_RESEND_PIECES: u32 = 16;
+
 /// The reliable side of a reliable producer.
 #[derive(Debug)]
 struct Reliable {
@@ -214,8 +218,7 @@ impl ProducerState {
             flags: self.flags(),
         };
         // The monotonic clock only where something is timed: reliable streams and batches.
-        let now = (out.reliable.is_some() || self.qos.batching != Batching::Off)
-            .then(Instant::now);
+        let now = (out.reliable.is_some() || self.qos.batching != Batching::Off).then(Instant::now);
         let fragmented = payload.len() > whole_limit(&self.net);
         // Kept for repairs: every sample of a reliable producer (its history), the newest
         // fragmented one of a best-effort producer.
@@ -295,22 +298,25 @@ impl ProducerState {
             let Some(dest) = outbox.dest_of(reader) else {
                 continue;
             };
-            // Large samples asked for again: one piece goes, and the reader's requests for
-            // the pieces it lacks (NackFrag) do the rest. Resending all of them on every
-            // AckNack would resend what already arrived.
+            // Fragmented samples asked for again: a few pieces go again whole; of a large
+            // one, only its last piece goes, and the reader's requests for the pieces it
+            // lacks (NackFrag) do the rest, so what already arrived is not sent again.
             for output in group {
                 if let WriterOutput::Resend { sample, .. } = output
                     && sample.bytes.len() > whole_limit(net)
                 {
-                    let last = outbox::split(net, sample.bytes.len())
-                        .map_or(0, |s| s.count().saturating_sub(1));
+                    let count = outbox::split(net, sample.bytes.len()).map_or(1, |s| s.count());
+                    let last = count.saturating_sub(1);
+                    let mut only_last = std::iter::once(last);
+                    let pieces: Option<&mut dyn Iterator<Item = u32>> =
+                        (count > FULL_RESEND_PIECES).then_some(&mut only_last);
                     let _ = dest.send_fragments(
                         net,
                         self.entity,
                         Some(reader.entity),
                         sample.meta,
                         &sample.bytes,
-                        Some(&mut std::iter::once(last)),
+                        pieces,
                     );
                 }
             }
@@ -470,10 +476,12 @@ pub struct RawProducer {
 impl RawProducer {
     /// Sends an encoded sample to every matched consumer.
     pub fn write_bytes(&self, payload: &[u8]) -> Result<(), WriteError> {
-        self.finish(self.state.write_with(|buffer| {
-            buffer.extend_from_slice(payload);
-            Ok(())
-        }))
+        // Sent from the caller's bytes, with no copy into the producer's buffer.
+        let state = &self.state;
+        let sent = state
+            .wait_for_window(lock(&state.out))
+            .and_then(|mut out| state.send_locked(&mut out, payload));
+        self.finish(sent)
     }
 
     /// Hands a batch's timer to the participant's timer thread.

@@ -117,6 +117,23 @@ impl Dest {
         net.send(self.batch.bytes(), self.addr)
     }
 
+    /// Sends one whole sample now, in a datagram of its own (after any pending batch), to all
+    /// readers or to `only`; the payload goes to the kernel without being copied first.
+    pub(crate) fn send_sample(
+        &mut self,
+        net: &Net,
+        writer: u32,
+        only: Option<u32>,
+        sub: &DataSub<'_>,
+    ) -> std::io::Result<()> {
+        self.flush(net)?;
+        self.begin(net, writer, only);
+        match self.batch.push_head(sub, net.limits.max_datagram) {
+            Some(trailing) => net.send_parts(self.batch.bytes(), trailing, self.addr),
+            None => Err(std::io::Error::other("sample larger than a datagram")),
+        }
+    }
+
     /// Adds a submessage to the batch.
     fn batch(
         &mut self,
@@ -192,8 +209,9 @@ impl Dest {
                 chunk: &payload[range],
             });
             self.begin(net, writer, only);
-            self.batch.push(&sub, net.limits.max_datagram);
-            net.send(self.batch.bytes(), self.addr)?;
+            if let Some(chunk) = self.batch.push_head(&sub, net.limits.max_datagram) {
+                net.send_parts(self.batch.bytes(), chunk, self.addr)?;
+            }
         }
         Ok(())
     }
@@ -261,7 +279,7 @@ impl Outbox {
                     (Batching::On { max_bytes, .. }, Some(now)) => {
                         dest.batch(net, writer, &sub, now, max_bytes)
                     }
-                    _ => dest.send_now(net, writer, None, [sub]),
+                    _ => dest.send_sample(net, writer, None, &sub),
                 }
             } else {
                 dest.send_fragments(net, writer, None, meta, payload, None)

@@ -134,6 +134,19 @@ impl ConsumerSlot {
         self.reschedule(&state);
     }
 
+    /// A piece of a reliable producer's large sample arrived; the sample is not complete.
+    pub(crate) fn on_partial(&self, now: Instant, origin: &Origin, seq: u64) {
+        let Some(config) = self.reliable else {
+            return;
+        };
+        let mut state = lock(&self.state);
+        stream(&mut state, config, origin)
+            .reader
+            .handle_partial(now, seq);
+        self.pump(&mut state, now);
+        self.reschedule(&state);
+    }
+
     /// A reliable producer's gap.
     pub(crate) fn on_gap(&self, now: Instant, origin: &Origin, gap: Gap) {
         let Some(config) = self.reliable else {

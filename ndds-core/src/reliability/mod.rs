@@ -108,6 +108,7 @@ pub mod writer;
 
 pub use bitmap::{Bitmap, MAX_BITS};
 pub use reader::{AckNack, Delivery, ReaderConfig, ReaderStats, ReliableReader};
+pub use rtt::RttEstimate;
 pub use writer::{ReliableWriter, WriteError, WriterConfig, WriterOutput, WriterStats};
 
 #[cfg(test)]

@@ -32,6 +32,10 @@ pub struct ReaderConfig {
     pub nack_retry: Duration,
     /// Shortest wait before a request is repeated (default 1 ms).
     pub nack_retry_min: Duration,
+    /// How long a sample being put together from pieces (see
+    /// [`ReliableReader::handle_partial`]) is left to piece-level repair after its last piece
+    /// arrived, before it is asked for again as a whole (default 100 ms).
+    pub partial_timeout: Duration,
 }
 
 impl Default for ReaderConfig {
@@ -40,6 +44,7 @@ impl Default for ReaderConfig {
             depth: 256,
             nack_retry: Duration::from_millis(20),
             nack_retry_min: Duration::from_millis(1),
+            partial_timeout: Duration::from_millis(100),
         }
     }
 }
@@ -140,6 +145,10 @@ pub struct ReliableReader<S> {
     pending: Option<AckNack>,
     /// When each missing seq was last asked for.
     asked: BTreeMap<u64, Ask>,
+    /// Seqs arriving in pieces, with when their last piece came: not missing while fresh.
+    partial: BTreeMap<u64, Instant>,
+    /// When `partial` is next looked through for stale entries.
+    partial_check: Option<Instant>,
     /// Round trip from request to repair.
     rtt: RttEstimate,
     /// When the oldest request still unanswered may be repeated.
@@ -166,6 +175,8 @@ impl<S> ReliableReader<S> {
             drained_at: None,
             pending: None,
             asked: BTreeMap::new(),
+            partial: BTreeMap::new(),
+            partial_check: None,
             rtt: RttEstimate::default(),
             nack_due: None,
             catch_up_at: None,
@@ -216,6 +227,7 @@ impl<S> ReliableReader<S> {
             self.stats.duplicates += 1;
             return;
         }
+        self.partial.remove(&seq);
         let opens_hole = seq > self.highest.saturating_add(1).max(front);
         self.highest = self.highest.max(seq);
         self.known_last = self.known_last.max(seq);
@@ -231,6 +243,35 @@ impl<S> ReliableReader<S> {
                 self.queue(now, ack);
             }
         }
+    }
+
+    /// A piece of sample `seq` arrived, and the sample is not complete yet (a large sample
+    /// put together from fragments, whose missing pieces the driver asks for itself). While
+    /// pieces keep coming (within `partial_timeout` of the last one), the seq is not asked
+    /// for with AckNack, so the whole sample is not sent again for a missing piece; it counts
+    /// as existing, so the seqs before it that are missing are asked for at once.
+    pub fn handle_partial(&mut self, now: Instant, seq: u64) {
+        if !self.synced {
+            return;
+        }
+        let front = self.front();
+        if seq < front || self.buf.contains_key(&seq) || seq - front >= self.config.depth as u64 {
+            return;
+        }
+        let opens_hole = seq > self.highest.saturating_add(1).max(front);
+        self.highest = self.highest.max(seq);
+        self.known_last = self.known_last.max(seq);
+        self.partial.insert(seq, now);
+        if self.partial_check.is_none() {
+            self.partial_check = now.checked_add(self.config.partial_timeout);
+        }
+        if opens_hole {
+            let ack = self.build(Some(now));
+            if !ack.missing.is_empty() {
+                self.queue(now, ack);
+            }
+        }
+        self.rearm();
     }
 
     /// A heartbeat: the writer can repair `first..=last` for us. The first one fixes where
@@ -280,8 +321,27 @@ impl<S> ReliableReader<S> {
         self.lost.insert(from, to);
     }
 
-    /// Repeats the request for missing samples when its retry time has come.
+    /// Repeats the request for missing samples when its retry time has come; asks for
+    /// samples whose pieces stopped coming.
     pub fn handle_timeout(&mut self, now: Instant) {
+        let timeout = self.config.partial_timeout;
+        let before = self.partial.len();
+        if self.partial_check.is_some_and(|at| at <= now) {
+            self.partial
+                .retain(|_, last| last.checked_add(timeout).is_none_or(|stale| stale > now));
+            self.partial_check = self
+                .partial
+                .values()
+                .min()
+                .and_then(|oldest| oldest.checked_add(timeout));
+        }
+        if self.partial.len() < before {
+            let ack = self.build(Some(now));
+            if !ack.missing.is_empty() {
+                self.queue(now, ack);
+                return;
+            }
+        }
         if self.nack_due.is_none_or(|due| due > now) {
             return;
         }
@@ -295,7 +355,12 @@ impl<S> ReliableReader<S> {
 
     /// When [`ReliableReader::handle_timeout`] must next run.
     pub fn poll_timeout(&self) -> Option<Instant> {
-        self.nack_due
+        // The check may come early (a partial sample refreshed since); it then looks again
+        // later.
+        match (self.nack_due, self.partial_check) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// The next in-order sample, or the report of a lost range, if available. A lost range is
@@ -348,6 +413,10 @@ impl<S> ReliableReader<S> {
         self.base = base;
         self.lost.remove_below(base);
         self.asked = self.asked.split_off(&base);
+        self.partial = self.partial.split_off(&base);
+        if self.partial.is_empty() {
+            self.partial_check = None;
+        }
         if self.catch_up_at.is_some_and(|at| base >= at) {
             self.catch_up_at = None;
             let ack = self.build(None);
@@ -391,7 +460,7 @@ impl<S> ReliableReader<S> {
 
     /// Neither held nor known lost (the caller bounds `seq` to the window).
     fn is_missing(&self, seq: u64) -> bool {
-        !self.buf.contains_key(&seq) && !self.lost.contains(seq)
+        !self.buf.contains_key(&seq) && !self.lost.contains(seq) && !self.partial.contains_key(&seq)
     }
 
     /// Queues an AckNack, noting when its missing seqs were asked for.

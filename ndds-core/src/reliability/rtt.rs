@@ -1,18 +1,19 @@
 //! A round-trip estimate in the manner of TCP's retransmission timer (smoothed mean plus four
-//! mean deviations), used by a reader to decide how soon an unanswered request is repeated.
+//! mean deviations), used by a reader to decide how soon an unanswered request is repeated
+//! (for whole samples here, and by drivers for the pieces of large samples).
 
 use std::time::Duration;
 
 /// Smoothed round trip and its mean deviation.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(crate) struct RttEstimate {
+pub struct RttEstimate {
     smoothed: Option<Duration>,
     deviation: Duration,
 }
 
 impl RttEstimate {
     /// Takes one measured round trip into account.
-    pub(crate) fn sample(&mut self, rtt: Duration) {
+    pub fn sample(&mut self, rtt: Duration) {
         let Some(smoothed) = self.smoothed else {
             self.smoothed = Some(rtt);
             self.deviation = rtt / 2;
@@ -25,7 +26,7 @@ impl RttEstimate {
 
     /// How long to wait for an answer before asking again: `smoothed + 4 × deviation` within
     /// `min..=max`, or `max` before the first sample.
-    pub(crate) fn timeout(&self, min: Duration, max: Duration) -> Duration {
+    pub fn timeout(&self, min: Duration, max: Duration) -> Duration {
         let Some(smoothed) = self.smoothed else {
             return max;
         };

@@ -14,6 +14,7 @@ fn reader(depth: usize) -> ReliableReader<u64> {
         depth,
         nack_retry: 20 * MS,
         nack_retry_min: MS,
+        partial_timeout: 100 * MS,
     })
 }
 
@@ -49,6 +50,8 @@ fn writer(depth: usize) -> ReliableWriter<u32, u64> {
         max_bytes: 1 << 20,
         heartbeat_period: 20 * MS,
         idle_heartbeat_period: 1000 * MS,
+        // The fixed-period tests below assume no faster heartbeats while blocked.
+        blocked_heartbeat_period: 20 * MS,
     })
 }
 
@@ -517,4 +520,86 @@ proptest! {
             while r.poll_output().is_some() {}
         }
     }
+}
+
+#[test]
+fn a_blocked_writer_heartbeats_quickly_then_backs_off_until_acknowledged() {
+    let t0 = Instant::now();
+    let mut w = ReliableWriter::<u32, u64>::new(WriterConfig {
+        depth: 4,
+        max_bytes: 1 << 20,
+        heartbeat_period: 20 * MS,
+        idle_heartbeat_period: 1000 * MS,
+        blocked_heartbeat_period: MS,
+    });
+    w.add_reader(t0, 1);
+    outputs(&mut w);
+    write_n(&mut w, t0, 1..=4);
+    assert!(!w.window_open());
+    outputs(&mut w);
+    // Heartbeats come after 1, 2, 4, 8, 16, 20, 20 ms while nothing is acknowledged.
+    let mut now = t0;
+    let mut gaps = Vec::new();
+    for _ in 0..7 {
+        let due = w.poll_timeout().expect("a heartbeat is armed");
+        gaps.push((due - now).as_millis());
+        now = due;
+        w.handle_timeout(now);
+        let beats = outputs(&mut w);
+        assert!(
+            beats
+                .iter()
+                .any(|o| matches!(o, WriterOutput::Heartbeat { reader: 1, .. })),
+            "{beats:?}"
+        );
+    }
+    assert_eq!(gaps, [1, 2, 4, 8, 16, 20, 20]);
+    // Progress starts the back-off again; an open window goes back to the normal period.
+    w.handle_acknack(now, 1, 3, &[]);
+    assert!(w.window_open());
+    w.write(now, 5, 5, 1).unwrap();
+    assert!(w.window_open());
+    w.write(now, 6, 6, 1).unwrap();
+    assert!(!w.window_open());
+    outputs(&mut w);
+    let due = w.poll_timeout().unwrap();
+    assert_eq!((due - now).as_millis(), 1);
+}
+
+#[test]
+fn a_sample_arriving_in_pieces_is_not_asked_for_while_its_pieces_keep_coming() {
+    let t0 = Instant::now();
+    let mut r = synced(t0, 16, 1);
+    r.handle_sample(t0, 1, 10);
+    // Pieces of 3 arrive: 2 is missing and asked for at once, 3 is not asked for.
+    r.handle_partial(t0, 3);
+    let ack = r.poll_output().expect("the hole before the partial sample");
+    assert_eq!((ack.acked, asked(&ack)), (1, vec![2]));
+    // 2 comes; a heartbeat's answer still leaves 3 to its pieces.
+    r.handle_sample(t0 + MS, 2, 20);
+    r.handle_heartbeat(t0 + 2 * MS, 1, 3);
+    let ack = r.poll_output().unwrap();
+    assert!(asked(&ack).is_empty(), "{ack:?}");
+    // More pieces keep it fresh; once they stop for the partial timeout, it is asked for.
+    r.handle_partial(t0 + 50 * MS, 3);
+    // The first look, a timeout after the first piece, finds it fresh and looks again when
+    // it would be stale.
+    assert_eq!(r.poll_timeout(), Some(t0 + 100 * MS));
+    r.handle_timeout(t0 + 100 * MS);
+    assert!(r.poll_output().is_none());
+    assert_eq!(r.poll_timeout(), Some(t0 + 150 * MS));
+    r.handle_timeout(t0 + 149 * MS);
+    assert!(r.poll_output().is_none());
+    r.handle_timeout(t0 + 150 * MS);
+    let ack = r.poll_output().expect("asked for as a whole");
+    assert_eq!(asked(&ack), vec![3]);
+    // The whole sample completes it.
+    r.handle_sample(t0 + 151 * MS, 3, 30);
+    assert_eq!(deliveries(&mut r), samples(1..=3));
+    while r.poll_output().is_some() {}
+    // Pieces of samples already had, or beyond the window, change nothing.
+    r.handle_partial(t0 + 152 * MS, 2);
+    r.handle_partial(t0 + 152 * MS, 40);
+    assert!(r.poll_output().is_none());
+    assert_eq!(r.poll_timeout(), None);
 }

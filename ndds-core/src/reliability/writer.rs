@@ -29,6 +29,8 @@ const MAX_PENDING_GAPS: usize = 64;
 
 /// Shortest heartbeat period accepted; shorter configured periods are raised to it.
 const MIN_PERIOD: Duration = Duration::from_millis(1);
+/// Shortest first heartbeat period while the window is closed.
+const MIN_BLOCKED_PERIOD: Duration = Duration::from_micros(100);
 
 /// Settings of one reliable writer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,6 +45,11 @@ pub struct WriterConfig {
     pub heartbeat_period: Duration,
     /// Heartbeat period towards all readers when none is behind (default 1 s; at least 1 ms).
     pub idle_heartbeat_period: Duration,
+    /// First heartbeat period while the window is closed (default 1 ms; at least 100 µs).
+    /// The writer then waits for acknowledgements, and a lost heartbeat or a lost last sample
+    /// would otherwise hold it up for a whole `heartbeat_period`; the period doubles while
+    /// no acknowledgement moves the window, up to `heartbeat_period`.
+    pub blocked_heartbeat_period: Duration,
 }
 
 impl Default for WriterConfig {
@@ -52,6 +59,7 @@ impl Default for WriterConfig {
             max_bytes: 64 << 20,
             heartbeat_period: Duration::from_millis(20),
             idle_heartbeat_period: Duration::from_secs(1),
+            blocked_heartbeat_period: Duration::from_millis(1),
         }
     }
 }
@@ -207,6 +215,10 @@ pub struct ReliableWriter<K, S> {
     idle_due: Option<Instant>,
     /// Samples and bytes written since the last heartbeat to the readers behind.
     since_heartbeat: (usize, usize),
+    /// The heartbeat period while the window is closed: starts at
+    /// `blocked_heartbeat_period`, doubles at each heartbeat that finds the window still
+    /// closed, and starts again when an acknowledgement makes progress.
+    blocked_period: Duration,
     stats: WriterStats,
 }
 
@@ -221,6 +233,10 @@ where
             depth: config.depth.max(1),
             heartbeat_period: config.heartbeat_period.max(MIN_PERIOD),
             idle_heartbeat_period: config.idle_heartbeat_period.max(MIN_PERIOD),
+            blocked_heartbeat_period: config
+                .blocked_heartbeat_period
+                .max(MIN_BLOCKED_PERIOD)
+                .min(config.heartbeat_period.max(MIN_PERIOD)),
             ..config
         };
         ReliableWriter {
@@ -232,6 +248,7 @@ where
             period_due: None,
             idle_due: None,
             since_heartbeat: (0, 0),
+            blocked_period: config.blocked_heartbeat_period,
             stats: WriterStats::default(),
         }
     }
@@ -374,6 +391,9 @@ where
             Self::advance(state, next);
             self.evict();
             return;
+        }
+        if acked > state.acked {
+            self.blocked_period = self.config.blocked_heartbeat_period;
         }
         Self::advance(state, acked);
         let mut queued = false;
@@ -579,16 +599,27 @@ where
                 any = true;
             }
         }
-        self.period_due = if any {
-            now.checked_add(self.config.heartbeat_period)
+        let period = self.period();
+        if !self.window_open() {
+            // Still blocked at the next one: wait twice as long (up to the normal period).
+            self.blocked_period = (self.blocked_period * 2).min(self.config.heartbeat_period);
+        }
+        self.period_due = if any { now.checked_add(period) } else { None };
+    }
+
+    /// The heartbeat period now: short while the window is closed (see
+    /// [`WriterConfig::blocked_heartbeat_period`]), else the configured one.
+    fn period(&self) -> Duration {
+        if self.window_open() {
+            self.config.heartbeat_period
         } else {
-            None
-        };
+            self.blocked_period
+        }
     }
 
     /// Makes sure a periodic heartbeat comes within one period (never postpones one).
     fn arm_period(&mut self, now: Instant) {
-        let Some(due) = now.checked_add(self.config.heartbeat_period) else {
+        let Some(due) = now.checked_add(self.period()) else {
             return;
         };
         self.period_due = Some(self.period_due.map_or(due, |d| d.min(due)));

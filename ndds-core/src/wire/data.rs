@@ -208,6 +208,52 @@ impl DataWriter {
         self.prefix_len = self.buf.len();
     }
 
+    /// Appends a `Sample` or `Fragment` submessage without its trailing bytes (the payload or
+    /// chunk), for a sender that hands [`DataWriter::bytes`] and those bytes to the kernel
+    /// together (scatter-gather), so they are never copied into the datagram buffer. The
+    /// datagram is then exactly `bytes() ++ trailing`; nothing may be pushed after it. Returns
+    /// the trailing bytes, or `None` (nothing appended) for other submessages or when the
+    /// whole datagram would exceed `limit`.
+    pub fn push_head<'s>(&mut self, sub: &DataSub<'s>, limit: usize) -> Option<&'s [u8]> {
+        let mark = self.buf.len();
+        let trailing = match sub {
+            DataSub::Sample(s) => s.payload,
+            DataSub::Fragment(f) => f.chunk,
+            DataSub::Heartbeat(_) | DataSub::Gap(_) => return None,
+        };
+        if !self.valid || mark + 1 + trailing.len() > limit.min(MAX_DATAGRAM) {
+            return None;
+        }
+        self.buf.push(sub.kind() as u8);
+        let buf = std::mem::take(&mut self.buf);
+        // The trailing bytes are a byte string: a varint length, then the bytes.
+        let len = trailing.len() as u64;
+        let result = match sub {
+            DataSub::Sample(s) => postcard::to_extend(&(s.meta, len), buf),
+            DataSub::Fragment(f) => {
+                postcard::to_extend(&(f.meta, f.total_len, f.frag_size, f.index, len), buf)
+            }
+            DataSub::Heartbeat(_) | DataSub::Gap(_) => Ok(buf),
+        };
+        match result {
+            Ok(buf) if buf.len() + trailing.len() <= limit.min(MAX_DATAGRAM) => {
+                self.buf = buf;
+                self.subs += 1;
+                Some(trailing)
+            }
+            Ok(mut buf) => {
+                buf.truncate(mark);
+                self.buf = buf;
+                None
+            }
+            Err(_) => {
+                // Encoding integers into a Vec cannot fail.
+                self.buf.truncate(mark);
+                None
+            }
+        }
+    }
+
     /// Appends a submessage if the datagram stays within `limit` bytes; returns whether it
     /// was appended (the datagram is unchanged otherwise).
     pub fn push(&mut self, sub: &DataSub<'_>, limit: usize) -> bool {
@@ -411,6 +457,46 @@ mod tests {
         writer: 1,
         readers: &[3, 2, 3],
     };
+
+    #[test]
+    fn a_head_and_its_trailing_bytes_are_the_pushed_submessage() {
+        let fragment = DataSub::Fragment(Fragment {
+            meta: SampleMeta {
+                seq: 300,
+                timestamp_ns: u64::MAX,
+                strength: -7,
+                persistence_us: 5,
+                flags: FLAG_RELIABLE,
+            },
+            total_len: 100_000,
+            frag_size: 1400,
+            index: 70,
+            chunk: &[9; 1400],
+        });
+        for sub in [
+            sample(&[]),
+            sample(&[1; 200]),
+            sample(&[2; 70_000][..65_000]),
+            fragment,
+        ] {
+            let mut whole = DataWriter::new();
+            whole.begin(7, 0xAB, &TO);
+            let pushed = whole.push(&sub, MAX_DATAGRAM);
+            let mut head = DataWriter::new();
+            head.begin(7, 0xAB, &TO);
+            let trailing = head.push_head(&sub, MAX_DATAGRAM);
+            assert_eq!(pushed, trailing.is_some());
+            if let Some(trailing) = trailing {
+                assert_eq!([head.bytes(), trailing].concat(), whole.bytes());
+            }
+        }
+        let mut w = DataWriter::new();
+        w.begin(7, 0xAB, &TO);
+        assert!(w.push_head(&sample(&[1; 500]), 400).is_none());
+        assert!(w.is_empty());
+        let gap = DataSub::Gap(Gap { from: 1, to: 2 });
+        assert!(w.push_head(&gap, MAX_DATAGRAM).is_none());
+    }
 
     #[test]
     fn batches_round_trip_and_respect_the_limit() {

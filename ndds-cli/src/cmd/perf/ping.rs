@@ -11,10 +11,10 @@ use std::net::SocketAddrV4;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use ndds_client::{Producer, Sample};
+use ndds_client::Producer;
 
 use super::latency::{self, Limit, Progress};
-use super::sample::{PerfSample, mono_ns, parse_size};
+use super::sample::{PerfSample, PerfView, mono_ns, parse_size, perf_type};
 use super::{Stream, connect, udp};
 use crate::connect::DaemonArgs;
 use crate::seconds;
@@ -134,17 +134,17 @@ impl Pinger {
     }
 
     /// A reply, on the participant's receive thread.
-    fn on_reply(&self, reply: &Sample<PerfSample>) {
+    fn on_reply(&self, reply: &PerfView<'_>) {
         let arrived = mono_ns();
         let now = Instant::now();
         let mut state = self.lock();
         // A late reply to a ping already given up is not a round trip of this loop.
-        if state.finished || (self.closed_loop && reply.value.seq != state.next.seq) {
+        if state.finished || (self.closed_loop && reply.seq != state.next.seq) {
             return;
         }
         state
             .progress
-            .record(arrived.saturating_sub(reply.value.sent_ns), now);
+            .record(arrived.saturating_sub(reply.sent_ns), now);
         state.last_reply = Some(now);
         if state.progress.done(now) {
             state.finished = true;
@@ -160,8 +160,11 @@ fn ping_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Progress> {
     let participant = connect(daemon)?;
     let producer = participant
         .producer::<PerfSample>(&args.stream.topic("ping"), args.stream.producer_qos())?;
-    let consumer = participant
-        .consumer::<PerfSample>(&args.stream.topic("pong"), args.stream.consumer_qos())?;
+    let consumer = participant.raw_consumer(
+        &args.stream.topic("pong"),
+        perf_type(),
+        args.stream.consumer_qos(),
+    )?;
     let matched =
         producer.wait_for_consumers(1, run.wait) && consumer.wait_for_producers(1, run.wait);
     if !matched {
@@ -188,9 +191,10 @@ fn ping_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Progress> {
     // The callback holds no strong reference: the producer is dropped here, never on the
     // receive thread.
     let replies = Arc::downgrade(&pinger);
-    let direct = consumer.on_sample_direct(move |reply| {
-        if let Some(pinger) = replies.upgrade() {
-            pinger.on_reply(&reply);
+    // Replies are read in place (no copy of their payload), as raw UDP reads them.
+    let direct = consumer.on_raw_sample_direct(move |reply| {
+        if let (Some(pinger), Some(view)) = (replies.upgrade(), PerfView::read(&reply.payload)) {
+            pinger.on_reply(&view);
         }
     })?;
     let result = match run.rate {

@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use ndds_client::Producer;
+use ndds_client::RawProducer;
 use serde_json::json;
 
-use super::sample::PerfSample;
+use super::sample::perf_type;
 use super::{Stream, connect, udp};
 use crate::connect::DaemonArgs;
 use crate::seconds;
@@ -68,15 +68,15 @@ pub struct Echoed {
 
 /// What the callback uses and counts.
 struct Echo {
-    producer: Producer<PerfSample>,
+    producer: RawProducer,
     echoed: AtomicU64,
     errors: AtomicU64,
     first_error: Mutex<Option<String>>,
 }
 
 impl Echo {
-    fn answer(&self, ping: &PerfSample) {
-        match self.producer.write(ping) {
+    fn answer(&self, ping: &[u8]) {
+        match self.producer.write_bytes(ping) {
             Ok(()) => self.echoed.fetch_add(1, Ordering::Relaxed),
             Err(err) => {
                 let mut first = self.first_error.lock().unwrap_or_else(|p| p.into_inner());
@@ -89,10 +89,17 @@ impl Echo {
 
 fn pong_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Echoed> {
     let participant = connect(daemon)?;
-    let producer = participant
-        .producer::<PerfSample>(&args.stream.topic("pong"), args.stream.producer_qos())?;
-    let consumer = participant
-        .consumer::<PerfSample>(&args.stream.topic("ping"), args.stream.consumer_qos())?;
+    // The ping's bytes go back as they came: no decoding, no encoding.
+    let producer = participant.raw_producer(
+        &args.stream.topic("pong"),
+        perf_type(),
+        args.stream.producer_qos(),
+    )?;
+    let consumer = participant.raw_consumer(
+        &args.stream.topic("ping"),
+        perf_type(),
+        args.stream.consumer_qos(),
+    )?;
     let echo = Arc::new(Echo {
         producer,
         echoed: AtomicU64::new(0),
@@ -101,9 +108,9 @@ fn pong_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Echoed> {
     });
     // A weak reference, so the producer is dropped here and never on the receive thread.
     let answers = Arc::downgrade(&echo);
-    let direct = consumer.on_sample_direct(move |ping| {
+    let direct = consumer.on_raw_sample_direct(move |ping| {
         if let Some(echo) = answers.upgrade() {
-            echo.answer(&ping.value);
+            echo.answer(&ping.payload);
         }
     })?;
     wait_for_ping_to_leave(&echo, args.duration);

@@ -24,6 +24,28 @@ pub struct PerfSample {
     pub payload: ByteBuf,
 }
 
+/// A received [`PerfSample`] read in place: same encoding, but the payload is borrowed from
+/// the datagram instead of copied, so receiving costs what the transport costs.
+#[derive(Debug, Deserialize)]
+pub struct PerfView<'a> {
+    pub seq: u64,
+    pub sent_ns: u64,
+    #[serde(borrow, with = "serde_bytes")]
+    pub payload: &'a [u8],
+}
+
+impl<'a> PerfView<'a> {
+    /// Reads an encoded `PerfSample`; `None` when the bytes are not one.
+    pub fn read(bytes: &'a [u8]) -> Option<Self> {
+        postcard::from_bytes(bytes).ok()
+    }
+}
+
+/// The type description `PerfSample` is announced with.
+pub fn perf_type() -> ndds_client::TypeDescription {
+    ndds_client::TypeDescription::of::<PerfSample>()
+}
+
 impl PerfSample {
     /// A sample with a payload of `size` bytes (a recognisable pattern, not zeros).
     pub fn with_size(size: usize) -> Self {

@@ -93,19 +93,19 @@ impl Tally {
 
 fn subscribe_ndds(daemon: &DaemonArgs, args: &Args, window: &Window) -> anyhow::Result<Measured> {
     let participant = connect(daemon)?;
-    let consumer = participant.consumer::<super::sample::PerfSample>(
+    let consumer = participant.raw_consumer(
         &args.stream.topic("data"),
+        super::sample::perf_type(),
         args.stream.consumer_qos(),
     )?;
     let tally = Arc::new(Mutex::new(Tally::default()));
     let counter = Arc::clone(&tally);
-    let direct = consumer.on_sample_direct(move |sample| {
-        let mut tally = counter.lock().unwrap_or_else(|p| p.into_inner());
-        tally.see(
-            sample.info.writer,
-            sample.value.seq,
-            sample.value.payload.len(),
-        );
+    // Undecoded, read in place: the sample's fields without copying its payload.
+    let direct = consumer.on_raw_sample_direct(move |sample| {
+        if let Some(view) = super::sample::PerfView::read(&sample.payload) {
+            let mut tally = counter.lock().unwrap_or_else(|p| p.into_inner());
+            tally.see(sample.info.writer, view.seq, view.payload.len());
+        }
     })?;
     let measured = throughput::measure(window, || {
         tally.lock().unwrap_or_else(|p| p.into_inner()).counts
