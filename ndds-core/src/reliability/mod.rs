@@ -35,7 +35,9 @@
 //!   sent
 //!   - to every reader that is behind (acknowledged below `last + 1`) or never heard from,
 //!     `heartbeat_period` (20 ms) after the write that put it behind, then every period while
-//!     it stays so;
+//!     it stays so; while the window is closed the period is `blocked_heartbeat_period`
+//!     (1 ms), doubling at each heartbeat that finds the window still closed (up to
+//!     `heartbeat_period`) and starting again when an acknowledgement makes progress;
 //!   - to those readers right after a write once a quarter of the window (`depth / 4`
 //!     samples or `max_bytes / 4` bytes) was written since the last heartbeat, and after the
 //!     write that closes the window, so acknowledgements come before the window is full;
@@ -86,6 +88,10 @@
 //!
 //!   An AckNack not yet sent is replaced by a newer one, which keeps the requests of the
 //!   older one that still stand.
+//! - **Samples arriving in pieces** ([`ReliableReader::handle_partial`]): a seq some pieces
+//!   of which arrived is not missing while pieces keep coming (within `partial_timeout`,
+//!   100 ms, of the last one): the driver repairs its pieces itself. It counts as known, so
+//!   the missing seqs before it are asked for at once.
 //! - **Retry time** adapts like TCP's retransmission timer: the round trip from a request to
 //!   the sample answering it (requests made once only) is smoothed, and the retry time is
 //!   the smoothed value plus four mean deviations, within `nack_retry_min..=nack_retry`
