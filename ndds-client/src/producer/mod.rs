@@ -158,9 +158,14 @@ impl ProducerState {
         encode: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
     ) -> Result<Option<Instant>, WriteError> {
         let mut out = self.wait_for_window(lock(&self.out))?;
+        if out.reliable.is_some() {
+            // Encoded straight into a history buffer: the history needs no copy.
+            let encoded = out.pool.fill(encode)?;
+            return self.send_locked(&mut out, &encoded, Some(&encoded));
+        }
         let mut payload = std::mem::take(&mut out.outbox.payload);
         payload.clear();
-        let result = encode(&mut payload).and_then(|()| self.send_locked(&mut out, &payload));
+        let result = encode(&mut payload).and_then(|()| self.send_locked(&mut out, &payload, None));
         out.outbox.payload = payload;
         result
     }
@@ -201,7 +206,13 @@ impl ProducerState {
         }
     }
 
-    fn send_locked(&self, out: &mut Out, payload: &[u8]) -> Result<Option<Instant>, WriteError> {
+    /// Sends `payload`; `kept` is the same bytes already in a pooled buffer, if they are.
+    fn send_locked(
+        &self,
+        out: &mut Out,
+        payload: &[u8],
+        kept: Option<&Arc<Vec<u8>>>,
+    ) -> Result<Option<Instant>, WriteError> {
         let max = self.net.limits.max_sample;
         if payload.len() > max {
             return Err(WriteError::TooLarge {
@@ -224,7 +235,7 @@ impl ProducerState {
         // fragmented one of a best-effort producer.
         let kept = (out.reliable.is_some() || fragmented).then(|| Kept {
             meta,
-            bytes: out.pool.copy(payload),
+            bytes: kept.cloned().unwrap_or_else(|| out.pool.copy(payload)),
         });
         if let Some(reliable) = &mut out.reliable
             && let Some(kept) = &kept
@@ -480,7 +491,7 @@ impl RawProducer {
         let state = &self.state;
         let sent = state
             .wait_for_window(lock(&state.out))
-            .and_then(|mut out| state.send_locked(&mut out, payload));
+            .and_then(|mut out| state.send_locked(&mut out, payload, None));
         self.finish(sent)
     }
 

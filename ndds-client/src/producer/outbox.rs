@@ -364,20 +364,37 @@ impl KeptPool {
 
     /// A buffer holding a copy of `payload`.
     pub(crate) fn copy(&mut self, payload: &[u8]) -> Arc<Vec<u8>> {
+        let filled = self.fill(|buffer| {
+            buffer.extend_from_slice(payload);
+            Ok::<(), std::convert::Infallible>(())
+        });
+        match filled {
+            Ok(buffer) => buffer,
+            Err(never) => match never {},
+        }
+    }
+
+    /// A buffer filled by `fill` (given it empty), such as a sample encoded straight into it.
+    pub(crate) fn fill<E>(
+        &mut self,
+        fill: impl FnOnce(&mut Vec<u8>) -> Result<(), E>,
+    ) -> Result<Arc<Vec<u8>>, E> {
         let len = self.buffers.len();
         for step in 0..len {
             let index = (self.next + step) % len;
             if let Some(buffer) = Arc::get_mut(&mut self.buffers[index]) {
                 buffer.clear();
-                buffer.extend_from_slice(payload);
+                fill(buffer)?;
                 self.next = (index + 1) % len;
-                return self.buffers[index].clone();
+                return Ok(self.buffers[index].clone());
             }
         }
-        let buffer = Arc::new(payload.to_vec());
+        let mut buffer = Vec::new();
+        fill(&mut buffer)?;
+        let buffer = Arc::new(buffer);
         if self.buffers.len() < self.buffers.capacity() {
             self.buffers.push(buffer.clone());
         }
-        buffer
+        Ok(buffer)
     }
 }
