@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 
 use common::{participant, sibling, unique_config};
 use ndds_client::{
-    ConsumerQos, Event, Notification, ProducerQos, RecvError, Reliability, WhenFull, WriteError,
+    Consumer, ConsumerQos, Event, Notification, Producer, ProducerQos, RecvError, Reliability,
+    WhenFull, WriteError,
 };
 
 const WAIT: Duration = Duration::from_secs(5);
@@ -17,32 +18,53 @@ fn reliable(depth: u32) -> Reliability {
     Reliability::Reliable { depth }
 }
 
-#[test]
-fn a_slow_reliable_consumer_gets_every_sample_in_order_and_slows_its_producer() {
+/// Two participants on one daemon, a reliable consumer of `topic` on one (queue `queue`,
+/// reordering depth `depth`) and a reliable producer (history `depth`, and `producer`'s other
+/// settings) on the other, matched. The participants and the daemon's directory live as long
+/// as the returned guard.
+fn reliable_pair(
+    topic: &str,
+    queue: usize,
+    depth: u32,
+    producer: ProducerQos,
+) -> (impl Sized, Consumer<u64>, Producer<u64>) {
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
     let (writer_side, reader_side) = (participant(&config), participant(&config));
     let consumer = reader_side
         .consumer::<u64>(
-            "cmd",
+            topic,
             ConsumerQos {
-                depth: 4,
-                reliability: reliable(16),
+                depth: queue,
+                reliability: reliable(depth),
                 ..ConsumerQos::default()
             },
         )
         .unwrap();
     let producer = writer_side
         .producer::<u64>(
-            "cmd",
+            topic,
             ProducerQos {
-                reliability: reliable(16),
-                write_timeout: Duration::from_secs(10),
-                ..ProducerQos::default()
+                reliability: reliable(depth),
+                ..producer
             },
         )
         .unwrap();
     assert!(producer.wait_for_consumers(1, WAIT));
+    ((dir, writer_side, reader_side), consumer, producer)
+}
+
+#[test]
+fn a_slow_reliable_consumer_gets_every_sample_in_order_and_slows_its_producer() {
+    let (_hosts, consumer, producer) = reliable_pair(
+        "cmd",
+        4,
+        16,
+        ProducerQos {
+            write_timeout: Duration::from_secs(10),
+            ..ProducerQos::default()
+        },
+    );
     const COUNT: u64 = 600;
     let writer = std::thread::spawn(move || {
         for i in 1..=COUNT {
@@ -69,30 +91,15 @@ fn a_slow_reliable_consumer_gets_every_sample_in_order_and_slows_its_producer() 
 
 #[test]
 fn a_consumer_that_takes_nothing_blocks_its_producer_until_the_timeout() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = unique_config(dir.path(), "a");
-    let (writer_side, reader_side) = (participant(&config), participant(&config));
-    let consumer = reader_side
-        .consumer::<u64>(
-            "cmd",
-            ConsumerQos {
-                depth: 4,
-                reliability: reliable(8),
-                ..ConsumerQos::default()
-            },
-        )
-        .unwrap();
-    let producer = writer_side
-        .producer::<u64>(
-            "cmd",
-            ProducerQos {
-                reliability: reliable(8),
-                write_timeout: Duration::from_millis(300),
-                ..ProducerQos::default()
-            },
-        )
-        .unwrap();
-    assert!(producer.wait_for_consumers(1, WAIT));
+    let (_hosts, consumer, producer) = reliable_pair(
+        "cmd",
+        4,
+        8,
+        ProducerQos {
+            write_timeout: Duration::from_millis(300),
+            ..ProducerQos::default()
+        },
+    );
     // The window (8) fills once the consumer's queue (4) is full and nothing is taken.
     let mut written = 0u64;
     let blocked = loop {
@@ -125,31 +132,16 @@ fn a_consumer_that_takes_nothing_blocks_its_producer_until_the_timeout() {
 
 #[test]
 fn a_producer_that_drops_the_oldest_never_waits_and_reports_samples_lost() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = unique_config(dir.path(), "a");
-    let (writer_side, reader_side) = (participant(&config), participant(&config));
-    let consumer = reader_side
-        .consumer::<u64>(
-            "state",
-            ConsumerQos {
-                depth: 4,
-                reliability: reliable(8),
-                ..ConsumerQos::default()
-            },
-        )
-        .unwrap();
-    let producer = writer_side
-        .producer::<u64>(
-            "state",
-            ProducerQos {
-                reliability: reliable(8),
-                when_full: WhenFull::DropOldest,
-                write_timeout: Duration::from_secs(10),
-                ..ProducerQos::default()
-            },
-        )
-        .unwrap();
-    assert!(producer.wait_for_consumers(1, WAIT));
+    let (_hosts, consumer, producer) = reliable_pair(
+        "state",
+        4,
+        8,
+        ProducerQos {
+            when_full: WhenFull::DropOldest,
+            write_timeout: Duration::from_secs(10),
+            ..ProducerQos::default()
+        },
+    );
     const COUNT: u64 = 200;
     let started = Instant::now();
     for i in 1..=COUNT {

@@ -121,41 +121,34 @@ impl ConsumerSlot {
 
     /// A reliable producer's heartbeat.
     pub(crate) fn on_heartbeat(&self, now: Instant, origin: &Origin, heartbeat: Heartbeat) {
-        let Some(config) = self.reliable else {
-            return;
-        };
-        let mut state = lock(&self.state);
-        stream(&mut state, config, origin).reader.handle_heartbeat(
-            now,
-            heartbeat.first,
-            heartbeat.last,
-        );
-        self.pump(&mut state, now);
-        self.reschedule(&state);
+        self.with_stream(now, origin, |reader| {
+            reader.handle_heartbeat(now, heartbeat.first, heartbeat.last);
+        });
     }
 
     /// A piece of a reliable producer's large sample arrived; the sample is not complete.
     pub(crate) fn on_partial(&self, now: Instant, origin: &Origin, seq: u64) {
-        let Some(config) = self.reliable else {
-            return;
-        };
-        let mut state = lock(&self.state);
-        stream(&mut state, config, origin)
-            .reader
-            .handle_partial(now, seq);
-        self.pump(&mut state, now);
-        self.reschedule(&state);
+        self.with_stream(now, origin, |reader| reader.handle_partial(now, seq));
     }
 
     /// A reliable producer's gap.
     pub(crate) fn on_gap(&self, now: Instant, origin: &Origin, gap: Gap) {
+        self.with_stream(now, origin, |reader| reader.handle_gap(gap.from, gap.to));
+    }
+
+    /// Hands `origin`'s reliable stream to `apply` (a reliable consumer only), then moves
+    /// what it can deliver and sends its acknowledgements.
+    fn with_stream(
+        &self,
+        now: Instant,
+        origin: &Origin,
+        apply: impl FnOnce(&mut ReliableReader<(Incoming, RawSample)>),
+    ) {
         let Some(config) = self.reliable else {
             return;
         };
         let mut state = lock(&self.state);
-        stream(&mut state, config, origin)
-            .reader
-            .handle_gap(gap.from, gap.to);
+        apply(&mut stream(&mut state, config, origin).reader);
         self.pump(&mut state, now);
         self.reschedule(&state);
     }
