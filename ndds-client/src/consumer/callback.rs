@@ -38,10 +38,11 @@ impl<T: DeserializeOwned> Consumer<T> {
         let decoder = Arc::clone(&self.raw.state.decoder);
         // Weak: the slot holds the queue's sender, which must go when the consumer does.
         let slot = Arc::downgrade(&self.raw.state.slot);
+        let signal = Arc::clone(&self.raw.state.slot.sink.signal);
         let thread = std::thread::Builder::new()
             .name(format!("ndds-cb-{}", decoder.topic))
             .spawn(move || {
-                while let Ok(event) = rx.recv() {
+                while let Ok(event) = signal.recv(&rx, None) {
                     // Room was made: a reliable stream waiting for it moves on.
                     if let Some(slot) = slot.upgrade() {
                         slot.resume(Instant::now());

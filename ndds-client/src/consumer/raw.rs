@@ -107,16 +107,14 @@ impl RawConsumer {
 
     fn take_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
         let rx = self.queue()?;
+        let signal = &self.state.slot.sink.signal;
         match wait {
-            Wait::Block => rx.recv().map_err(|_| RecvError::Closed),
+            Wait::Block => signal.recv(rx, None),
             Wait::Try => rx.try_recv().map_err(|err| match err {
                 flume::TryRecvError::Empty => RecvError::Empty,
                 flume::TryRecvError::Disconnected => RecvError::Closed,
             }),
-            Wait::Until(at) => rx.recv_deadline(at).map_err(|err| match err {
-                flume::RecvTimeoutError::Timeout => RecvError::Timeout,
-                flume::RecvTimeoutError::Disconnected => RecvError::Closed,
-            }),
+            Wait::Until(at) => signal.recv(rx, Some(at)),
         }
     }
 

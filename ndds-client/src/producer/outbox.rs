@@ -350,6 +350,9 @@ pub(crate) struct KeptPool {
     /// Where the search for a free buffer starts: buffers come free in the order they were
     /// taken (the history is first in, first out), so the next one is usually free.
     next: usize,
+    /// The largest sample kept so far: a new buffer starts with this capacity, so filling it
+    /// does not grow it again.
+    largest: usize,
 }
 
 impl KeptPool {
@@ -359,6 +362,7 @@ impl KeptPool {
         KeptPool {
             buffers: Vec::with_capacity(capacity.min(4096)),
             next: 0,
+            largest: 0,
         }
     }
 
@@ -385,12 +389,14 @@ impl KeptPool {
             if let Some(buffer) = Arc::get_mut(&mut self.buffers[index]) {
                 buffer.clear();
                 fill(buffer)?;
+                self.largest = self.largest.max(buffer.len());
                 self.next = (index + 1) % len;
                 return Ok(self.buffers[index].clone());
             }
         }
-        let mut buffer = Vec::new();
+        let mut buffer = Vec::with_capacity(self.largest);
         fill(&mut buffer)?;
+        self.largest = self.largest.max(buffer.len());
         let buffer = Arc::new(buffer);
         if self.buffers.len() < self.buffers.capacity() {
             self.buffers.push(buffer.clone());

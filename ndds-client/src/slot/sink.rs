@@ -2,11 +2,13 @@
 //! mode), a latest-sample cell (polled mode), or a callback on the producing thread (direct).
 
 use std::collections::VecDeque;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
 use ndds_core::arbitration::Notification;
 
+use crate::error::RecvError;
 use crate::qos::{ConsumerMode, ConsumerQos};
 use crate::sample::{PollStatus, RawEvent, RawSample};
 use crate::sync::lock;
@@ -66,10 +68,81 @@ enum Kind {
     Latest(Mutex<Latest>),
 }
 
+/// Wakes threads waiting for a consumer's queue. Waiting on flume's own blocking receive
+/// would register (allocate) a waker at each wait; this waits on a condition variable, which
+/// allocates nothing, and costs a sender one atomic read when nobody waits.
+#[derive(Debug, Default)]
+pub(crate) struct Signal {
+    waiting: AtomicUsize,
+    /// True once the sink is gone.
+    closed: Mutex<bool>,
+    wake: Condvar,
+}
+
+/// Longest single wait: a waiter looks again at least this often.
+const WAIT_SLICE: Duration = Duration::from_millis(250);
+
+impl Signal {
+    fn notify(&self) {
+        if self.waiting.load(Ordering::SeqCst) > 0 {
+            let _closed = lock(&self.closed);
+            self.wake.notify_all();
+        }
+    }
+
+    fn close(&self) {
+        *lock(&self.closed) = true;
+        self.wake.notify_all();
+    }
+
+    /// The next event of `rx`, waiting until `until` (forever with `None`).
+    pub(crate) fn recv(
+        &self,
+        rx: &flume::Receiver<RawEvent>,
+        until: Option<Instant>,
+    ) -> Result<RawEvent, RecvError> {
+        let take = || match rx.try_recv() {
+            Ok(event) => Some(Ok(event)),
+            Err(flume::TryRecvError::Disconnected) => Some(Err(RecvError::Closed)),
+            Err(flume::TryRecvError::Empty) => None,
+        };
+        if let Some(result) = take() {
+            return result;
+        }
+        let mut closed = lock(&self.closed);
+        // Counted before looking again under the lock: a sender that queues after this look
+        // sees the count and takes the lock to notify, which it gets only once this waits.
+        self.waiting.fetch_add(1, Ordering::SeqCst);
+        let result = loop {
+            if let Some(result) = take() {
+                break result;
+            }
+            if *closed {
+                break Err(RecvError::Closed);
+            }
+            let now = Instant::now();
+            let wait = match until {
+                Some(at) if at <= now => break Err(RecvError::Timeout),
+                Some(at) => (at - now).min(WAIT_SLICE),
+                None => WAIT_SLICE,
+            };
+            closed = self
+                .wake
+                .wait_timeout(closed, wait)
+                .map(|(guard, _)| guard)
+                .unwrap_or_else(|poison| poison.into_inner().0);
+        };
+        self.waiting.fetch_sub(1, Ordering::SeqCst);
+        result
+    }
+}
+
 /// A consumer's sink.
 #[derive(Debug)]
 pub(crate) struct Sink {
     kind: Kind,
+    /// Wakes the application's threads waiting for the queue.
+    pub(crate) signal: Arc<Signal>,
     direct: Mutex<Option<DirectBox>>,
     has_direct: AtomicBool,
     /// Events dropped because the application did not keep up.
@@ -95,6 +168,7 @@ impl Sink {
         };
         let sink = Sink {
             kind,
+            signal: Arc::default(),
             direct: Mutex::new(None),
             has_direct: AtomicBool::new(false),
             overflow: AtomicU64::new(0),
@@ -148,7 +222,7 @@ impl Sink {
     ) {
         loop {
             match tx.try_send(event) {
-                Ok(()) => return,
+                Ok(()) => return self.signal.notify(),
                 Err(flume::TrySendError::Full(back)) => {
                     event = back;
                     if oldest.try_recv().is_ok() {
@@ -178,5 +252,11 @@ impl Sink {
                 latest.notifications.push_back(notification);
             }
         }
+    }
+}
+
+impl Drop for Sink {
+    fn drop(&mut self) {
+        self.signal.close();
     }
 }
