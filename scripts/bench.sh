@@ -372,6 +372,39 @@ $(goal_rows)
 
 The reliable-under-10 %-loss goal is in its own section below (it needs two hosts).
 
+## What bounds the goals not met
+
+Written from profiles (\`perf record\`, \`perf stat\`) of the runs above; the figures move a little
+from run to run, the reasons do not.
+
+- **Round trips with both processes on one CPU** (64 B reliable, 8 KiB): on one CPU every
+  microsecond either process spends adds to the round trip, and raw UDP spends almost nothing
+  besides the two system calls. Per direction ndds encodes the sample (one copy of the payload
+  into a buffer), reads the clocks, locks the producer and the consumer's slot, and arbitrates;
+  a reliable stream adds its history entry and the reader's ordering, about 0.3–0.6 µs per
+  side. Across CPUs the wake-up of the other CPU dominates and every ratio is 1.2 or less. What
+  would move it: encoding large payloads by reference (a scatter-gather entry instead of a
+  copy), and reliable bookkeeping in rings instead of ordered maps.
+- **64 B, 12 × raw unbatched UDP on one CPU**: publisher and subscriber share one CPU, so the
+  rate is bounded by their summed cost per sample (about 280 ns here: serializing, a clock read
+  for the source timestamp, the producer's lock, appending to the batch; then parsing and
+  arbitrating at the subscriber). Across CPUs the goal is met. Reliable batches pay
+  150–230 ns more per sample (history entry, acknowledgement accounting).
+- **8 KiB without batching, 0.8 × raw UDP**: one datagram per sample as raw UDP, plus the
+  encoding copy and the per-sample work above (0.75–0.78 ×). Reliable 8 KiB without batching
+  also keeps 1024 samples (8 MiB) in flight, more than the receiver's socket buffer (4 MiB
+  here, \`net.core.rmem_max\`), so datagrams are dropped by the kernel and repaired. With
+  batching (several samples per datagram) 8 KiB exceeds raw UDP.
+- **Reliable through 10 % loss** (64 B batched, 8 KiB in fragments): the flow-control window
+  is counted in samples (1024). At 2 million samples/s that is half a millisecond of data; a
+  lost datagram carries about 19 batched samples (or one of six pieces), the window cannot
+  move past it until its repair arrives, and a repair lost again waits for the retry time
+  (at least 1 ms). The stream then spends more time waiting than sending. 1 KiB samples,
+  one per datagram, reach 0.57–0.78. What would move it: a window sized in bytes to the
+  bandwidth-delay product rather than in samples, a shorter retry floor once the measured
+  round trip is tens of microseconds (a shorter fixed floor made things worse: spurious
+  repeats), and a receive buffer at least as large as the window.
+
 $LOSS_SECTION
 
 ## Round trips (µs)
