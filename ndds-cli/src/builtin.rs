@@ -1,6 +1,10 @@
-//! Built-in sample types that `ndds pub --type` can publish without discovery.
+//! Built-in sample types that `ndds pub --type` can publish without discovery, and the
+//! recognition of the CSMat type, which `ndds echo` prints as a table and `ndds pub` validates.
+
+use std::sync::OnceLock;
 
 use ndds_client::TypeDescription;
+use ndds_client::runtime::CsMat;
 
 /// Names accepted by `--type`, with the Rust type each stands for.
 pub const NAMES: &[(&str, &str)] = &[
@@ -17,6 +21,7 @@ pub const NAMES: &[(&str, &str)] = &[
     ("f64", "f64"),
     ("string", "String"),
     ("bytes", "Vec<u8>"),
+    ("csmat", "ndds_client::runtime::CsMat"),
 ];
 
 /// The description of a built-in type, or `None` for an unknown name.
@@ -35,8 +40,24 @@ pub fn describe(name: &str) -> Option<TypeDescription> {
         "f64" => TypeDescription::of::<f64>(),
         "string" => TypeDescription::of::<String>(),
         "bytes" => TypeDescription::of::<Vec<u8>>(),
+        "csmat" => TypeDescription::of::<CsMat>(),
         _ => return None,
     })
+}
+
+/// True when `desc` is the CSMat named matrix (same fingerprint as [`CsMat`]'s description).
+pub fn is_csmat(desc: &TypeDescription) -> bool {
+    static CSMAT: OnceLock<u64> = OnceLock::new();
+    let csmat = *CSMAT.get_or_init(|| TypeDescription::of::<CsMat>().fingerprint());
+    desc.layout.is_some() && desc.fingerprint() == csmat
+}
+
+/// Checks an encoded CSMat sample the way its consumers will decode it: data length
+/// `rows * cols`, one field per row (column) or none.
+pub fn check_csmat(payload: &[u8]) -> anyhow::Result<()> {
+    let mut mat = CsMat::zeros("", 0, 0);
+    mat.decode_into(payload)
+        .map_err(|err| anyhow::anyhow!("the value is not a consistent CSMat: {err}"))
 }
 
 /// `bool, i8, ...` for error messages.
@@ -59,5 +80,22 @@ mod tests {
             assert!(desc.layout.is_some(), "{name} has a layout");
         }
         assert!(describe("quaternion").is_none());
+    }
+
+    #[test]
+    fn csmat_is_recognised_and_checked() {
+        let csmat = describe("csmat").unwrap();
+        assert!(is_csmat(&csmat));
+        assert!(!is_csmat(&describe("f64").unwrap()));
+        assert!(!is_csmat(&TypeDescription::opaque(
+            "ndds_client::runtime::CsMat"
+        )));
+        let good = CsMat::from_row_slice("x", 2, 1, &[1.0, 2.0]).unwrap();
+        check_csmat(&postcard::to_allocvec(&good).unwrap()).unwrap();
+        let err = check_csmat(&[1, b'x', 2, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "the value is not a consistent CSMat: `x` is 2x1 but 1 values were given"
+        );
     }
 }

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use common::{RUN_LIMIT, Running, SETTLE, World, dead_socket, eventually, ndds_at};
+use ndds_client::runtime::CsMat;
 use ndds_client::{ConsumerQos, ProducerQos, RawProducer, TypeDescription};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -690,7 +691,7 @@ fn pub_with_an_unknown_type_lists_the_builtin_ones() {
     assert!(stderr.contains("quaternion"), "{run}");
     for builtin in [
         "bool", "i8", "i16", "i32", "i64", "u8", "u16", "u32", "u64", "f32", "f64", "string",
-        "bytes",
+        "bytes", "csmat",
     ] {
         assert!(
             stderr.contains(&format!(" {builtin},")) || stderr.contains(&format!(" {builtin})")),
@@ -734,6 +735,130 @@ fn pub_says_when_the_consumers_have_another_type() {
     let run = world.ndds(&["pub", "typed/topic", "1", "--type", "f64", "--wait", "1"]);
     assert!(run.stderr.contains("incompatible"), "{run}");
     assert!(run.stderr.contains(&type_name_of::<Pose>()), "{run}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// CSMat, the built-in named matrix
+
+/// A 2x2 gain matrix with row and column fields, as `ndds pub` takes it.
+fn gain_json(data: &[f64], row_fields: usize) -> String {
+    let rows = [("tau1", "N.m"), ("tau2", "N.m")];
+    json!({
+        "name": "K",
+        "rows": 2,
+        "cols": 2,
+        "data": data,
+        "row_fields": rows[..row_fields]
+            .iter()
+            .map(|(name, unit)| json!({ "name": name, "unit": unit }))
+            .collect::<Vec<_>>(),
+        "col_fields": [{ "name": "q1", "unit": "rad" }, { "name": "q2", "unit": "" }],
+    })
+    .to_string()
+}
+
+#[test]
+fn pub_of_a_csmat_is_echoed_as_a_labelled_table() {
+    let world = World::start();
+    let participant = world.participant("csmat-test");
+    let consumer = participant
+        .consumer::<CsMat>("arm/gain", ConsumerQos::default())
+        .unwrap();
+    let echo = world.spawn(&["echo", "arm/gain", "--count", "1"]);
+    assert!(
+        world.graph_until(&participant, |g| g
+            .endpoints
+            .iter()
+            .filter(|e| e.info.topic == "arm/gain")
+            .count()
+            == 2),
+        "the echo's consumer appears"
+    );
+    let value = gain_json(&[1.0, -2.5, 0.125, 4.0], 2);
+    let run = world.ndds(&[
+        "pub", "arm/gain", &value, "--type", "csmat", "--count", "10", "--rate", "20", "--wait",
+        "10",
+    ]);
+    assert!(run.success(), "{run}");
+    let echoed = echo.finish(RUN_LIMIT);
+    let stdout = echoed.ok();
+    let expected = CsMat::from_row_slice("K", 2, 2, &[1.0, -2.5, 0.125, 4.0])
+        .unwrap()
+        .with_row_fields([("tau1", "N.m"), ("tau2", "N.m")])
+        .unwrap()
+        .with_col_fields([("q1", "rad"), ("q2", "")])
+        .unwrap();
+    assert!(
+        stdout.starts_with("arm/gain  K  (2 x 2)  ["),
+        "the header: {echoed}"
+    );
+    for label in ["q1 [rad]", "q2", "tau1 [N.m]", "tau2 [N.m]"] {
+        assert!(stdout.contains(label), "{label} shown: {echoed}");
+    }
+    assert!(
+        stdout.contains(&format!("\n{expected}\n")),
+        "the table:\n{expected}\nin {echoed}"
+    );
+    assert_eq!(
+        lines(stdout)[1..],
+        [
+            "            q1 [rad]    q2",
+            "tau1 [N.m]         1  -2.5",
+            "tau2 [N.m]     0.125     4",
+        ],
+        "{echoed}"
+    );
+    let sample = consumer.recv_timeout(SETTLE).expect("the sample arrives");
+    assert_eq!(sample.value, expected);
+
+    // --json keeps the JSON form.
+    let echo = world.spawn(&["echo", "arm/gain", "--count", "1", "--json"]);
+    let run = world.ndds(&[
+        "pub", "arm/gain", &value, "--count", "10", "--rate", "20", "--wait", "10",
+    ]);
+    assert!(run.success(), "{run}");
+    let echoed = echo.finish(RUN_LIMIT);
+    let printed = parse_line(lines(echoed.ok())[0]);
+    assert_eq!(
+        printed["value"],
+        serde_json::from_str::<Value>(&value).unwrap()
+    );
+}
+
+#[test]
+fn pub_refuses_an_inconsistent_csmat() {
+    let world = World::start();
+    let participant = world.participant("csmat-bad-test");
+    let consumer = participant
+        .consumer::<CsMat>("arm/gain", ConsumerQos::default())
+        .unwrap();
+    assert!(world.graph_until(&participant, |g| g.endpoints.len() == 1));
+    let cases = [
+        (
+            gain_json(&[1.0, 2.0, 3.0], 2),
+            "`K` is 2x2 but 3 values were given",
+        ),
+        (
+            gain_json(&[1.0, 2.0, 3.0, 4.0], 1),
+            "`K` has 2 rows but 1 row fields were given",
+        ),
+    ];
+    for (value, reason) in &cases {
+        for typed in [true, false] {
+            let mut args = vec!["pub", "arm/gain", value.as_str(), "--wait", "0"];
+            if typed {
+                args.extend(["--type", "csmat"]);
+            }
+            let run = world.ndds(&args);
+            let stderr = run.err();
+            assert!(stderr.contains("not a consistent CSMat"), "{run}");
+            assert!(stderr.contains(reason), "{reason}: {run}");
+        }
+    }
+    assert!(
+        consumer.recv_timeout(Duration::from_millis(300)).is_err(),
+        "nothing was published"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -44,6 +44,7 @@ mod plane;
 pub mod producer;
 pub mod qos;
 mod router;
+pub mod runtime;
 pub mod sample;
 mod session;
 mod slot;

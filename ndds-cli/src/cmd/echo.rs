@@ -1,11 +1,14 @@
 //! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
+//! CSMat samples print as labelled tables unless `--json` is given.
 
 use std::time::{Duration, SystemTime};
 
+use ndds_client::runtime::CsMat;
 use ndds_client::{ConsumerQos, RawSample, TypeDescription};
 use ndds_core::dynamic;
 use serde_json::{Value, json};
 
+use crate::builtin;
 use crate::connect::{DaemonArgs, connect};
 use crate::render;
 use crate::seconds;
@@ -43,11 +46,22 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             ..ConsumerQos::default()
         },
     )?;
+    // A CSMat topic decodes every sample into this one matrix.
+    let mut table = (!args.json && builtin::is_csmat(&desc)).then(|| CsMat::zeros("", 0, 0));
     let mut printed = 0u64;
     while args.count.is_none_or(|count| printed < count) {
         let sample = consumer.recv_raw()?;
-        match decode(&desc, &sample) {
-            Ok(value) => println!("{}", line(args.json, &args.topic, &sample, value)),
+        let text = match table.as_mut() {
+            Some(mat) => mat
+                .decode_into(&sample.payload)
+                .map(|()| csmat_table(&args.topic, &sample, mat))
+                .map_err(anyhow::Error::from),
+            None => {
+                decode(&desc, &sample).map(|value| line(args.json, &args.topic, &sample, value))
+            }
+        };
+        match text {
+            Ok(text) => println!("{text}"),
             Err(err) => eprintln!(
                 "ndds: sample {} from {} skipped: {err}",
                 sample.info.seq, sample.info.writer
@@ -56,6 +70,18 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         printed += 1;
     }
     Ok(())
+}
+
+/// A CSMat sample: a header line `topic  name  (rows x cols)  [writer #seq]`, the labelled
+/// table, and an empty line.
+fn csmat_table(topic: &str, sample: &RawSample, mat: &CsMat) -> String {
+    let (rows, cols) = mat.shape();
+    format!(
+        "{topic}  {}  ({rows} x {cols})  [{} #{}]\n{mat}\n",
+        mat.name(),
+        sample.info.writer,
+        sample.info.seq
+    )
 }
 
 /// Resolves the topic's type, retrying until `wait` seconds have passed.

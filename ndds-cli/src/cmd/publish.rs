@@ -119,6 +119,8 @@ fn warn_unmatched(producer: &RawProducer, topic: &str, waited: bool) {
     }
 }
 
+/// Encodes the JSON value as a sample of `desc`; a CSMat is also checked for consistency
+/// (data length, field counts), which the layout alone cannot express.
 fn encode(desc: &TypeDescription, value: &serde_json::Value) -> anyhow::Result<Vec<u8>> {
     let layout = desc.layout.as_ref().with_context(|| {
         format!(
@@ -126,6 +128,10 @@ fn encode(desc: &TypeDescription, value: &serde_json::Value) -> anyhow::Result<V
             desc.name
         )
     })?;
-    dynamic::encode_json(layout, value)
-        .with_context(|| format!("the value does not fit type {}", desc.name))
+    let payload = dynamic::encode_json(layout, value)
+        .with_context(|| format!("the value does not fit type {}", desc.name))?;
+    if builtin::is_csmat(desc) {
+        builtin::check_csmat(&payload)?;
+    }
+    Ok(payload)
 }

@@ -1,0 +1,140 @@
+//! Modules that move CSMats between habitats and over the network.
+
+use std::sync::{Arc, Mutex};
+
+use super::csmat::CsMat;
+use super::mat::Mat;
+use super::module::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
+use super::runtime::lock;
+use crate::{Producer, RawConsumer};
+
+/// Copies `src` into `dst`, reallocating only when the shape changes.
+pub(crate) fn copy_into(dst: &mut CsMat, src: &CsMat) {
+    if dst.shape() == src.shape() {
+        let _ = dst.copy_from(src);
+    } else {
+        let name = dst.name().to_owned();
+        *dst = src.clone();
+        dst.set_name(name);
+    }
+}
+
+/// Writes its input on a topic each sample (installed by `Runtime::publish`).
+pub(crate) struct Publisher {
+    input: Mat,
+    producer: Producer<CsMat>,
+}
+
+impl Publisher {
+    pub(crate) fn new(b: &mut Binder<'_>, mat: &str, producer: Producer<CsMat>) -> Self {
+        Self {
+            input: b.input(mat, Shape::Any),
+            producer,
+        }
+    }
+}
+
+impl SampleModule for Publisher {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let value = self.input.read();
+        self.producer
+            .write(&value)
+            .map_err(|err| ModuleError::Failed(format!("publishing `{}`: {err}", value.name())))
+    }
+}
+
+/// Writes the newest sample of a topic into its output (installed by `Runtime::subscribe`).
+pub(crate) struct Subscriber {
+    output: Mat,
+    consumer: RawConsumer,
+    staging: CsMat,
+}
+
+impl Subscriber {
+    pub(crate) fn new(b: &mut Binder<'_>, mat: &str, shape: Shape, consumer: RawConsumer) -> Self {
+        Self {
+            output: b.output(mat, shape),
+            consumer,
+            staging: CsMat::zeros(mat, 0, 0),
+        }
+    }
+}
+
+impl SampleModule for Subscriber {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let mut newest = None;
+        while let Ok(sample) = self.consumer.try_recv_raw() {
+            newest = Some(sample);
+        }
+        if let Some(sample) = newest {
+            // Decoded into a staging matrix that keeps the sender's name and fields, so the
+            // steady state allocates nothing; then copied under the local name.
+            self.staging.decode_into(&sample.payload)?;
+            let mut out = self.output.write();
+            if out.shape() != self.staging.shape() {
+                out.resize(self.staging.rows(), self.staging.cols());
+                out.set_fields_from(&self.staging);
+            }
+            out.copy_from(&self.staging)?;
+        }
+        Ok(())
+    }
+}
+
+/// The source side of a rate transition.
+pub(crate) struct RateIn {
+    input: Mat,
+    buffer: Arc<Mutex<Option<CsMat>>>,
+}
+
+impl RateIn {
+    pub(crate) fn new(b: &mut Binder<'_>, mat: &str, buffer: Arc<Mutex<Option<CsMat>>>) -> Self {
+        Self {
+            input: b.input(mat, Shape::Any),
+            buffer,
+        }
+    }
+}
+
+impl SampleModule for RateIn {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let value = self.input.read();
+        let mut buffer = lock(&self.buffer);
+        match buffer.as_mut() {
+            Some(held) => copy_into(held, &value),
+            None => *buffer = Some(value.clone()),
+        }
+        Ok(())
+    }
+}
+
+/// The destination side of a rate transition.
+pub(crate) struct RateOut {
+    output: Mat,
+    buffer: Arc<Mutex<Option<CsMat>>>,
+}
+
+impl RateOut {
+    pub(crate) fn new(
+        b: &mut Binder<'_>,
+        mat: &str,
+        template: Option<CsMat>,
+        buffer: Arc<Mutex<Option<CsMat>>>,
+    ) -> Self {
+        let output = match template {
+            Some(template) => b.output_like(mat, template),
+            None => b.output(mat, Shape::Any),
+        };
+        Self { output, buffer }
+    }
+}
+
+impl SampleModule for RateOut {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let buffer = lock(&self.buffer);
+        if let Some(value) = buffer.as_ref() {
+            copy_into(&mut self.output.write(), value);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,221 @@
+//! Built-in components: what the paper's PD/LQG example needs, and the registry entries that
+//! let systems name them as data. (The full component library comes with description files.)
+//!
+//! | type                 | module                     | reads            | writes   |
+//! |----------------------|----------------------------|------------------|----------|
+//! | `gain`               | [`Gain`]                   | `input`          | `output` |
+//! | `lowpass`            | [`LowPass`]                | `input`          | `output` |
+//! | `pd`                 | [`Pd`]                     | `measured`, `reference` | `output` |
+//! | `estimator`          | [`Estimator`]              | `measured`, `command` (state) | `estimate` |
+//! | `state_feedback`     | [`StateFeedback`]          | `estimate`, `reference` | `output` |
+//! | `mass_spring_damper` | [`MassSpringDamper`]       | `force` (state)  | `position`, `angle` |
+
+mod control;
+mod plant;
+
+pub use control::{Estimator, Pd, StateFeedback, discretize, dlqr, kalman_gain, reference_gain};
+pub use plant::MassSpringDamper;
+
+use nalgebra::DMatrix;
+
+use super::csmat::CsMat;
+use super::mat::Mat;
+use super::module::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
+use super::registry::Registry;
+
+/// Fails when two of a module's CSMats are the same (a module holds both locks at once).
+pub(crate) fn distinct(names: &[&str]) -> Result<(), ModuleError> {
+    for (i, a) in names.iter().enumerate() {
+        if names[i + 1..].contains(a) {
+            return Err(ModuleError::Failed(format!(
+                "CSMat `{a}` is used twice by this module; inputs and outputs must differ"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The shape of `mat` if it exists, else `fallback`.
+pub(crate) fn shape_of(mat: &Mat, fallback: Shape) -> Shape {
+    if mat.is_bound() {
+        mat.shape().into()
+    } else {
+        fallback
+    }
+}
+
+/// A scalar parameter CSMat `"{module}.{name}"` (created with `value` if absent).
+pub(crate) fn scalar_param(b: &mut Binder<'_>, name: &str, value: f64) -> Mat {
+    let full = format!("{}.{name}", b.module_name());
+    b.param_or(
+        &full,
+        CsMat::from_row_slice(&full, 1, 1, &[value]).unwrap_or_else(|_| CsMat::zeros(&full, 1, 1)),
+    )
+}
+
+/// A matrix parameter CSMat `"{module}.{name}"` created from `value`.
+pub(crate) fn matrix_param(b: &mut Binder<'_>, name: &str, value: &DMatrix<f64>) -> Mat {
+    let full = format!("{}.{name}", b.module_name());
+    let mut mat = CsMat::zeros(&full, value.nrows(), value.ncols());
+    mat.matrix_mut().copy_from(value);
+    b.param_or(&full, mat)
+}
+
+fn shape_error(what: &str, mat: &CsMat, expected: (usize, usize)) -> ModuleError {
+    ModuleError::Failed(format!(
+        "{what} `{}` is {}x{}, expected {}x{}",
+        mat.name(),
+        mat.rows(),
+        mat.cols(),
+        expected.0,
+        expected.1
+    ))
+}
+
+/// `y = k·u`, element by element (`k` is the 1 × 1 parameter `"{module}.k"`).
+pub struct Gain {
+    input: Mat,
+    output: Mat,
+    k: Mat,
+}
+
+impl Gain {
+    /// Reads `input`, writes `output` (same shape).
+    pub fn new(b: &mut Binder<'_>, input: &str, output: &str, k: f64) -> Result<Self, ModuleError> {
+        distinct(&[input, output])?;
+        let input_mat = b.input(input, Shape::Any);
+        Ok(Self {
+            output: b.output_same_as(output, &input_mat),
+            input: input_mat,
+            k: scalar_param(b, "k", k),
+        })
+    }
+}
+
+impl SampleModule for Gain {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let k = self.k.read().get(0, 0)?;
+        let input = self.input.read();
+        let mut output = self.output.write();
+        output.copy_from(&input)?;
+        output.matrix_mut().scale_mut(k);
+        Ok(())
+    }
+}
+
+/// First-order low-pass filter `y += a·(u − y)`, `a = dt / (tau + dt)`; `tau` in seconds is
+/// the 1 × 1 parameter `"{module}.tau"`. Enabling it starts from the current input (no step).
+pub struct LowPass {
+    input: Mat,
+    output: Mat,
+    tau: Mat,
+    state: DMatrix<f64>,
+    primed: bool,
+}
+
+impl LowPass {
+    /// Filters `input` into `output` (same shape).
+    pub fn new(
+        b: &mut Binder<'_>,
+        input: &str,
+        output: &str,
+        tau: f64,
+    ) -> Result<Self, ModuleError> {
+        distinct(&[input, output])?;
+        let input_mat = b.input(input, Shape::Any);
+        Ok(Self {
+            output: b.output_same_as(output, &input_mat),
+            input: input_mat,
+            tau: scalar_param(b, "tau", tau),
+            state: DMatrix::zeros(0, 0),
+            primed: false,
+        })
+    }
+
+    fn prime(&mut self) {
+        let input = self.input.read();
+        self.state = input.matrix().clone();
+        self.primed = true;
+    }
+}
+
+impl SampleModule for LowPass {
+    fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
+        if !self.primed {
+            self.prime();
+        }
+        let tau = self.tau.read().get(0, 0)?.max(0.0);
+        let a = ctx.dt() / (tau + ctx.dt());
+        let input = self.input.read();
+        if input.shape() != self.state.shape() {
+            return Err(shape_error("input", &input, self.state.shape()));
+        }
+        self.state
+            .zip_apply(input.matrix(), |s, u| *s += a * (u - *s));
+        let mut output = self.output.write();
+        if output.shape() != self.state.shape() {
+            return Err(shape_error("output", &output, self.state.shape()));
+        }
+        output.matrix_mut().copy_from(&self.state);
+        Ok(())
+    }
+
+    fn enable(&mut self, _: &SampleContext) -> RoutineResult {
+        self.prime();
+        Ok(())
+    }
+
+    fn reset(&mut self, _: &SampleContext) -> RoutineResult {
+        self.primed = false;
+        Ok(())
+    }
+}
+
+/// Registers the built-in component types.
+pub(crate) fn register_builtin(registry: &mut Registry) {
+    registry.register("gain", "y = k·u (params: input, output, k)", |b, p| {
+        Gain::new(
+            b,
+            p.text("input")?,
+            p.text("output")?,
+            p.number_or("k", 1.0)?,
+        )
+    });
+    registry.register(
+        "lowpass",
+        "first-order low-pass (params: input, output, tau seconds)",
+        |b, p| LowPass::new(b, p.text("input")?, p.text("output")?, p.number("tau")?),
+    );
+    registry.register(
+        "pd",
+        "PD on the measurement (params: measured, reference, output, kp, kd)",
+        |b, p| {
+            Pd::new(
+                b,
+                p.text("measured")?,
+                p.text("reference")?,
+                p.text("output")?,
+                p.number("kp")?,
+                p.number("kd")?,
+            )
+        },
+    );
+    registry.register(
+        "mass_spring_damper",
+        "simulated plant (params: force, position, angle, mass, stiffness, damping, length)",
+        |b, p| {
+            MassSpringDamper::new(
+                b,
+                p.text("force")?,
+                p.text("position")?,
+                p.text("angle")?,
+                plant::Physical {
+                    mass: p.number_or("mass", 1.0)?,
+                    stiffness: p.number_or("stiffness", 4.0)?,
+                    damping: p.number_or("damping", 0.4)?,
+                    length: p.number_or("length", 0.5)?,
+                },
+            )
+        },
+    );
+}

@@ -1,0 +1,59 @@
+//! The ControlShell runtime: the real-time component layer control programs build on.
+//!
+//! - [`CsMat`]: named matrices with field names and units; [`Mat`] is the shared handle the
+//!   linking database gives out.
+//! - [`Runtime`]: the linking database (every named object, reference before creation,
+//!   [`verify`](Runtime::verify)), the component registry, the configuration manager
+//!   (modules → groups → categories → configurations) and the network bindings.
+//! - [`SampleModule`]: the nine entry routines; [`Binder`] declares a module's CSMats.
+//! - [`Habitat`]: a periodic task running a dependency-sorted execution list, with
+//!   statistics ([`HabitatStats`]) published on the network.
+//!
+//! ```
+//! use ndds_client::runtime::{components::Gain, Clock, CsMat, HabitatOptions, Runtime};
+//!
+//! let rt = Runtime::new("example");
+//! rt.create_mat(CsMat::from_row_slice("setpoint", 1, 1, &[1.5])?)?;
+//! rt.create_habitat("servo", HabitatOptions::rate(1000.0).clock(Clock::Manual))?;
+//! // Installed out of order: the list is sorted so `scale` runs after `double`.
+//! rt.install("servo", "scale", |b| Gain::new(b, "doubled", "out", 10.0))?;
+//! rt.install("servo", "double", |b| Gain::new(b, "setpoint", "doubled", 2.0))?;
+//! assert!(rt.verify().is_ok());
+//! let servo = rt.habitat("servo");
+//! assert_eq!(servo.order(), ["double", "scale"]);
+//! servo.start()?;
+//! servo.step()?;
+//! assert_eq!(rt.mat("out").value(0, 0), 30.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod binding;
+mod clock;
+pub mod components;
+pub mod csmat;
+mod database;
+mod habitat;
+mod list;
+mod mat;
+mod module;
+mod registry;
+#[allow(clippy::module_inception)]
+mod runtime;
+mod sort;
+mod stats;
+mod verify;
+
+pub use csmat::{CsMat, Field, MatError};
+pub use database::ObjectKind;
+pub use habitat::{Clock, Habitat, HabitatError, HabitatOptions};
+pub use mat::Mat;
+pub use module::{
+    Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,
+};
+pub use registry::{Factory, ParamError, ParamValue, Params, Registry};
+pub use runtime::{Runtime, RuntimeError};
+pub use sort::{SortError, SortNode, sort};
+pub use stats::{HabitatStats, Percentiles};
+pub use verify::{Problem, VerifyReport};
+
+pub(crate) use runtime::Inner;

@@ -1,0 +1,114 @@
+//! Habitat timing statistics: what each habitat publishes on `cs/<runtime>/<habitat>/stats`.
+//!
+//! Three distributions are kept per habitat, in microseconds:
+//! - **latency**: how late each sample started against its absolute deadline;
+//! - **period jitter**: how far each interval between two sample starts was from the period;
+//! - **exec**: how long the sample (every `execute` and `state_update`) took.
+//!
+//! The habitat's thread records into histograms it owns (no lock, no allocation) and hands
+//! them over once per statistics interval with a `try_lock`, so a reader never delays a sample.
+
+use hdrhistogram::Histogram;
+use serde::{Deserialize, Serialize};
+
+/// p50 / p99 / max of one distribution, in microseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Percentiles {
+    /// Samples the figures are over.
+    pub count: u64,
+    /// Median.
+    pub p50_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// Largest.
+    pub max_us: f64,
+}
+
+/// A habitat's statistics (the sample type of its stats topic).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct HabitatStats {
+    /// The runtime the habitat belongs to.
+    pub runtime: String,
+    /// The habitat.
+    pub habitat: String,
+    /// Whether sampling runs.
+    pub running: bool,
+    /// Nominal rate in Hz.
+    pub rate_hz: f64,
+    /// Samples executed since sampling began.
+    pub samples: u64,
+    /// Deadlines skipped because a sample ran past the next one, since sampling began.
+    pub overruns: u64,
+    /// Failed entry routines since the habitat was created.
+    pub module_errors: u64,
+    /// Active modules.
+    pub active_modules: u32,
+    /// The runtime's current configuration (empty if none was switched to).
+    pub configuration: String,
+    /// Seconds the distributions below cover (the last complete interval).
+    pub interval_s: f64,
+    /// Sample start latency against the absolute deadline.
+    pub latency: Percentiles,
+    /// Deviation of the interval between sample starts from the period.
+    pub period_jitter: Percentiles,
+    /// Execution time of a sample.
+    pub exec: Percentiles,
+}
+
+/// The three distributions, in nanoseconds.
+pub(crate) struct Timings {
+    pub(crate) latency: Histogram<u64>,
+    pub(crate) jitter: Histogram<u64>,
+    pub(crate) exec: Histogram<u64>,
+}
+
+impl Timings {
+    pub(crate) fn new() -> Self {
+        // 1 ns .. 100 s at 2 significant digits: about 30 KiB each, allocated once.
+        let make = || {
+            Histogram::new_with_bounds(1, 100_000_000_000, 2)
+                .expect("constant histogram bounds are valid")
+        };
+        Self {
+            latency: make(),
+            jitter: make(),
+            exec: make(),
+        }
+    }
+
+    pub(crate) fn record(&mut self, latency_ns: Option<u64>, jitter_ns: Option<u64>, exec_ns: u64) {
+        if let Some(latency) = latency_ns {
+            self.latency.saturating_record(latency.max(1));
+        }
+        if let Some(jitter) = jitter_ns {
+            self.jitter.saturating_record(jitter.max(1));
+        }
+        self.exec.saturating_record(exec_ns.max(1));
+    }
+
+    pub(crate) fn reset(&mut self) {
+        self.latency.reset();
+        self.jitter.reset();
+        self.exec.reset();
+    }
+
+    /// Adds `other` into `self` (same bounds: never allocates).
+    pub(crate) fn add(&mut self, other: &Timings) {
+        let _ = self.latency.add(&other.latency);
+        let _ = self.jitter.add(&other.jitter);
+        let _ = self.exec.add(&other.exec);
+    }
+}
+
+pub(crate) fn percentiles(h: &Histogram<u64>) -> Percentiles {
+    if h.is_empty() {
+        return Percentiles::default();
+    }
+    let us = |ns: u64| ns as f64 / 1000.0;
+    Percentiles {
+        count: h.len(),
+        p50_us: us(h.value_at_quantile(0.5)),
+        p99_us: us(h.value_at_quantile(0.99)),
+        max_us: us(h.max()),
+    }
+}
