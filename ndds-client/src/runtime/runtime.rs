@@ -196,10 +196,13 @@ impl std::fmt::Debug for Runtime {
 }
 
 fn check_name(kind: ObjectKind, name: &str) -> Result<(), RuntimeError> {
+    let slash = kind == ObjectKind::Habitat && name.contains('/');
     let why = if name.is_empty() {
         "empty"
-    } else if name.chars().any(|c| c.is_control() || c == '/') {
-        "control characters and `/` are not allowed"
+    } else if name.chars().any(char::is_control) {
+        "control characters are not allowed"
+    } else if slash {
+        "`/` is not allowed (the name is part of topic names)"
     } else {
         return Ok(());
     };

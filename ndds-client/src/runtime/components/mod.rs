@@ -14,7 +14,7 @@ mod control;
 mod plant;
 
 pub use control::{Estimator, Pd, StateFeedback, discretize, dlqr, kalman_gain, reference_gain};
-pub use plant::MassSpringDamper;
+pub use plant::{MassSpringDamper, Physical};
 
 use nalgebra::DMatrix;
 
@@ -209,7 +209,7 @@ pub(crate) fn register_builtin(registry: &mut Registry) {
                 p.text("force")?,
                 p.text("position")?,
                 p.text("angle")?,
-                plant::Physical {
+                Physical {
                     mass: p.number_or("mass", 1.0)?,
                     stiffness: p.number_or("stiffness", 4.0)?,
                     damping: p.number_or("damping", 0.4)?,

@@ -1,0 +1,106 @@
+//! The controller half of the ControlShell paper's PD/LQG example, at 200 Hz: two sensor
+//! groups ("joint": the lever angle, "endpoint": the tip position) and two controller groups
+//! ("PD": a low-pass filter and a PD controller, "LQG": a Kalman estimator and LQR state
+//! feedback), switched as the configurations "JointPD" and "endptLQG" — every 4 s here, or
+//! from the network with `ndds pub cs/arm-controller/configure '"endptLQG"'`.
+//!
+//! ```text
+//! cargo run -p ndds-client --example arm_plant &
+//! cargo run -p ndds-client --example arm_controller [SECONDS]
+//! ```
+
+use std::time::{Duration, Instant};
+
+use nalgebra::DMatrix;
+use ndds_client::runtime::components::{
+    Estimator, Gain, LowPass, Pd, StateFeedback, discretize, dlqr, kalman_gain, reference_gain,
+};
+use ndds_client::runtime::{CsMat, HabitatOptions, Runtime, RuntimeError};
+use ndds_client::{ConsumerQos, Participant, ProducerQos};
+
+const HZ: f64 = 200.0;
+
+/// Installs the sensors, both controllers, their groups and the two configurations in
+/// `habitat`: reads CSMats `tip` and `angle`, writes `force`, tracks `reference`.
+pub fn install_controller(rt: &Runtime, habitat: &str, dt: f64) -> Result<(), RuntimeError> {
+    // Groups first: a module installed into an inactive group never conflicts with the
+    // active one writing the same CSMat.
+    rt.group("sensors", "joint", &["joint_sensor"])?;
+    rt.group("sensors", "endpoint", &["endpoint_sensor"])?;
+    rt.group("controllers", "PD", &["pd_filter", "pd"])?;
+    rt.group("controllers", "LQG", &["estimator", "lqr"])?;
+    rt.configuration("JointPD", &[("sensors", "joint"), ("controllers", "PD")])?;
+    rt.configuration(
+        "endptLQG",
+        &[("sensors", "endpoint"), ("controllers", "LQG")],
+    )?;
+
+    rt.install(habitat, "joint_sensor", |b| {
+        Gain::new(b, "angle", "measured", 0.5)
+    })?;
+    rt.install(habitat, "endpoint_sensor", |b| {
+        Gain::new(b, "tip", "measured", 1.0)
+    })?;
+    rt.install(habitat, "pd_filter", |b| {
+        LowPass::new(b, "measured", "filtered", 0.004)
+    })?;
+    rt.install(habitat, "pd", |b| {
+        Pd::new(b, "filtered", "reference", "force", 400.0, 40.0)
+    })?;
+
+    // LQG designed on the plant's model (1 kg, 4 N/m, 0.4 N·s/m), discretised at dt.
+    let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.4]);
+    let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+    let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+    let (ad, bd) = discretize(&a, &b, dt);
+    let q = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![4000.0, 10.0]));
+    let r = DMatrix::from_element(1, 1, 0.01);
+    let k = dlqr(&ad, &bd, &q, &r).expect("the arm is controllable");
+    let qn = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![1e-6, 1e-4]));
+    let l = kalman_gain(&ad, &c, &qn, &DMatrix::from_element(1, 1, 1e-6)).expect("observable");
+    let n = reference_gain(&ad, &bd, &c, &k).expect("the arm can track a step");
+    rt.install(habitat, "estimator", |bb| {
+        Estimator::new(bb, "measured", "force", "estimate", &ad, &bd, &c, &l)
+    })?;
+    rt.install(habitat, "lqr", |bb| {
+        StateFeedback::new(bb, "estimate", "reference", "force", &k, &n)
+    })?;
+    rt.switch("JointPD")
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    tracing_subscriber::fmt().with_env_filter("info").init();
+    let seconds: Option<f64> = std::env::args().nth(1).map(|s| s.parse()).transpose()?;
+    let rt = Runtime::with_participant("arm-controller", &Participant::connect()?)?;
+    rt.create_habitat("control", HabitatOptions::rate(HZ))?;
+    rt.subscribe("control", "tip", (1, 1), "arm/tip", ConsumerQos::default())?;
+    rt.subscribe(
+        "control",
+        "angle",
+        (1, 1),
+        "arm/angle",
+        ConsumerQos::default(),
+    )?;
+    rt.create_mat(CsMat::from_row_slice("reference", 1, 1, &[0.1])?)?;
+    install_controller(&rt, "control", 1.0 / HZ)?;
+    rt.publish("control", "force", "arm/force", ProducerQos::default())?;
+    rt.start_all()?;
+    let (start, mut last_switch) = (Instant::now(), Instant::now());
+    while seconds.is_none_or(|s| start.elapsed().as_secs_f64() < s) {
+        std::thread::sleep(Duration::from_millis(250));
+        if seconds.is_none() && last_switch.elapsed() > Duration::from_secs(4) {
+            let next = match rt.current_configuration().as_deref() {
+                Some("JointPD") => "endptLQG",
+                _ => "JointPD",
+            };
+            rt.switch(next)?;
+            last_switch = Instant::now();
+        }
+        let tip = rt.mat("measured").value(0, 0);
+        let force = rt.mat("force").value(0, 0);
+        let config = rt.current_configuration().unwrap_or_default();
+        println!("{config:>9}  measured {tip:+.4} m  force {force:+8.3} N");
+    }
+    rt.stop_all();
+    Ok(())
+}
