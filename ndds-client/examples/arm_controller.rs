@@ -11,9 +11,9 @@
 
 use std::time::{Duration, Instant};
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use ndds_client::runtime::components::{
-    Estimator, Gain, LowPass, Pd, StateFeedback, discretize, dlqr, kalman_gain, reference_gain,
+    Estimator, Gain, LowPass, LqgWeights, Pd, Physical, StateFeedback, design_lqg,
 };
 use ndds_client::runtime::{CsMat, HabitatOptions, Runtime, RuntimeError};
 use ndds_client::{ConsumerQos, Participant, ProducerQos};
@@ -49,23 +49,42 @@ pub fn install_controller(rt: &Runtime, habitat: &str, dt: f64) -> Result<(), Ru
     })?;
 
     // LQG designed on the plant's model (1 kg, 4 N/m, 0.4 N·s/m), discretised at dt.
-    let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.4]);
-    let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
-    let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
-    let (ad, bd) = discretize(&a, &b, dt);
-    let q = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![4000.0, 10.0]));
-    let r = DMatrix::from_element(1, 1, 0.01);
-    let k = dlqr(&ad, &bd, &q, &r).expect("the arm is controllable");
-    let qn = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![1e-6, 1e-4]));
-    let l = kalman_gain(&ad, &c, &qn, &DMatrix::from_element(1, 1, 1e-6)).expect("observable");
-    let n = reference_gain(&ad, &bd, &c, &k).expect("the arm can track a step");
-    rt.install(habitat, "estimator", |bb| {
-        Estimator::new(bb, "measured", "force", "estimate", &ad, &bd, &c, &l)
+    let (a, b) = ARM.model();
+    let lqg = design_lqg(&a, &b, &position_only(), dt, &weights())
+        .expect("the arm is controllable and observable");
+    rt.install(habitat, "estimator", |b| {
+        Estimator::new(
+            b, "measured", "force", "estimate", &lqg.ad, &lqg.bd, &lqg.c, &lqg.l,
+        )
     })?;
-    rt.install(habitat, "lqr", |bb| {
-        StateFeedback::new(bb, "estimate", "reference", "force", &k, &n)
+    rt.install(habitat, "lqr", |b| {
+        StateFeedback::new(b, "estimate", "reference", "force", &lqg.k, &lqg.n)
     })?;
     rt.switch("JointPD")
+}
+
+/// The arm's model, as the plant example simulates it.
+pub const ARM: Physical = Physical {
+    mass: 1.0,
+    stiffness: 4.0,
+    damping: 0.4,
+    length: 0.5,
+};
+
+/// Only the position is measured.
+pub fn position_only() -> DMatrix<f64> {
+    DMatrix::from_row_slice(1, 2, &[1.0, 0.0])
+}
+
+/// LQG weights: stiff on position, light on force; a precise position sensor.
+pub fn weights() -> LqgWeights {
+    let diag = |v: &[f64]| DMatrix::from_diagonal(&DVector::from_row_slice(v));
+    LqgWeights {
+        q: diag(&[4000.0, 10.0]),
+        r: diag(&[0.01]),
+        process_noise: diag(&[1e-6, 1e-4]),
+        measurement_noise: diag(&[1e-6]),
+    }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

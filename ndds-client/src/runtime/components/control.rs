@@ -338,3 +338,56 @@ pub fn reference_gain(
     let dc = c * closed.try_inverse()? * b;
     dc.try_inverse()
 }
+
+/// Everything an LQG controller for a continuous plant needs, discretised at one period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LqgDesign {
+    /// Discrete state matrix.
+    pub ad: DMatrix<f64>,
+    /// Discrete input matrix.
+    pub bd: DMatrix<f64>,
+    /// Output matrix.
+    pub c: DMatrix<f64>,
+    /// State-feedback gain (`u = N·r − K·x̂`).
+    pub k: DMatrix<f64>,
+    /// Reference feedforward.
+    pub n: DMatrix<f64>,
+    /// Kalman gain.
+    pub l: DMatrix<f64>,
+}
+
+/// Weights of an LQG design: state and input costs, process and measurement noise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LqgWeights {
+    /// State cost (n × n).
+    pub q: DMatrix<f64>,
+    /// Input cost (m × m).
+    pub r: DMatrix<f64>,
+    /// Process noise covariance (n × n).
+    pub process_noise: DMatrix<f64>,
+    /// Measurement noise covariance (p × p).
+    pub measurement_noise: DMatrix<f64>,
+}
+
+/// Designs an LQG controller for `ẋ = A·x + B·u`, `y = C·x` sampled every `dt` seconds, or
+/// `None` if the plant is not stabilisable / detectable with these weights.
+pub fn design_lqg(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+    dt: f64,
+    weights: &LqgWeights,
+) -> Option<LqgDesign> {
+    let (ad, bd) = discretize(a, b, dt);
+    let k = dlqr(&ad, &bd, &weights.q, &weights.r)?;
+    let l = kalman_gain(&ad, c, &weights.process_noise, &weights.measurement_noise)?;
+    let n = reference_gain(&ad, &bd, c, &k)?;
+    Some(LqgDesign {
+        ad,
+        bd,
+        c: c.clone(),
+        k,
+        n,
+        l,
+    })
+}

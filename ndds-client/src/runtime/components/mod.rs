@@ -13,7 +13,10 @@
 mod control;
 mod plant;
 
-pub use control::{Estimator, Pd, StateFeedback, discretize, dlqr, kalman_gain, reference_gain};
+pub use control::{
+    Estimator, LqgDesign, LqgWeights, Pd, StateFeedback, design_lqg, discretize, dlqr, kalman_gain,
+    reference_gain,
+};
 pub use plant::{MassSpringDamper, Physical};
 
 use nalgebra::DMatrix;
