@@ -1082,3 +1082,94 @@ fn hz_reports_when_its_duration_ends() {
     let rate = parse_line(reports[0])["rate_hz"].as_f64().unwrap();
     assert!((35.0..=65.0).contains(&rate), "about 50 Hz: {run}");
 }
+
+/// Two habitats of a runtime in the test process, at 1 kHz and 100 Hz, joined by a rate
+/// transition: each one's statistics are readable with `ndds echo`, and `ndds pub` on the
+/// runtime's configure topic switches its configuration.
+#[test]
+fn habitat_statistics_are_echoed_and_configurations_switch_from_ndds_pub() {
+    use ndds_client::runtime::components::Gain;
+    use ndds_client::runtime::{HabitatOptions, Runtime};
+
+    let world = World::start();
+    let participant = world.participant("runtime-test");
+    let rt = Runtime::with_participant("cli-rt", &participant).unwrap();
+    for (name, hz) in [("fast", 1000.0), ("slow", 100.0)] {
+        let mut options = HabitatOptions::rate(hz);
+        options.stats_interval = Duration::from_millis(200);
+        rt.create_habitat(name, options).unwrap();
+    }
+    rt.create_mat(CsMat::from_row_slice("input", 1, 1, &[1.0]).unwrap())
+        .unwrap();
+    rt.group("gains", "one", &["gain_one"]).unwrap();
+    rt.group("gains", "ten", &["gain_ten"]).unwrap();
+    rt.configuration("low", &[("gains", "one")]).unwrap();
+    rt.configuration("high", &[("gains", "ten")]).unwrap();
+    rt.install("fast", "gain_one", |b| {
+        Gain::new(b, "input", "fast_out", 1.0)
+    })
+    .unwrap();
+    rt.install("fast", "gain_ten", |b| {
+        Gain::new(b, "input", "fast_out", 10.0)
+    })
+    .unwrap();
+    rt.rate_transition("fast_to_slow", ("fast", "fast_out"), ("slow", "slow_in"))
+        .unwrap();
+    rt.start_all().unwrap();
+
+    for (name, hz) in [("fast", 1000.0), ("slow", 100.0)] {
+        let topic = format!("cs/cli-rt/{name}/stats");
+        let run = world.ndds(&["echo", &topic, "--count", "2", "--json", "--wait", "10"]);
+        assert!(run.success(), "{run}");
+        let last: Value = run.ok().lines().last().map(parse_line).unwrap();
+        let stats = &last["value"];
+        assert_eq!(stats["runtime"], "cli-rt", "{last}");
+        assert_eq!(stats["habitat"], name, "{last}");
+        assert_eq!(stats["rate_hz"].as_f64(), Some(hz), "{last}");
+        assert_eq!(stats["running"], true, "{last}");
+        assert!(stats["samples"].as_u64().unwrap() > 0, "{last}");
+        assert!(
+            stats["period_jitter"]["count"].as_u64().unwrap() > 0,
+            "{last}"
+        );
+        for key in ["p50_us", "p99_us", "max_us"] {
+            assert!(stats["exec"][key].as_f64().is_some(), "{key}: {last}");
+        }
+    }
+
+    assert!(eventually(SETTLE, || rt.mat("slow_in").value(0, 0) == 1.0));
+    // The configure topic is reliable: a best-effort `ndds pub` is told so.
+    let run = world.ndds(&["pub", "cs/cli-rt/configure", "\"high\"", "--wait", "2"]);
+    assert!(run.stderr.contains("pass --reliable"), "{run}");
+    assert_eq!(rt.current_configuration(), None);
+    let run = world.ndds(&[
+        "pub",
+        "cs/cli-rt/configure",
+        "\"high\"",
+        "--reliable",
+        "--wait",
+        "10",
+    ]);
+    assert!(run.success(), "{run}");
+    assert!(
+        eventually(SETTLE, || rt.current_configuration().as_deref()
+            == Some("high")),
+        "the configure topic switched the runtime"
+    );
+    assert!(
+        eventually(SETTLE, || rt.mat("slow_in").value(0, 0) == 10.0),
+        "the new gain's output crossed the rate transition"
+    );
+    let run = world.ndds(&[
+        "pub",
+        "cs/cli-rt/configure",
+        "\"nonexistent\"",
+        "--reliable",
+        "--wait",
+        "10",
+    ]);
+    assert!(run.success(), "{run}");
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(rt.current_configuration().as_deref(), Some("high"));
+    rt.stop_all();
+}

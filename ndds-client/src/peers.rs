@@ -60,15 +60,21 @@ impl Peers {
 
     /// Records an incompatible peer and logs it.
     pub(crate) fn incompatible(&self, remote: EndpointInfo) {
+        let reason = if remote.fingerprint == self.fingerprint {
+            "reliability: a reliable consumer needs a reliable producer"
+        } else {
+            "type"
+        };
         tracing::warn!(
             topic = self.topic,
+            reason,
             local_type = self.type_desc.name,
             local_fingerprint = fingerprint_hex(self.fingerprint),
             remote_type = remote.type_desc.name,
             remote_fingerprint = fingerprint_hex(remote.fingerprint),
             remote_pid = remote.pid,
             remote_process = remote.process,
-            "incompatible type on topic: samples will not flow between these endpoints"
+            "incompatible endpoint on topic: samples will not flow between these endpoints"
         );
         let mut maps = lock(&self.maps);
         maps.matched.remove(&remote.guid);

@@ -3,7 +3,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use ndds_client::{ProducerQos, RawProducer, TypeDescription};
+use ndds_client::{ProducerQos, RawProducer, Reliability, TypeDescription};
 use ndds_core::dynamic;
 use ndds_core::types::fingerprint_hex;
 
@@ -37,6 +37,11 @@ pub struct Args {
     /// Producer strength.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     strength: i32,
+    /// Publish reliably (needed by reliable consumers, e.g. a runtime's `cs/NAME/configure`):
+    /// losses are repaired, and `ndds pub` waits (up to --wait, at least 1 s) until every
+    /// consumer has acknowledged before it exits.
+    #[arg(long)]
+    reliable: bool,
 }
 
 /// Runs `ndds pub`.
@@ -72,6 +77,11 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let payload = encode(&desc, &value)?;
     let qos = ProducerQos {
         strength: args.strength,
+        reliability: if args.reliable {
+            Reliability::Reliable { depth: 64 }
+        } else {
+            Reliability::BestEffort
+        },
         ..ProducerQos::default()
     };
     let producer = participant.raw_producer(&args.topic, desc, qos)?;
@@ -93,6 +103,9 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         }
         producer.write_bytes(&payload)?;
     }
+    if args.reliable && !producer.wait_for_acknowledgments(args.wait.max(Duration::from_secs(1))) {
+        eprintln!("ndds: not every consumer acknowledged every sample before the wait ended");
+    }
     eprintln!(
         "ndds: published {} sample(s) on {:?}",
         producer.written(),
@@ -105,7 +118,13 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
 fn warn_unmatched(producer: &RawProducer, topic: &str, waited: bool) {
     let ours = producer.type_description();
     let others = producer.incompatible();
-    if let Some(other) = others.first() {
+    if let Some(other) = others.first()
+        && other.fingerprint == ours.fingerprint()
+    {
+        eprintln!(
+            "ndds: consumers of {topic:?} request reliable delivery: pass --reliable to reach them"
+        );
+    } else if let Some(other) = others.first() {
         eprintln!(
             "ndds: consumers of {topic:?} expect type {} ({}), not {} ({}): they will not \
              receive these samples",

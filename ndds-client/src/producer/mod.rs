@@ -462,6 +462,11 @@ impl<T: Serialize> Producer<T> {
         }))
     }
 
+    /// See [`RawProducer::wait_for_acknowledgments`].
+    pub fn wait_for_acknowledgments(&self, timeout: Duration) -> bool {
+        self.raw.wait_for_acknowledgments(timeout)
+    }
+
     /// The untyped producer underneath.
     pub fn raw(&self) -> &RawProducer {
         &self.raw
@@ -549,6 +554,27 @@ impl RawProducer {
     /// The quality of service it was declared with.
     pub fn qos(&self) -> ProducerQos {
         self.state.qos
+    }
+
+    /// Waits until every matched consumer has acknowledged every sample written so far (a
+    /// reliable producer about to be dropped calls this so its history can still repair
+    /// losses); true at once for a best-effort producer, false if `timeout` passed first.
+    pub fn wait_for_acknowledgments(&self, timeout: Duration) -> bool {
+        let _ = self.flush();
+        let deadline = Instant::now() + timeout;
+        loop {
+            let pending = lock(&self.state.out)
+                .reliable
+                .as_ref()
+                .map_or(0, |reliable| reliable.writer.history_len());
+            if pending == 0 {
+                return true;
+            }
+            if Instant::now() >= deadline {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 }
 
