@@ -13,6 +13,8 @@
 //!
 //! ## Layout
 //! - `protocol.md`: the protocol specification.
+//! - `runtime.md`: the ControlShell runtime guide; `tests/runtime_guide.rs` checks its code
+//!   excerpts and tables against the code.
 //! - [`markdown`]: headings, pipe tables and fenced blocks of a document, with line numbers.
 //! - [`report`]: every mismatch found, each naming the document line to update.
 //! - `tests/protocol_tables.rs`: message kinds, `Data` and `Feedback` submessage kinds, drop

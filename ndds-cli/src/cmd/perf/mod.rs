@@ -9,12 +9,14 @@
 //! - [`sample`]: the sample type, sizes, clocks and sequence-gap counting shared by all modes;
 //! - [`latency`] and [`throughput`]: what is measured and how it is reported;
 //! - [`ping`], [`pong`], [`publish`], [`subscribe`]: the ndds side of each mode;
-//! - [`udp`]: the same four modes over plain UDP sockets.
+//! - [`udp`]: the same four modes over plain UDP sockets;
+//! - [`runtime`]: the ControlShell runtime's overhead and jitter.
 
 mod latency;
 mod ping;
 mod pong;
 mod publish;
+mod runtime;
 mod sample;
 mod subscribe;
 mod throughput;
@@ -46,6 +48,9 @@ enum Mode {
     Pub(publish::Args),
     /// Receive samples and report their rate, bandwidth and loss over a steady window.
     Sub(subscribe::Args),
+    /// The ControlShell runtime's per-sample overhead and a timer habitat's jitter (no
+    /// network, no daemon).
+    Runtime(runtime::Args),
 }
 
 /// Runs `ndds perf`.
@@ -55,6 +60,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         Mode::Pong(args) => pong::run(daemon, args),
         Mode::Pub(args) => publish::run(daemon, args),
         Mode::Sub(args) => subscribe::run(daemon, args),
+        Mode::Runtime(args) => runtime::run(args),
     }
 }
 

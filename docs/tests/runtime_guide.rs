@@ -1,0 +1,159 @@
+//! `docs/runtime.md` against the code: its code excerpts are verbatim parts of the files they
+//! name, and its tables of entry routines, verification problems, built-in components and
+//! statistics fields list exactly what the code has.
+
+use std::path::Path;
+
+use ndds_client::runtime::{HabitatStats, Runtime};
+use ndds_docs::markdown::{Doc, Table};
+use ndds_docs::report::Problems;
+
+fn doc() -> Doc {
+    Doc::load("runtime.md")
+}
+
+fn source(relative: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(relative);
+    std::fs::read_to_string(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()))
+}
+
+/// The one table whose header starts with `columns`.
+fn table(doc: &Doc, columns: &[&str]) -> Table {
+    let mut found: Vec<Table> = doc
+        .tables()
+        .into_iter()
+        .filter(|t| t.starts_with(columns))
+        .collect();
+    assert_eq!(found.len(), 1, "one table with columns {columns:?}");
+    found.pop().unwrap()
+}
+
+/// Compares the table's first column with `expected`, in order.
+fn first_column(doc: &Doc, problems: &mut Problems, columns: &[&str], expected: &[String]) {
+    let table = table(doc, columns);
+    let listed: Vec<String> = table.rows.iter().map(|r| r.plain(0)).collect();
+    if listed != expected {
+        problems.at(
+            doc,
+            table.line,
+            format!("the table lists {listed:?}; the code has {expected:?}"),
+        );
+    }
+}
+
+/// Names declared in `source` as `fn NAME(` inside the block that starts with `opening`.
+fn names_in_block(source: &str, opening: &str, pattern: fn(&str) -> Option<String>) -> Vec<String> {
+    let start = source.find(opening).expect("the block exists");
+    let mut depth = 0i32;
+    let mut names = Vec::new();
+    for line in source[start..].lines() {
+        if depth == 1
+            && let Some(name) = pattern(line.trim())
+        {
+            names.push(name);
+        }
+        depth += line.matches('{').count() as i32 - line.matches('}').count() as i32;
+        if depth == 0 && line.contains('}') {
+            break;
+        }
+    }
+    names
+}
+
+#[test]
+fn code_excerpts_are_verbatim() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    let mut excerpts = 0;
+    for block in doc.blocks().into_iter().filter(|b| b.info == "rust") {
+        let Some((_, first)) = block.lines.first() else {
+            continue;
+        };
+        let Some(file) = first.strip_prefix("// from ") else {
+            continue;
+        };
+        excerpts += 1;
+        let body: Vec<&str> = block.lines[1..].iter().map(|(_, l)| l.as_str()).collect();
+        let text = source(file.trim());
+        let lines: Vec<&str> = text.lines().collect();
+        let found = lines
+            .windows(body.len().max(1))
+            .any(|w| w == body.as_slice());
+        if !found {
+            problems.at(
+                &doc,
+                block.line,
+                format!("this excerpt is not a verbatim part of {file}"),
+            );
+        }
+    }
+    assert!(excerpts >= 2, "the guide quotes the example program");
+    problems.finish("docs/runtime.md code excerpts");
+}
+
+#[test]
+fn entry_routines_are_the_traits() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    let trait_source = source("ndds-client/src/runtime/module.rs");
+    let routines = names_in_block(&trait_source, "pub trait SampleModule", |line| {
+        let rest = line.strip_prefix("fn ")?;
+        Some(rest[..rest.find('(')?].to_owned())
+    });
+    assert_eq!(routines.len(), 9, "the paper's nine routines: {routines:?}");
+    first_column(
+        &doc,
+        &mut problems,
+        &["routine", "when the habitat calls it"],
+        &routines,
+    );
+    problems.finish("docs/runtime.md entry routines");
+}
+
+#[test]
+fn verification_problems_are_the_enums() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    let verify = source("ndds-client/src/runtime/verify.rs");
+    let variants = names_in_block(&verify, "pub enum Problem", |line| {
+        let name: String = line.chars().take_while(|c| c.is_alphanumeric()).collect();
+        (line.ends_with('{') && name.chars().next().is_some_and(char::is_uppercase)).then_some(name)
+    });
+    first_column(&doc, &mut problems, &["problem", "meaning"], &variants);
+    problems.finish("docs/runtime.md verification problems");
+}
+
+#[test]
+fn built_in_components_are_the_registry() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    let mut registered: Vec<String> = Runtime::new("docs")
+        .component_types()
+        .into_iter()
+        .map(|(name, _)| name)
+        .collect();
+    let table = table(&doc, &["type", "reads", "writes"]);
+    let mut listed: Vec<String> = table.rows.iter().map(|r| r.plain(0)).collect();
+    registered.sort();
+    listed.sort();
+    if listed != registered {
+        problems.at(
+            &doc,
+            table.line,
+            format!("the table lists {listed:?}; the registry has {registered:?}"),
+        );
+    }
+    problems.finish("docs/runtime.md built-in components");
+}
+
+#[test]
+fn statistics_fields_are_the_sample_type() {
+    let doc = doc();
+    let mut problems = Problems::new();
+    let value = serde_json::to_value(HabitatStats::default()).unwrap();
+    let fields: Vec<String> = value.as_object().unwrap().keys().cloned().collect();
+    first_column(&doc, &mut problems, &["field", "meaning"], &fields);
+    problems.finish("docs/runtime.md statistics fields");
+}
