@@ -252,6 +252,7 @@ if [[ $(id -u) == 0 ]] && command -v nft >/dev/null && command -v ip >/dev/null;
 fi
 ELAPSED=$(($(date +%s) - START))
 DDSPERF_VERSION=$(dpkg-query -W -f '${Package} ${Version}' cyclonedds-tools 2>/dev/null || echo "not installed")
+RUNTIME_SECTION=$(scripts/bench-runtime.sh) || RUNTIME_SECTION="scripts/bench-runtime.sh failed."
 say "measured in ${ELAPSED} s; writing $OUT"
 
 # ---------------------------------------------------------------------------- the report
@@ -430,6 +431,8 @@ Each pair below is one run (the first line's process starts 0.3 s earlier):
 \`\`\`sh
 $(sed "s#--socket \$WORK/ndds.sock#--socket \$WORK/ndds.sock#" "$CMDS")
 \`\`\`
+
+$RUNTIME_SECTION
 EOF
 } >"$OUT"
 say "done: $OUT"

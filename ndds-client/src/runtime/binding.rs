@@ -115,15 +115,19 @@ pub(crate) struct RateOut {
 }
 
 impl RateOut {
+    /// Writes `mat`, created with the shape (and fields) of `source` once that exists.
     pub(crate) fn new(
         b: &mut Binder<'_>,
         mat: &str,
-        template: Option<CsMat>,
+        source: &Mat,
         buffer: Arc<Mutex<Option<CsMat>>>,
     ) -> Self {
-        let output = match template {
-            Some(template) => b.output_like(mat, template),
-            None => b.output(mat, Shape::Any),
+        let output = if source.is_bound() {
+            let mut template = source.snapshot();
+            template.fill(0.0);
+            b.output_like(mat, template)
+        } else {
+            b.output_same_as(mat, source)
         };
         Self { output, buffer }
     }

@@ -50,7 +50,8 @@ impl HabitatOptions {
     /// A timer-clocked habitat at `hz`.
     pub fn rate(hz: f64) -> Self {
         Self {
-            period: period_of(hz).unwrap_or(Duration::from_millis(1)),
+            // An unusable rate gives a zero period, which `create_habitat` refuses.
+            period: period_of(hz).unwrap_or(Duration::ZERO),
             clock: Clock::Timer,
             realtime_priority: None,
             cpu: None,

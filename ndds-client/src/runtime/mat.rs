@@ -45,6 +45,13 @@ impl Mat {
         self.0.bound.store(true, Ordering::Release);
     }
 
+    /// Makes it a placeholder again (an install that failed undoes what it created).
+    pub(crate) fn unbind(&self) {
+        let name = self.0.name.to_string();
+        *self.write() = CsMat::zeros(name, 0, 0);
+        self.0.bound.store(false, Ordering::Release);
+    }
+
     /// The name it is registered under.
     pub fn name(&self) -> &str {
         &self.0.name

@@ -13,9 +13,12 @@
 //! | `reset`          | when [`Habitat::reset`](super::Habitat::reset) is called, every installed module |
 //! | `terminate`      | when the module is unloaded (removed, or its runtime dropped)               |
 //!
-//! Every routine runs on the habitat's thread while sampling runs (on the caller's thread
-//! while it is stopped), between two samples: never concurrently with another routine of the
-//! same habitat.
+//! Routines of one habitat never run concurrently: all run under the habitat's list lock,
+//! between two samples (`execute` and `state_update` on the habitat's thread, the others on
+//! the thread that called `start`, `stop`, `switch`, `set_rate`, ...). So a routine must not
+//! call back into its [`Runtime`](super::Runtime) or [`Habitat`](super::Habitat) (switch,
+//! install, stop): that would wait for the lock it runs under. Hand such requests to another
+//! thread.
 
 use std::time::Duration;
 
@@ -176,6 +179,8 @@ pub struct Binder<'a> {
     pub(crate) interface: Interface,
     /// `(output, input)`: outputs that take their input's shape once it is known.
     pub(crate) follows: Vec<(String, String)>,
+    /// CSMats this module's declarations created (undone if the install fails).
+    pub(crate) created: Vec<Mat>,
 }
 
 impl Binder<'_> {
@@ -206,6 +211,7 @@ impl Binder<'_> {
         let handle = self.declare_input(mat, mat, shape, Use::Parameter);
         if !handle.is_bound() {
             handle.bind(default);
+            self.created.push(handle.clone());
         }
         handle
     }
@@ -217,6 +223,7 @@ impl Binder<'_> {
         let handle = (self.lookup)(mat);
         if let (false, Shape::Exact(rows, cols)) = (handle.is_bound(), shape) {
             handle.bind(CsMat::zeros(mat, rows, cols));
+            self.created.push(handle.clone());
         }
         self.interface.outputs.push(Port {
             role: mat.to_owned(),
@@ -245,6 +252,7 @@ impl Binder<'_> {
         let handle = self.output(mat, Shape::Any);
         if !handle.is_bound() {
             handle.bind(template);
+            self.created.push(handle.clone());
         }
         if let Some(port) = self.interface.outputs.last_mut() {
             port.shape = shape;

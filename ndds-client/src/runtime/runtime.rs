@@ -11,7 +11,7 @@ use super::binding::{Publisher, RateIn, RateOut, Subscriber};
 use super::components;
 use super::csmat::CsMat;
 use super::database::{CategoryEntry, Database, GroupEntry, ModuleEntry, ObjectKind};
-use super::habitat::{Habitat, HabitatError, HabitatOptions};
+use super::habitat::{Habitat, HabitatError, HabitatOptions, period_of};
 use super::list::{ExecList, Slot};
 use super::mat::Mat;
 use super::module::{Binder, Interface, ModuleError, SampleModule};
@@ -155,7 +155,10 @@ impl Drop for Inner {
     fn drop(&mut self) {
         if let Some(mut services) = lock(&self.services).take() {
             services.stop.store(true, Ordering::Release);
-            if let Some(thread) = services.stats.take() {
+            // The last handle may be the one the statistics thread holds for a moment.
+            if let Some(thread) = services.stats.take()
+                && thread.thread().id() != std::thread::current().id()
+            {
                 let _ = thread.join();
             }
         }
@@ -390,6 +393,14 @@ impl Runtime {
         options: HabitatOptions,
     ) -> Result<Habitat, RuntimeError> {
         check_name(ObjectKind::Habitat, name)?;
+        let period = options.period.as_secs_f64();
+        if period_of(1.0 / period).is_none() || period > 3600.0 {
+            return Err(HabitatError::InvalidRate {
+                habitat: name.to_owned(),
+                hz: 1.0 / period,
+            }
+            .into());
+        }
         let mut db = self.db();
         let habitat = self.habitat_in(&mut db, name);
         if habitat.is_created() {
@@ -463,34 +474,59 @@ impl Runtime {
             });
         }
         let target = self.habitat_in(&mut db, habitat);
-        let (interface, built) = {
+        let follows_before = db.follows.len();
+        let mut new_names: Vec<String> = Vec::new();
+        let created: Vec<Mat>;
+        let built = {
             let db_ref: &mut Database = &mut db;
-            let mut lookup = |name: &str| db_ref.mat(name);
+            let new_names = &mut new_names;
+            let mut lookup = |name: &str| {
+                if !db_ref.mats.contains_key(name) {
+                    new_names.push(name.to_owned());
+                }
+                db_ref.mat(name)
+            };
             let mut binder = Binder {
                 lookup: &mut lookup,
                 module: module.to_owned(),
                 interface: Interface::default(),
                 follows: Vec::new(),
+                created: Vec::new(),
             };
-            let built = build(&mut binder).map_err(|source| RuntimeError::Build {
-                module: module.to_owned(),
-                source,
-            })?;
+            let result = build(&mut binder);
             let Binder {
-                interface, follows, ..
+                interface,
+                follows,
+                created: made,
+                ..
             } = binder;
-            db_ref.follows.extend(follows);
-            (interface, built)
+            created = made;
+            result.map(|built| (interface, built, follows))
         };
-        db.propagate_shapes();
+        let (interface, built) = match built {
+            Ok((interface, built, follows)) => {
+                db.follows.extend(follows);
+                (interface, built)
+            }
+            Err(source) => {
+                Self::undo(&mut db, &created, &new_names, follows_before);
+                return Err(RuntimeError::Build {
+                    module: module.to_owned(),
+                    source,
+                });
+            }
+        };
         let active = db.is_active_with(module, &db.active_groups());
         let slot = Slot::new(module.to_owned(), interface.clone(), built);
-        lock(&target.shared.list)
-            .install(slot, active)
-            .map_err(|source| RuntimeError::Sort {
+        let installed = lock(&target.shared.list).install(slot, active);
+        if let Err(source) = installed {
+            Self::undo(&mut db, &created, &new_names, follows_before);
+            return Err(RuntimeError::Sort {
                 habitat: habitat.to_owned(),
                 source,
-            })?;
+            });
+        }
+        db.propagate_shapes();
         db.modules.insert(
             module.to_owned(),
             ModuleEntry {
@@ -499,6 +535,18 @@ impl Runtime {
             },
         );
         Ok(())
+    }
+
+    /// Undoes what a failed install created: the CSMats its declarations bound, the
+    /// placeholders it added, its shape-following entries.
+    fn undo(db: &mut Database, created: &[Mat], new_names: &[String], follows_before: usize) {
+        for mat in created {
+            mat.unbind();
+        }
+        for name in new_names {
+            db.mats.remove(name);
+        }
+        db.follows.truncate(follows_before);
     }
 
     /// Unloads a module: `disable` and `shutdown` if its habitat samples, then `terminate`.
@@ -827,18 +875,14 @@ impl Runtime {
         from: (&str, &str),
         to: (&str, &str),
     ) -> Result<(), RuntimeError> {
-        let template = {
-            let mut db = self.db();
-            let source = db.mat(from.1);
-            source.is_bound().then(|| source.snapshot())
-        };
-        let buffer = Arc::new(Mutex::new(template.clone()));
+        let source = self.db().mat(from.1);
+        let buffer = Arc::new(Mutex::new(None));
         let shared = Arc::clone(&buffer);
         self.install(from.0, &format!("{name}.in"), |b| {
             Ok(RateIn::new(b, from.1, shared))
         })?;
         let result = self.install(to.0, &format!("{name}.out"), |b| {
-            Ok(RateOut::new(b, to.1, template, buffer))
+            Ok(RateOut::new(b, to.1, &source, buffer))
         });
         if result.is_err() {
             let _ = self.remove(&format!("{name}.in"));

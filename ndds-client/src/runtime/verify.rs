@@ -386,12 +386,19 @@ fn active_set(
         }
     }
     for (habitat, modules) in by_habitat {
+        // Double writers are reported above; only the first writer of a CSMat orders the
+        // list here, so a loop elsewhere in the same set is still found.
+        let mut claimed: BTreeSet<&str> = BTreeSet::new();
         let nodes: Vec<SortNode<'_>> = modules
             .iter()
             .map(|&m| SortNode {
                 module: m,
                 reads: db.modules[m].interface.feedthrough_names().collect(),
-                writes: db.modules[m].interface.output_names().collect(),
+                writes: db.modules[m]
+                    .interface
+                    .output_names()
+                    .filter(|mat| claimed.insert(mat))
+                    .collect(),
             })
             .collect();
         if let Err(SortError::AlgebraicLoop { modules, mats }) = sort(&nodes) {

@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# Prints the "ControlShell runtime" section of docs/benchmarks.md (markdown on stdout):
+# `ndds perf runtime` — the per-sample overhead of a list of 50 modules and the jitter of a
+# 1 kHz timer habitat, idle, with the other core loaded, with both cores loaded, and with
+# SCHED_FIFO (when run as root). No network at all.
+#
+#   scripts/bench-runtime.sh            (scripts/bench.sh calls it)
+#
+# Environment: BENCH_RUNTIME_SECONDS (seconds per jitter run, default 10). Needs jq.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SECS=${BENCH_RUNTIME_SECONDS:-10}
+NDDS=target/release/ndds
+[[ -x $NDDS ]] || cargo build --release -p ndds-cli >&2
+WORK=$(mktemp -d /tmp/ndds-bench-runtime.XXXXXX)
+trap 'rm -rf "$WORK"' EXIT
+CMDS=$WORK/commands.txt
+
+say() { echo "bench-runtime: $*" >&2; }
+
+# Runs one measurement; its JSON goes to $WORK/NAME.json, its command line to the list.
+run() {
+    local name=$1
+    shift
+    echo "target/release/ndds perf runtime $*" >>"$CMDS"
+    say "$name: ndds perf runtime $*"
+    "$NDDS" perf runtime --json "$@" >"$WORK/$name.json"
+}
+
+run idle --seconds "$SECS" --cpu 0
+run other --jitter-only --seconds "$SECS" --cpu 0 --load 1 --load-cpu 1
+run both --jitter-only --seconds "$SECS" --load 2
+FIFO_NOTE="(not measured: SCHED_FIFO needs root)"
+if [[ $(id -u) == 0 ]]; then
+    run fifo --jitter-only --seconds "$SECS" --cpu 0 --load 2 --fifo 50
+    FIFO_NOTE=""
+fi
+
+q() { jq -r "$2" "$WORK/$1.json"; }
+f1() { awk -v x="$1" 'BEGIN { printf "%.1f", x }'; }
+
+row() {
+    local name=$1 label=$2
+    [[ -f $WORK/$name.json ]] || { echo "| $label | - | - | - | - | - | - | - |"; return; }
+    echo "| $label | $(q "$name" .jitter.samples) / $(q "$name" .jitter.expected_samples) | $(q "$name" .jitter.overruns) \
+| $(f1 "$(q "$name" .jitter.latency_us.p50)") / $(f1 "$(q "$name" .jitter.latency_us.p99)") / $(f1 "$(q "$name" .jitter.latency_us.max)") \
+| $(f1 "$(q "$name" .jitter.period_jitter_us.p50)") / $(f1 "$(q "$name" .jitter.period_jitter_us.p99)") / $(f1 "$(q "$name" .jitter.period_jitter_us.max)") \
+| $(f1 "$(q "$name" .jitter.exec_us.p50)") / $(f1 "$(q "$name" .jitter.exec_us.p99)") |"
+}
+
+cat <<EOM
+## The ControlShell runtime
+
+Measured by \`scripts/bench-runtime.sh\` on the same machine, with no network: a habitat runs
+a list of 50 modules. **Overhead** (manual habitat, $(q idle .overhead.nop.samples) samples timed
+one by one on the calling thread):
+
+| modules | per sample (mean) | per module (mean) | per sample p50 / p99 / max |
+|---|---|---|---|
+| 50 that do nothing (the runtime's own cost) | $(f1 "$(q idle .overhead.nop.mean_ns_per_sample)") ns | $(f1 "$(q idle .overhead.nop.mean_ns_per_module)") ns | $(q idle .overhead.nop.p50_ns) / $(q idle .overhead.nop.p99_ns) / $(q idle .overhead.nop.max_ns) ns |
+| 50 1 × 1 gains in a chain (two CSMat locks and a copy each) | $(f1 "$(q idle .overhead.gain.mean_ns_per_sample)") ns | $(f1 "$(q idle .overhead.gain.mean_ns_per_module)") ns | $(q idle .overhead.gain.p50_ns) / $(q idle .overhead.gain.p99_ns) / $(q idle .overhead.gain.max_ns) ns |
+
+**Jitter** of a 1 kHz timer habitat running the 50 gains for $SECS s (µs; *start latency*: how
+late a sample started against its absolute deadline; *period jitter*: how far the interval
+between two starts was from 1 ms; an overrun is a deadline skipped):
+
+| load | samples / expected | overruns | start latency p50 / p99 / max | period jitter p50 / p99 / max | execution p50 / p99 |
+|---|---|---|---|---|---|
+$(row idle "idle, habitat on CPU 0")
+$(row other "1 busy thread on CPU 1, habitat on CPU 0")
+$(row both "2 busy threads, unpinned (both cores loaded)")
+$(row fifo "2 busy threads, habitat on CPU 0 with SCHED_FIFO 50 $FIFO_NOTE")
+
+Steady-state sampling allocates nothing: \`ndds-client/tests/runtime_alloc.rs\` counts
+allocations with a counting global allocator on the sampling thread (50 modules plus the
+PD/LQG loop stepped 2000 times per configuration; a 1 kHz timer habitat for 1 s including ten
+statistics hand-overs; CSMats published and received through topics for 1000 samples): 0.
+
+Commands:
+
+\`\`\`sh
+$(cat "$CMDS")
+\`\`\`
+EOM
