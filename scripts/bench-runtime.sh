@@ -36,6 +36,37 @@ if [[ $(id -u) == 0 ]]; then
     FIFO_NOTE=""
 fi
 
+# The machine's own timer latency, as the baseline: cyclictest (rt-tests), one thread on
+# CPU 0 at 1 kHz, installed with apt-get when missing and this runs as root.
+if ! command -v cyclictest >/dev/null && [[ $(id -u) == 0 ]]; then
+    apt-get install -y rt-tests >/dev/null 2>&1 || true
+fi
+# cyclictest p50 / p99 / max (µs) with extra arguments $2.., under $1 busy shell loops.
+cyclic() {
+    local busy=$1 pids=() out
+    shift
+    for ((i = 0; i < busy; i++)); do
+        timeout $((SECS + 2)) sh -c 'while :; do :; done' &
+        pids+=($!)
+    done
+    echo "cyclictest -a 0 -t 1 -i 1000 -D $SECS -q -h 20000 $*   # with $busy busy shell loop(s)" >>"$CMDS"
+    out=$(cyclictest -a 0 -t 1 -i 1000 -D "$SECS" -q -h 20000 "$@" 2>/dev/null)
+    kill "${pids[@]}" 2>/dev/null || true
+    wait "${pids[@]}" 2>/dev/null || true
+    echo "$out" | awk '/^[0-9]/ { v[n] = $1 + 0; c[n] = $2 + 0; t += $2; n++ }
+        /Max Latencies/ { mx = $4 + 0 }
+        END { for (k = 0; k < n; k++) { s += c[k]; if (p50 == "" && s >= t * 0.5) p50 = v[k]; if (p99 == "" && s >= t * 0.99) p99 = v[k] }
+              printf "%s / %s / %s", p50, p99, mx }'
+}
+if command -v cyclictest >/dev/null; then
+    say "cyclictest baselines"
+    CT_IDLE=$(cyclic 0)
+    CT_FIFO=$(cyclic 0 -p 50)
+    CT_FIFO_LOADED=$(cyclic 2 -p 50)
+else
+    CT_IDLE="- (cyclictest missing)" CT_FIFO="-" CT_FIFO_LOADED="-"
+fi
+
 q() { jq -r "$2" "$WORK/$1.json"; }
 f1() { awk -v x="$1" 'BEGIN { printf "%.1f", x }'; }
 
@@ -70,6 +101,16 @@ $(row idle "idle, habitat on CPU 0")
 $(row other "1 busy thread on CPU 1, habitat on CPU 0")
 $(row both "2 busy threads, unpinned (both cores loaded)")
 $(row fifo "2 busy threads, habitat on CPU 0 with SCHED_FIFO 50 $FIFO_NOTE")
+
+The machine's own timer latency for comparison (cyclictest, one thread on CPU 0 waking every
+1 ms; p50 / p99 / max in µs; its normal-priority run keeps the default 50 µs timer slack, which
+the habitats set to 1 ns):
+
+| cyclictest | wake-up latency p50 / p99 / max |
+|---|---|
+| idle, normal priority | $CT_IDLE |
+| idle, SCHED_FIFO 50 | $CT_FIFO |
+| 2 busy threads, SCHED_FIFO 50 | $CT_FIFO_LOADED |
 
 Steady-state sampling allocates nothing: \`ndds-client/tests/runtime_alloc.rs\` counts
 allocations with a counting global allocator on the sampling thread (50 modules plus the
