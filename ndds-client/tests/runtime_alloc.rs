@@ -2,82 +2,24 @@
 //! made on the thread that runs the samples (the test thread for a manual habitat, the
 //! habitat's own thread for a timer habitat) after a warm-up.
 
+mod counting;
+
 mod common;
 
 #[path = "../examples/arm_controller.rs"]
 #[allow(dead_code)]
 mod arm_controller;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use counting::{allocations, allocations_during, track, turn};
 use ndds_client::runtime::components::{Gain, MassSpringDamper};
 use ndds_client::runtime::{
     Clock, CsMat, HabitatOptions, RoutineResult, Runtime, SampleContext, SampleModule,
 };
 use ndds_client::{ConsumerQos, ProducerQos};
-
-struct Counting;
-
-thread_local! {
-    static TRACKED: Cell<bool> = const { Cell::new(false) };
-}
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-fn count() {
-    if TRACKED.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only
-// an atomic and a const-initialised thread-local, neither of which allocates.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: the caller's contract is passed on.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: the caller's contract is passed on.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: the caller's contract is passed on.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: the caller's contract is passed on.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// The counter is process-wide: the tests take turns.
-fn turn() -> std::sync::MutexGuard<'static, ()> {
-    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
-/// Allocations made on this thread while `f` runs.
-fn allocations_in(f: impl FnOnce()) -> u64 {
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    TRACKED.with(|t| t.set(true));
-    f();
-    TRACKED.with(|t| t.set(false));
-    ALLOCATIONS.load(Ordering::Relaxed) - before
-}
 
 /// A chain of 50 gains, `c0 -> c1 -> ... -> c50`, installed in reverse so sorting matters.
 fn fifty_gains(rt: &Runtime, habitat: &str) {
@@ -117,7 +59,7 @@ fn stepping_fifty_modules_and_the_pd_lqg_loop_allocates_nothing() {
         for _ in 0..100 {
             servo.step().unwrap();
         }
-        let allocations = allocations_in(|| {
+        let allocations = allocations_during(|| {
             for _ in 0..2000 {
                 servo.step().unwrap();
             }
@@ -140,12 +82,12 @@ struct Tracker {
 impl SampleModule for Tracker {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
         let on = self.counting.load(Ordering::Relaxed);
-        TRACKED.with(|t| t.set(on));
+        track(on);
         Ok(())
     }
 
     fn shutdown(&mut self, _: &SampleContext) -> RoutineResult {
-        TRACKED.with(|t| t.set(false));
+        track(false);
         Ok(())
     }
 }
@@ -166,13 +108,13 @@ fn a_timer_habitat_samples_without_allocating() {
     let servo = rt.habitat("servo");
     servo.start().unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = allocations();
     let samples_before = servo.stats().samples;
     counting.store(true, Ordering::Relaxed);
     std::thread::sleep(Duration::from_millis(1000));
     counting.store(false, Ordering::Relaxed);
     std::thread::sleep(Duration::from_millis(20));
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = allocations() - before;
     let samples = servo.stats().samples - samples_before;
     servo.stop();
     assert!(samples > 500, "only {samples} samples in 1 s");
@@ -218,7 +160,7 @@ fn csmats_bound_to_topics_publish_and_receive_without_allocating() {
         servo.step().unwrap();
         std::thread::sleep(Duration::from_micros(200));
     }
-    let allocations = allocations_in(|| {
+    let allocations = allocations_during(|| {
         for _ in 0..1000 {
             servo.step().unwrap();
             std::thread::sleep(Duration::from_micros(200));
