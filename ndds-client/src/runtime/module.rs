@@ -1,17 +1,7 @@
 //! Sample modules: the [`SampleModule`] trait with ControlShell's nine entry routines, and the
 //! [`Binder`] through which a module declares the CSMats it reads and writes.
 //!
-//! | routine          | when the habitat calls it                                                   |
-//! |------------------|-----------------------------------------------------------------------------|
-//! | `execute`        | once each sample period, active modules, in dependency order                |
-//! | `state_update`   | each sample, after every active module's `execute`, same order              |
-//! | `enable`         | when the module joins the active set while sampling (at `start`, after the startups; at a configuration switch; when installed into a running habitat) |
-//! | `disable`        | when it leaves the active set while sampling (configuration switch, removal, and at `stop` before the shutdowns) |
-//! | `startup`        | when sampling begins, every installed module (active or not), list order   |
-//! | `shutdown`       | when sampling ends, every installed module                                  |
-//! | `timing_changed` | when the habitat's rate changes, every installed module                     |
-//! | `reset`          | when [`Habitat::reset`](super::Habitat::reset) is called, every installed module |
-//! | `terminate`      | when the module is unloaded (removed, or its runtime dropped)               |
+//! See [`SampleModule`] for when each routine is called.
 //!
 //! Routines of one habitat never run concurrently: all run under the habitat's list lock,
 //! between two samples (`execute` and `state_update` on the habitat's thread, the others on
@@ -61,7 +51,26 @@ pub enum ModuleError {
 pub type RoutineResult = Result<(), ModuleError>;
 
 /// A sample module: the unit of reusable sampled-data code. Every routine defaults to doing
-/// nothing; see the [module docs](self) for when each is called.
+/// nothing. When the habitat calls each:
+///
+/// | routine          | when the habitat calls it                                                   |
+/// |------------------|-----------------------------------------------------------------------------|
+/// | `execute`        | once each sample period, active modules, in dependency order                |
+/// | `state_update`   | each sample, after every active module's `execute`, same order              |
+/// | `enable`         | when the module joins the active set while sampling (at `start`, after the startups; at a configuration switch; when installed into a running habitat) |
+/// | `disable`        | when it leaves the active set while sampling (configuration switch, removal, and at `stop` before the shutdowns) |
+/// | `startup`        | when sampling begins, every installed module (active or not), list order   |
+/// | `shutdown`       | when sampling ends, every installed module                                  |
+/// | `timing_changed` | when the habitat's rate changes, every installed module                     |
+/// | `reset`          | when [`Habitat::reset`](super::Habitat::reset) is called, every installed module |
+/// | `terminate`      | when the module is unloaded (removed, or its runtime dropped)               |
+///
+/// Routines of one habitat never run concurrently: all run under the habitat's list lock,
+/// between two samples (`execute` and `state_update` on the habitat's thread, the others on
+/// the thread that called `start`, `stop`, `switch`, `set_rate`, ...). So a routine must not
+/// call back into its [`Runtime`](super::Runtime) or [`Habitat`](super::Habitat) (switch,
+/// install, stop): that would wait for the lock it runs under. Hand such requests to another
+/// thread.
 #[allow(unused_variables)]
 pub trait SampleModule: Send + 'static {
     /// Once each sample period.
