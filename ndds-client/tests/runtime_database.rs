@@ -393,7 +393,21 @@ fn verify_reports_two_active_writers_in_two_habitats() -> TestResult {
     rt.create_habitat("fast", manual())?;
     rt.create_habitat("slow", manual())?;
     rt.install("fast", "w1", |b| Node::build(b, &log, &[], &[], &["u"]))?;
-    // Each habitat alone sorts, so install accepts it; verify sees the whole system.
+    // A second active writer in another habitat is refused at install ...
+    match rt.install("slow", "w2", |b| Node::build(b, &log, &[], &[], &["u"])) {
+        Err(RuntimeError::DoubleWriter { mat, first, second }) => {
+            assert_eq!(
+                (mat.as_str(), first.as_str(), second.as_str()),
+                ("u", "w1", "w2")
+            );
+        }
+        other => panic!("expected a double writer, got {other:?}"),
+    }
+    assert!(rt.habitat("slow").modules().is_empty());
+    // ... so it can only come with a configuration, which verify checks too.
+    rt.group("extra", "off", &[])?;
+    rt.group("extra", "on", &["w2"])?;
+    rt.configuration("both", &[("extra", "on")])?;
     rt.install("slow", "w2", |b| Node::build(b, &log, &[], &[], &["u"]))?;
     let report = rt.verify();
     assert_eq!(
@@ -401,12 +415,15 @@ fn verify_reports_two_active_writers_in_two_habitats() -> TestResult {
         [Problem::DoubleWriter {
             mat: "u".into(),
             writers: vec!["w1".into(), "w2".into()],
-            configuration: None,
+            configuration: Some("both".into()),
         }],
         "{report}"
     );
     let text = report.to_string();
-    assert!(text.contains("CSMat `u` is written by w1 and w2"), "{text}");
+    assert!(
+        text.contains("double writer (in configuration `both`): CSMat `u` is written by w1 and w2"),
+        "{text}"
+    );
     for habitat in ["fast", "slow"] {
         assert!(matches!(
             rt.habitat(habitat).start(),
@@ -414,6 +431,10 @@ fn verify_reports_two_active_writers_in_two_habitats() -> TestResult {
         ));
     }
     assert!(calls(&log).iter().all(|c| !c.ends_with(".startup")));
+    assert!(matches!(
+        rt.switch("both"),
+        Err(RuntimeError::DoubleWriter { .. })
+    ));
     Ok(())
 }
 

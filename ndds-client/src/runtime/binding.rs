@@ -46,6 +46,7 @@ impl SampleModule for Publisher {
 /// Writes the newest sample of a topic into its output (installed by `Runtime::subscribe`).
 pub(crate) struct Subscriber {
     output: Mat,
+    shape: Shape,
     consumer: RawConsumer,
     staging: CsMat,
 }
@@ -54,6 +55,7 @@ impl Subscriber {
     pub(crate) fn new(b: &mut Binder<'_>, mat: &str, shape: Shape, consumer: RawConsumer) -> Self {
         Self {
             output: b.output(mat, shape),
+            shape,
             consumer,
             staging: CsMat::zeros(mat, 0, 0),
         }
@@ -70,9 +72,19 @@ impl SampleModule for Subscriber {
             // Decoded into a staging matrix that keeps the sender's name and fields, so the
             // steady state allocates nothing; then copied under the local name.
             self.staging.decode_into(&sample.payload)?;
+            let (rows, cols) = self.staging.shape();
+            if let Shape::Exact(r, c) = self.shape
+                && (r, c) != (rows, cols)
+            {
+                return Err(ModuleError::Failed(format!(
+                    "sample of `{}` from {} is {rows}x{cols}, the CSMat is declared {r}x{c}: ignored",
+                    self.staging.name(),
+                    sample.info.writer
+                )));
+            }
             let mut out = self.output.write();
-            if out.shape() != self.staging.shape() {
-                out.resize(self.staging.rows(), self.staging.cols());
+            if out.shape() != (rows, cols) {
+                out.resize(rows, cols);
                 out.set_fields_from(&self.staging);
             }
             out.copy_from(&self.staging)?;
@@ -84,6 +96,7 @@ impl SampleModule for Subscriber {
 /// The source side of a rate transition.
 pub(crate) struct RateIn {
     input: Mat,
+    staging: CsMat,
     buffer: Arc<Mutex<Option<CsMat>>>,
 }
 
@@ -91,6 +104,7 @@ impl RateIn {
     pub(crate) fn new(b: &mut Binder<'_>, mat: &str, buffer: Arc<Mutex<Option<CsMat>>>) -> Self {
         Self {
             input: b.input(mat, Shape::Any),
+            staging: CsMat::zeros(mat, 0, 0),
             buffer,
         }
     }
@@ -98,11 +112,12 @@ impl RateIn {
 
 impl SampleModule for RateIn {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        let value = self.input.read();
+        // One lock at a time (the CSMat, then the buffer): no lock order to get wrong.
+        copy_into(&mut self.staging, &self.input.read());
         let mut buffer = lock(&self.buffer);
         match buffer.as_mut() {
-            Some(held) => copy_into(held, &value),
-            None => *buffer = Some(value.clone()),
+            Some(held) => copy_into(held, &self.staging),
+            None => *buffer = Some(self.staging.clone()),
         }
         Ok(())
     }
@@ -111,6 +126,7 @@ impl SampleModule for RateIn {
 /// The destination side of a rate transition.
 pub(crate) struct RateOut {
     output: Mat,
+    staging: Option<CsMat>,
     buffer: Arc<Mutex<Option<CsMat>>>,
 }
 
@@ -129,15 +145,26 @@ impl RateOut {
         } else {
             b.output_same_as(mat, source)
         };
-        Self { output, buffer }
+        Self {
+            output,
+            staging: None,
+            buffer,
+        }
     }
 }
 
 impl SampleModule for RateOut {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        let buffer = lock(&self.buffer);
-        if let Some(value) = buffer.as_ref() {
-            copy_into(&mut self.output.write(), value);
+        {
+            let buffer = lock(&self.buffer);
+            match (buffer.as_ref(), self.staging.as_mut()) {
+                (Some(value), Some(staging)) => copy_into(staging, value),
+                (Some(value), None) => self.staging = Some(value.clone()),
+                (None, _) => return Ok(()),
+            }
+        }
+        if let Some(staging) = &self.staging {
+            copy_into(&mut self.output.write(), staging);
         }
         Ok(())
     }

@@ -66,9 +66,26 @@ impl HabitatOptions {
     }
 }
 
-/// The period of a rate, if it is a usable one (finite, 0 < hz ≤ 1 MHz).
+/// The slowest usable rate: one sample an hour.
+pub const MIN_RATE_HZ: f64 = 1.0 / 3600.0;
+/// The fastest usable rate.
+pub const MAX_RATE_HZ: f64 = 1e6;
+
+/// The period of a rate, if it is a usable one ([`MIN_RATE_HZ`] ..= [`MAX_RATE_HZ`]).
 pub(crate) fn period_of(hz: f64) -> Option<Duration> {
-    (hz.is_finite() && hz > 0.0 && hz <= 1e6).then(|| Duration::from_secs_f64(1.0 / hz))
+    (hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&hz))
+        .then(|| Duration::from_secs_f64(1.0 / hz))
+}
+
+/// Whether a period is usable (the period of a usable rate, within rounding).
+pub(crate) fn period_is_usable(period: Duration) -> bool {
+    let secs = period.as_secs_f64();
+    (1.0 / MAX_RATE_HZ * 0.999..=1.0 / MIN_RATE_HZ * 1.001).contains(&secs)
+}
+
+/// Statistics intervals accepted: 10 ms ..= 1 h.
+pub(crate) fn stats_interval_is_usable(interval: Duration) -> bool {
+    (Duration::from_millis(10)..=Duration::from_secs(3600)).contains(&interval)
 }
 
 /// What can go wrong controlling a habitat.
@@ -96,12 +113,20 @@ pub enum HabitatError {
         report: VerifyReport,
     },
     /// A rate that is not finite, not positive, or above 1 MHz.
-    #[error("habitat `{habitat}`: {hz} Hz is not a usable rate (finite, > 0, <= 1 MHz)")]
+    #[error("habitat `{habitat}`: {hz} Hz is not a usable rate (from one sample an hour to 1 MHz)")]
     InvalidRate {
         /// The habitat.
         habitat: String,
         /// The rate asked for.
         hz: f64,
+    },
+    /// A statistics interval outside 10 ms ..= 1 h.
+    #[error("habitat `{habitat}`: a statistics interval of {interval:?} is outside 10 ms ..= 1 h")]
+    InvalidStatsInterval {
+        /// The habitat.
+        habitat: String,
+        /// The interval asked for.
+        interval: Duration,
     },
     /// The runtime it belonged to was dropped.
     #[error("habitat `{0}`: its runtime is gone")]
@@ -143,6 +168,8 @@ pub(crate) struct Shared {
     samples: AtomicU64,
     overruns: AtomicU64,
     thread: Mutex<Option<JoinHandle<()>>>,
+    /// Held by `start` and `stop` so that concurrent calls take turns.
+    control: Mutex<()>,
     runtime: Weak<Inner>,
 }
 
@@ -174,6 +201,7 @@ impl Habitat {
                 samples: AtomicU64::new(0),
                 overruns: AtomicU64::new(0),
                 thread: Mutex::new(None),
+                control: Mutex::new(()),
                 runtime,
             }),
         }
@@ -234,6 +262,7 @@ impl Habitat {
     /// found), calls every module's `startup`, then the active modules' `enable`, then starts
     /// the clock.
     pub fn start(&self) -> Result<(), HabitatError> {
+        let _turn = lock(&self.shared.control);
         let name = &self.shared.name;
         let options = lock(&self.shared.options)
             .clone()
@@ -304,6 +333,7 @@ impl Habitat {
     /// Ends sampling after the current sample: the active modules' `disable`, then every
     /// module's `shutdown`. Does nothing if it is not sampling.
     pub fn stop(&self) {
+        let _turn = lock(&self.shared.control);
         self.shared.stop.store(true, Ordering::Release);
         let thread = lock(&self.shared.thread).take();
         if let Some(thread) = thread
@@ -336,7 +366,9 @@ impl Habitat {
         }
         let exec = now_ns().saturating_sub(start);
         self.shared.samples.fetch_add(1, Ordering::Relaxed);
-        lock(&self.shared.slot).interval.record(None, None, exec);
+        let mut slot = lock(&self.shared.slot);
+        slot.interval.record(None, None, exec);
+        slot.total.record(None, None, exec);
         Ok(())
     }
 
@@ -439,7 +471,7 @@ impl Recorder {
         Self {
             local: Timings::new(),
             interval,
-            flush_at: now + interval,
+            flush_at: now.saturating_add(interval),
             flushed_at: now,
         }
     }
@@ -460,7 +492,7 @@ impl Recorder {
             slot.interval_s = now.saturating_sub(self.flushed_at) as f64 / 1e9;
             self.local.reset();
             self.flushed_at = now;
-            self.flush_at = now + self.interval;
+            self.flush_at = now.saturating_add(self.interval);
         }
     }
 }
@@ -482,7 +514,7 @@ fn run_timer(shared: &Shared, options: &HabitatOptions) {
             if now >= next {
                 break;
             }
-            sleep_until_ns(next.min(now + STOP_CHECK_NS));
+            sleep_until_ns(next.min(now.saturating_add(STOP_CHECK_NS)));
         }
         let start = now_ns();
         {
@@ -501,11 +533,11 @@ fn run_timer(shared: &Shared, options: &HabitatOptions) {
             .record(Some(start.saturating_sub(next)), jitter, end - start);
         shared.samples.fetch_add(1, Ordering::Relaxed);
         previous_start = Some(start);
-        next += period;
+        next = next.saturating_add(period);
         if end > next {
             let missed = (end - next) / period + 1;
             shared.overruns.fetch_add(missed, Ordering::Relaxed);
-            next += missed * period;
+            next = next.saturating_add(missed.saturating_mul(period));
             previous_start = None;
         }
         rec.maybe_flush(shared, end, false);

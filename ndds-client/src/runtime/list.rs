@@ -92,16 +92,18 @@ impl ExecList {
         let ctx = self.ctx;
         for k in 0..self.order.len() {
             let i = self.order[k];
-            let result = self.slots[i].module.execute(&ctx);
+            let module = &mut self.slots[i].module;
+            let result = guarded(|| module.execute(&ctx));
             self.check(i, Routine::Execute, result);
         }
         for k in 0..self.order.len() {
             let i = self.order[k];
-            let result = self.slots[i].module.state_update(&ctx);
+            let module = &mut self.slots[i].module;
+            let result = guarded(|| module.state_update(&ctx));
             self.check(i, Routine::StateUpdate, result);
         }
         self.ctx.sample += 1;
-        self.ctx.time += ctx.period;
+        self.ctx.time = self.ctx.time.saturating_add(ctx.period);
     }
 
     /// Sampling begins: startups (list order), then enables (execution order).
@@ -185,7 +187,10 @@ impl ExecList {
             self.call(index, Routine::Shutdown);
         }
         let mut slot = self.slots.remove(index);
-        slot.module.terminate();
+        let _ = guarded(|| {
+            slot.module.terminate();
+            Ok(())
+        });
         self.order.retain(|&i| i != index);
         for i in &mut self.order {
             if *i > index {
@@ -211,7 +216,10 @@ impl ExecList {
     pub(crate) fn terminate(&mut self) {
         self.stop();
         for slot in &mut self.slots {
-            slot.module.terminate();
+            let _ = guarded(|| {
+                slot.module.terminate();
+                Ok(())
+            });
         }
         self.slots.clear();
         self.order.clear();
@@ -228,7 +236,7 @@ impl ExecList {
     fn call(&mut self, i: usize, routine: Routine) {
         let ctx = self.ctx;
         let module = &mut self.slots[i].module;
-        let result = match routine {
+        let result = guarded(|| match routine {
             Routine::Execute => module.execute(&ctx),
             Routine::StateUpdate => module.state_update(&ctx),
             Routine::Enable => module.enable(&ctx),
@@ -237,7 +245,7 @@ impl ExecList {
             Routine::Shutdown => module.shutdown(&ctx),
             Routine::TimingChanged => module.timing_changed(&ctx),
             Routine::Reset => module.reset(&ctx),
-        };
+        });
         self.check(i, routine, result);
     }
 
@@ -257,6 +265,19 @@ impl ExecList {
                 "module routine failed (counted in the habitat's module_errors; later failures of this module are only counted)");
         }
     }
+}
+
+/// Runs a routine; a panic becomes an error (counted like any failure) instead of taking the
+/// habitat's thread, its lock and every other module down with it.
+fn guarded(routine: impl FnOnce() -> RoutineResult) -> RoutineResult {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(routine)).unwrap_or_else(|payload| {
+        let text = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a non-string payload".to_owned());
+        Err(ModuleError::Failed(format!("panicked: {text}")))
+    })
 }
 
 impl Drop for ExecList {

@@ -45,7 +45,7 @@ mod verify;
 
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
-pub use habitat::{Clock, Habitat, HabitatError, HabitatOptions};
+pub use habitat::{Clock, Habitat, HabitatError, HabitatOptions, MAX_RATE_HZ, MIN_RATE_HZ};
 pub use mat::Mat;
 pub use module::{
     Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,

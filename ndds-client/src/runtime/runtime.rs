@@ -11,7 +11,9 @@ use super::binding::{Publisher, RateIn, RateOut, Subscriber};
 use super::components;
 use super::csmat::CsMat;
 use super::database::{CategoryEntry, Database, GroupEntry, ModuleEntry, ObjectKind};
-use super::habitat::{Habitat, HabitatError, HabitatOptions, period_of};
+use super::habitat::{
+    Habitat, HabitatError, HabitatOptions, period_is_usable, stats_interval_is_usable,
+};
 use super::list::{ExecList, Slot};
 use super::mat::Mat;
 use super::module::{Binder, Interface, ModuleError, SampleModule};
@@ -393,11 +395,17 @@ impl Runtime {
         options: HabitatOptions,
     ) -> Result<Habitat, RuntimeError> {
         check_name(ObjectKind::Habitat, name)?;
-        let period = options.period.as_secs_f64();
-        if period_of(1.0 / period).is_none() || period > 3600.0 {
+        if !period_is_usable(options.period) {
             return Err(HabitatError::InvalidRate {
                 habitat: name.to_owned(),
-                hz: 1.0 / period,
+                hz: 1.0 / options.period.as_secs_f64(),
+            }
+            .into());
+        }
+        if !stats_interval_is_usable(options.stats_interval) {
+            return Err(HabitatError::InvalidStatsInterval {
+                habitat: name.to_owned(),
+                interval: options.stats_interval,
             }
             .into());
         }
@@ -517,6 +525,14 @@ impl Runtime {
             }
         };
         let active = db.is_active_with(module, &db.active_groups());
+        if active && let Some((mat, other)) = Self::writer_elsewhere(&db, habitat, &interface) {
+            Self::undo(&mut db, &created, &new_names, follows_before);
+            return Err(RuntimeError::DoubleWriter {
+                mat,
+                first: other,
+                second: module.to_owned(),
+            });
+        }
         let slot = Slot::new(module.to_owned(), interface.clone(), built);
         let installed = lock(&target.shared.list).install(slot, active);
         if let Err(source) = installed {
@@ -535,6 +551,25 @@ impl Runtime {
             },
         );
         Ok(())
+    }
+
+    /// An active module of another habitat writing one of `interface`'s outputs (a writer in
+    /// the same habitat is the sort's to refuse).
+    fn writer_elsewhere(
+        db: &Database,
+        habitat: &str,
+        interface: &Interface,
+    ) -> Option<(String, String)> {
+        let active = db.active_groups();
+        interface.output_names().find_map(|mat| {
+            db.modules
+                .iter()
+                .filter(|(_, m)| m.habitat != habitat)
+                .find(|(name, m)| {
+                    m.interface.output_names().any(|o| o == mat) && db.is_active_with(name, &active)
+                })
+                .map(|(name, _)| (mat.to_owned(), name.clone()))
+        })
     }
 
     /// Undoes what a failed install created: the CSMats its declarations bound, the
@@ -820,8 +855,10 @@ impl Runtime {
             .ok_or_else(|| RuntimeError::NoParticipant(self.inner.name.clone()))
     }
 
-    /// Publishes CSMat `mat` on `topic` after each sample in which it was written: a module
-    /// `publish:<topic>` in `habitat`, ordered after the CSMat's writer.
+    /// Publishes CSMat `mat` on `topic` every sample: a module `publish:<topic>` in
+    /// `habitat`, ordered after the CSMat's writer. A reliable producer here never blocks the
+    /// habitat: its `when_full` is made [`WhenFull::DropOldest`](crate::WhenFull), so a slow
+    /// consumer loses old samples (and is told so) instead of stalling the loop.
     pub fn publish(
         &self,
         habitat: &str,
@@ -913,7 +950,9 @@ fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
             if now < *due {
                 continue;
             }
-            *due = now + interval;
+            *due = now
+                .checked_add(interval)
+                .unwrap_or(now + Duration::from_secs(3600));
             let name = habitat.name().to_owned();
             if !producers.contains_key(&name) {
                 let topic = format!("cs/{}/{}/stats", rt.inner.name, name);

@@ -3,7 +3,7 @@
 
 use nalgebra::DMatrix;
 
-use super::{distinct, matrix_param, scalar_param, shape_error};
+use super::{copy_in, copy_out, distinct, matrix_param, scalar_param, shape_error};
 use crate::runtime::mat::Mat;
 use crate::runtime::module::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
 
@@ -44,6 +44,9 @@ pub struct Pd {
     output: Mat,
     kp: Mat,
     kd: Mat,
+    y: DMatrix<f64>,
+    r: DMatrix<f64>,
+    u: DMatrix<f64>,
     previous: DMatrix<f64>,
     primed: bool,
 }
@@ -67,6 +70,9 @@ impl Pd {
             measured: measured_mat,
             kp: scalar_param(b, "kp", kp),
             kd: scalar_param(b, "kd", kd),
+            y: DMatrix::zeros(0, 0),
+            r: DMatrix::zeros(0, 0),
+            u: DMatrix::zeros(0, 0),
             previous: DMatrix::zeros(0, 0),
             primed: false,
         })
@@ -77,31 +83,33 @@ impl SampleModule for Pd {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let kp = self.kp.read().get(0, 0)?;
         let kd = self.kd.read().get(0, 0)?;
-        let y = self.measured.read();
-        let r = self.reference.read();
-        let mut u = self.output.write();
-        if r.shape() != y.shape() {
-            return Err(shape_error("reference", &r, y.shape()));
+        copy_in(&self.measured, &mut self.y);
+        copy_in(&self.reference, &mut self.r);
+        if self.r.shape() != self.y.shape() {
+            return Err(shape_error(
+                "reference",
+                &self.reference.read(),
+                self.y.shape(),
+            ));
         }
-        if u.shape() != y.shape() {
-            return Err(shape_error("output", &u, y.shape()));
-        }
-        if !self.primed || self.previous.shape() != y.shape() {
-            self.previous = y.matrix().clone();
+        if !self.primed || self.previous.shape() != self.y.shape() {
+            copy_in(&self.measured, &mut self.previous);
             self.primed = true;
         }
-        let dt = ctx.dt();
-        let (y, r, prev) = (y.matrix(), r.matrix(), &self.previous);
-        for (i, out) in u.matrix_mut().iter_mut().enumerate() {
-            *out = kp * (r[i] - y[i]) - kd * (y[i] - prev[i]) / dt;
+        if self.u.shape() != self.y.shape() {
+            self.u = self.y.clone();
         }
-        Ok(())
+        let dt = ctx.dt();
+        for (i, out) in self.u.iter_mut().enumerate() {
+            let (y, r, prev) = (self.y[i], self.r[i], self.previous[i]);
+            *out = kp * (r - y) - kd * (y - prev) / dt;
+        }
+        copy_out(&self.output, &self.u)
     }
 
     fn state_update(&mut self, _: &SampleContext) -> RoutineResult {
-        let y = self.measured.read();
-        if self.previous.shape() == y.shape() {
-            self.previous.copy_from(y.matrix());
+        if self.previous.shape() == self.y.shape() {
+            self.previous.copy_from(&self.y);
         }
         Ok(())
     }
@@ -134,6 +142,8 @@ pub struct Estimator {
     predicted: DMatrix<f64>,
     innovation: DMatrix<f64>,
     corrected: DMatrix<f64>,
+    y: DMatrix<f64>,
+    u: DMatrix<f64>,
 }
 
 impl Estimator {
@@ -165,48 +175,81 @@ impl Estimator {
             predicted: DMatrix::zeros(n, 1),
             innovation: DMatrix::zeros(p, 1),
             corrected: DMatrix::zeros(n, 1),
+            y: DMatrix::zeros(p, 1),
+            u: DMatrix::zeros(m, 1),
         })
     }
 }
 
 impl SampleModule for Estimator {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        let y = self.measured.read();
-        let (c, l) = (self.c.read(), self.l.read());
-        if y.shape() != self.innovation.shape() {
-            return Err(shape_error("measurement", &y, self.innovation.shape()));
+        copy_in(&self.measured, &mut self.y);
+        if self.y.shape() != self.innovation.shape() {
+            return Err(shape_error(
+                "measurement",
+                &self.measured.read(),
+                self.innovation.shape(),
+            ));
         }
-        self.innovation.copy_from(y.matrix());
-        gemm(&mut self.innovation, -1.0, c.matrix(), &self.predicted, 1.0)?;
+        self.innovation.copy_from(&self.y);
+        gemm(
+            &mut self.innovation,
+            -1.0,
+            self.c.read().matrix(),
+            &self.predicted,
+            1.0,
+        )?;
         self.corrected.copy_from(&self.predicted);
-        gemm(&mut self.corrected, 1.0, l.matrix(), &self.innovation, 1.0)?;
-        let mut out = self.estimate.write();
-        if out.shape() != self.corrected.shape() {
-            return Err(shape_error("estimate", &out, self.corrected.shape()));
-        }
-        out.matrix_mut().copy_from(&self.corrected);
-        Ok(())
+        gemm(
+            &mut self.corrected,
+            1.0,
+            self.l.read().matrix(),
+            &self.innovation,
+            1.0,
+        )?;
+        copy_out(&self.estimate, &self.corrected)
     }
 
     fn state_update(&mut self, _: &SampleContext) -> RoutineResult {
-        let u = self.command.read();
-        let (a, b) = (self.a.read(), self.b.read());
-        gemm(&mut self.predicted, 1.0, a.matrix(), &self.corrected, 0.0)?;
-        gemm(&mut self.predicted, 1.0, b.matrix(), u.matrix(), 1.0)
+        copy_in(&self.command, &mut self.u);
+        gemm(
+            &mut self.predicted,
+            1.0,
+            self.a.read().matrix(),
+            &self.corrected,
+            0.0,
+        )?;
+        gemm(
+            &mut self.predicted,
+            1.0,
+            self.b.read().matrix(),
+            &self.u,
+            1.0,
+        )
     }
 
     fn enable(&mut self, _: &SampleContext) -> RoutineResult {
-        let y = self.measured.read();
-        let c = self.c.read();
-        let pinv = c
+        copy_in(&self.measured, &mut self.y);
+        let pinv = self
+            .c
+            .read()
             .matrix()
             .clone()
             .pseudo_inverse(1e-12)
             .map_err(|e| ModuleError::Failed(format!("C has no pseudo-inverse: {e}")))?;
-        if pinv.ncols() != y.rows() || y.cols() != 1 {
-            return Err(shape_error("measurement", &y, (pinv.ncols(), 1)));
+        if pinv.shape() != (self.predicted.nrows(), self.y.nrows()) || self.y.ncols() != 1 {
+            return Err(ModuleError::Failed(format!(
+                "estimator: C is {}x{} and the measurement {}x{}; expected {}x{} and {}x1",
+                pinv.ncols(),
+                pinv.nrows(),
+                self.y.nrows(),
+                self.y.ncols(),
+                self.innovation.nrows(),
+                self.predicted.nrows(),
+                self.innovation.nrows()
+            )));
         }
-        self.predicted = &pinv * y.matrix();
+        gemm(&mut self.predicted, 1.0, &pinv, &self.y, 0.0)?;
         self.corrected.copy_from(&self.predicted);
         Ok(())
     }
@@ -224,6 +267,8 @@ pub struct StateFeedback {
     output: Mat,
     k: Mat,
     n: Mat,
+    x: DMatrix<f64>,
+    r: DMatrix<f64>,
     work: DMatrix<f64>,
 }
 
@@ -248,6 +293,8 @@ impl StateFeedback {
             output: b.output(output, (m, 1)),
             k: matrix_param(b, "K", k),
             n: matrix_param(b, "N", n),
+            x: DMatrix::zeros(states, 1),
+            r: DMatrix::zeros(p, 1),
             work: DMatrix::zeros(m, 1),
         })
     }
@@ -255,16 +302,11 @@ impl StateFeedback {
 
 impl SampleModule for StateFeedback {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        let (x, r) = (self.estimate.read(), self.reference.read());
-        let (k, n) = (self.k.read(), self.n.read());
-        gemm(&mut self.work, 1.0, n.matrix(), r.matrix(), 0.0)?;
-        gemm(&mut self.work, -1.0, k.matrix(), x.matrix(), 1.0)?;
-        let mut u = self.output.write();
-        if u.shape() != self.work.shape() {
-            return Err(shape_error("output", &u, self.work.shape()));
-        }
-        u.matrix_mut().copy_from(&self.work);
-        Ok(())
+        copy_in(&self.estimate, &mut self.x);
+        copy_in(&self.reference, &mut self.r);
+        gemm(&mut self.work, 1.0, self.n.read().matrix(), &self.r, 0.0)?;
+        gemm(&mut self.work, -1.0, self.k.read().matrix(), &self.x, 1.0)?;
+        copy_out(&self.output, &self.work)
     }
 }
 

@@ -38,6 +38,28 @@ pub(crate) fn distinct(names: &[&str]) -> Result<(), ModuleError> {
     Ok(())
 }
 
+/// Copies `mat`'s values into the module's own `buffer` and releases the lock at once:
+/// built-in modules never hold two CSMat locks at a time, so habitats that feed each other
+/// cannot deadlock. Allocates only when the shape changes (the first sample).
+pub(crate) fn copy_in(mat: &Mat, buffer: &mut DMatrix<f64>) {
+    let value = mat.read();
+    if buffer.shape() == value.shape() {
+        buffer.copy_from(value.matrix());
+    } else {
+        *buffer = value.matrix().clone();
+    }
+}
+
+/// Writes `values` into `mat` (same shape required).
+pub(crate) fn copy_out(mat: &Mat, values: &DMatrix<f64>) -> RoutineResult {
+    let mut out = mat.write();
+    if out.shape() != values.shape() {
+        return Err(shape_error("output", &out, values.shape()));
+    }
+    out.matrix_mut().copy_from(values);
+    Ok(())
+}
+
 /// The shape of `mat` if it exists, else `fallback`.
 pub(crate) fn shape_of(mat: &Mat, fallback: Shape) -> Shape {
     if mat.is_bound() {
@@ -80,6 +102,7 @@ pub struct Gain {
     input: Mat,
     output: Mat,
     k: Mat,
+    value: DMatrix<f64>,
 }
 
 impl Gain {
@@ -91,6 +114,7 @@ impl Gain {
             output: b.output_same_as(output, &input_mat),
             input: input_mat,
             k: scalar_param(b, "k", k),
+            value: DMatrix::zeros(0, 0),
         })
     }
 }
@@ -98,11 +122,9 @@ impl Gain {
 impl SampleModule for Gain {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
         let k = self.k.read().get(0, 0)?;
-        let input = self.input.read();
-        let mut output = self.output.write();
-        output.copy_from(&input)?;
-        output.matrix_mut().scale_mut(k);
-        Ok(())
+        copy_in(&self.input, &mut self.value);
+        self.value.scale_mut(k);
+        copy_out(&self.output, &self.value)
     }
 }
 
@@ -113,6 +135,7 @@ pub struct LowPass {
     output: Mat,
     tau: Mat,
     state: DMatrix<f64>,
+    value: DMatrix<f64>,
     primed: bool,
 }
 
@@ -131,13 +154,13 @@ impl LowPass {
             input: input_mat,
             tau: scalar_param(b, "tau", tau),
             state: DMatrix::zeros(0, 0),
+            value: DMatrix::zeros(0, 0),
             primed: false,
         })
     }
 
     fn prime(&mut self) {
-        let input = self.input.read();
-        self.state = input.matrix().clone();
+        copy_in(&self.input, &mut self.state);
         self.primed = true;
     }
 }
@@ -149,18 +172,12 @@ impl SampleModule for LowPass {
         }
         let tau = self.tau.read().get(0, 0)?.max(0.0);
         let a = ctx.dt() / (tau + ctx.dt());
-        let input = self.input.read();
-        if input.shape() != self.state.shape() {
-            return Err(shape_error("input", &input, self.state.shape()));
+        copy_in(&self.input, &mut self.value);
+        if self.value.shape() != self.state.shape() {
+            self.prime();
         }
-        self.state
-            .zip_apply(input.matrix(), |s, u| *s += a * (u - *s));
-        let mut output = self.output.write();
-        if output.shape() != self.state.shape() {
-            return Err(shape_error("output", &output, self.state.shape()));
-        }
-        output.matrix_mut().copy_from(&self.state);
-        Ok(())
+        self.state.zip_apply(&self.value, |s, u| *s += a * (u - *s));
+        copy_out(&self.output, &self.state)
     }
 
     fn enable(&mut self, _: &SampleContext) -> RoutineResult {
