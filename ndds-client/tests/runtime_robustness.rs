@@ -63,7 +63,7 @@ struct Faulty {
 impl SampleModule for Faulty {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
         self.samples += 1;
-        if self.samples % 3 == 0 {
+        if self.samples.is_multiple_of(3) {
             panic!("sample {} went wrong", self.samples);
         }
         Ok(())
