@@ -206,3 +206,50 @@ fn absurd_rates_and_intervals_are_refused() {
     }
     assert_eq!(h.stats().samples, 3);
 }
+
+/// Sleeps through every sample.
+struct Sleepy(Duration);
+
+impl SampleModule for Sleepy {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        std::thread::sleep(self.0);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_switch_waits_only_for_the_habitats_it_changes() {
+    let rt = Runtime::new("busy");
+    rt.create_habitat("fast", HabitatOptions::rate(1000.0))
+        .unwrap();
+    rt.create_habitat("slow", HabitatOptions::rate(1.0))
+        .unwrap();
+    rt.create_mat(CsMat::from_row_slice("x", 1, 1, &[1.0]).unwrap())
+        .unwrap();
+    rt.group("gain", "one", &["one"]).unwrap();
+    rt.group("gain", "two", &["two"]).unwrap();
+    rt.configuration("double", &[("gain", "two")]).unwrap();
+    rt.install("fast", "one", |b| Gain::new(b, "x", "y", 1.0))
+        .unwrap();
+    rt.install("fast", "two", |b| Gain::new(b, "x", "y", 2.0))
+        .unwrap();
+    rt.install("slow", "sleepy", |_| Ok(Sleepy(Duration::from_secs(3))))
+        .unwrap();
+    rt.start_all().unwrap();
+    std::thread::sleep(Duration::from_millis(300)); // the slow habitat is inside its sample
+    let rt2 = rt.clone();
+    let took = within(Duration::from_secs(10), move || {
+        let started = std::time::Instant::now();
+        rt2.switch("double").unwrap();
+        started.elapsed()
+    });
+    assert!(
+        took < Duration::from_millis(1500),
+        "the switch waited {took:?} for a habitat it does not change"
+    );
+    assert!(common::eventually(Duration::from_secs(2), || rt
+        .mat("y")
+        .value(0, 0)
+        == 2.0));
+    within(Duration::from_secs(10), move || rt.stop_all());
+}

@@ -53,6 +53,8 @@ pub(crate) struct MatEntry {
 pub(crate) struct ModuleEntry {
     pub(crate) habitat: String,
     pub(crate) interface: Interface,
+    /// Whether it is in its habitat's active set now (mirrors the list's slot).
+    pub(crate) active: bool,
 }
 
 pub(crate) struct GroupEntry {

@@ -548,6 +548,7 @@ impl Runtime {
             ModuleEntry {
                 habitat: habitat.to_owned(),
                 interface,
+                active,
             },
         );
         Ok(())
@@ -756,12 +757,45 @@ impl Runtime {
         db: &mut Database,
         active: &BTreeMap<String, Option<String>>,
     ) -> Result<(), RuntimeError> {
-        let habitats: Vec<Habitat> = db.habitats.values().cloned().collect();
+        // Writers in different habitats, from the database (no lock needed); writers in one
+        // habitat are the sort's to refuse, with its own error.
+        let mut writers: BTreeMap<&str, (&str, &str)> = BTreeMap::new();
+        for (name, entry) in &db.modules {
+            if !db.is_active_with(name, active) {
+                continue;
+            }
+            for mat in entry.interface.output_names() {
+                match writers.get(mat) {
+                    Some((first, habitat)) if *habitat != entry.habitat => {
+                        return Err(RuntimeError::DoubleWriter {
+                            mat: mat.to_owned(),
+                            first: (*first).to_owned(),
+                            second: name.clone(),
+                        });
+                    }
+                    Some(_) => {}
+                    None => {
+                        writers.insert(mat, (name, &entry.habitat));
+                    }
+                }
+            }
+        }
+        // Only the habitats whose active set changes are locked (each at its next sample
+        // boundary, all together, in name order), so a switch never waits on the others.
+        let affected: Vec<Habitat> = db
+            .habitats
+            .values()
+            .filter(|h| {
+                db.modules.iter().any(|(name, m)| {
+                    m.habitat == h.name() && m.active != db.is_active_with(name, active)
+                })
+            })
+            .cloned()
+            .collect();
         let mut lists: Vec<MutexGuard<'_, ExecList>> =
-            habitats.iter().map(|h| lock(&h.shared.list)).collect();
+            affected.iter().map(|h| lock(&h.shared.list)).collect();
         let mut plans = Vec::with_capacity(lists.len());
-        let mut writers: BTreeMap<&str, &str> = BTreeMap::new();
-        for (habitat, list) in habitats.iter().zip(&lists) {
+        for (habitat, list) in affected.iter().zip(&lists) {
             let next: Vec<bool> = list
                 .slots
                 .iter()
@@ -773,18 +807,6 @@ impl Runtime {
                     habitat: habitat.name().to_owned(),
                     source,
                 })?;
-            for &i in &order {
-                let slot = &list.slots[i];
-                for mat in slot.interface.output_names() {
-                    if let Some(first) = writers.insert(mat, &slot.name) {
-                        return Err(RuntimeError::DoubleWriter {
-                            mat: mat.to_owned(),
-                            first: first.to_owned(),
-                            second: slot.name.clone(),
-                        });
-                    }
-                }
-            }
             plans.push((next, order));
         }
         drop(writers);
@@ -795,6 +817,16 @@ impl Runtime {
             list.enter(&next, order);
         }
         drop(lists);
+        let flags: Vec<(String, bool)> = db
+            .modules
+            .keys()
+            .map(|name| (name.clone(), db.is_active_with(name, active)))
+            .collect();
+        for (name, on) in flags {
+            if let Some(entry) = db.modules.get_mut(&name) {
+                entry.active = on;
+            }
+        }
         for (category, group) in active {
             if let Some(entry) = db.categories.get_mut(category) {
                 entry.active = group.clone();
