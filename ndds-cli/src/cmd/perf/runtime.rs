@@ -2,7 +2,7 @@
 //!
 //! 1. **Overhead**: a manual habitat runs `--samples` samples of `--modules` modules, first
 //!    modules that do nothing (the runtime's own cost: the list lock, two routine calls per
-//!    module, the counters), then a chain of 1 × 1 gains (each locks two CSMats and copies a
+//!    module, the counters), then a chain of 1 × 1 gains (each locks its gain, its input and its output, one at a time, and copies a
 //!    value). Reported per sample and per module.
 //! 2. **Jitter**: a timer habitat of `--modules` gains at `--rate` for `--seconds`: how late
 //!    each sample started against its absolute deadline, how far each period was from the
@@ -101,7 +101,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     } else {
         if let Some((nop, gain)) = &overhead {
             nop.print("modules that do nothing");
-            gain.print("1x1 gains (two CSMat locks and a copy each)");
+            gain.print("1x1 gains (three CSMat locks: gain, input, output; two copies)");
         }
         print_jitter(args, &jitter);
     }
