@@ -2,8 +2,9 @@
 //!
 //! 1. **Overhead**: a manual habitat runs `--samples` samples of `--modules` modules, first
 //!    modules that do nothing (the runtime's own cost: the list lock, two routine calls per
-//!    module, the counters), then a chain of 1 × 1 gains (each locks its gain, its input and its output, one at a time, and copies a
-//!    value). Reported per sample and per module.
+//!    module, the counters), then a chain of 1 × 1 gains (each locks its gain, its input and
+//!    its output, one at a time, and copies the value in and out). Reported per sample and
+//!    per module.
 //! 2. **Jitter**: a timer habitat of `--modules` gains at `--rate` for `--seconds`: how late
 //!    each sample started against its absolute deadline, how far each period was from the
 //!    nominal one, and execution times. `--load N` runs N busy threads meanwhile (pinned to
