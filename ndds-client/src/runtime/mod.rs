@@ -30,12 +30,15 @@
 mod binding;
 mod clock;
 pub mod components;
+mod config;
 pub mod csmat;
 mod database;
+mod error;
 mod habitat;
 mod list;
 mod mat;
 mod module;
+mod network;
 mod registry;
 #[allow(clippy::module_inception)]
 mod runtime;
@@ -45,13 +48,14 @@ mod verify;
 
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
+pub use error::RuntimeError;
 pub use habitat::{Clock, Habitat, HabitatError, HabitatOptions, MAX_RATE_HZ, MIN_RATE_HZ};
 pub use mat::Mat;
 pub use module::{
     Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,
 };
 pub use registry::{Factory, ParamError, ParamValue, Params, Registry};
-pub use runtime::{Runtime, RuntimeError};
+pub use runtime::Runtime;
 pub use sort::{SortError, SortNode, sort};
 pub use stats::{HabitatStats, Percentiles};
 pub use verify::{Problem, VerifyReport};

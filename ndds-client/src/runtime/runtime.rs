@@ -1,132 +1,25 @@
-//! [`Runtime`]: one process's ControlShell system — its linking database, habitats, component
-//! registry, configuration manager and network bindings.
+//! [`Runtime`]: one process's ControlShell system — its linking database (CSMats, modules,
+//! habitats), component registry and verification. The configuration manager is in
+//! `config.rs`, network bindings and services in `network.rs`, errors in `error.rs`.
 
-use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
-use super::binding::{Publisher, RateIn, RateOut, Subscriber};
 use super::components;
 use super::csmat::CsMat;
-use super::database::{CategoryEntry, Database, GroupEntry, ModuleEntry, ObjectKind};
+use super::database::{Database, ModuleEntry, ObjectKind};
+use super::error::RuntimeError;
 use super::habitat::{
     Habitat, HabitatError, HabitatOptions, period_is_usable, stats_interval_is_usable,
 };
-use super::list::{ExecList, Slot};
+use super::list::Slot;
 use super::mat::Mat;
 use super::module::{Binder, Interface, ModuleError, SampleModule};
 use super::registry::{Params, Registry};
-use super::sort::SortError;
 use super::stats::HabitatStats;
 use super::verify::{VerifyReport, verify};
-use crate::error::DeclareError;
-use crate::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
-
-/// What can go wrong building or changing a system.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum RuntimeError {
-    /// A second object of one kind with one name.
-    #[error("{kind} `{name}` already exists")]
-    Duplicate {
-        /// Its kind.
-        kind: ObjectKind,
-        /// Its name.
-        name: String,
-    },
-    /// An object that must exist does not.
-    #[error("unknown {kind} `{name}`")]
-    Unknown {
-        /// Its kind.
-        kind: ObjectKind,
-        /// Its name.
-        name: String,
-    },
-    /// An empty name, or one with a `/` where topic names are derived from it.
-    #[error("bad {kind} name `{name}`: {why}")]
-    BadName {
-        /// Its kind.
-        kind: ObjectKind,
-        /// The name.
-        name: String,
-        /// What is wrong with it.
-        why: &'static str,
-    },
-    /// No component type of that name is registered.
-    #[error("unknown component type `{name}` (registered: {known})")]
-    UnknownType {
-        /// The name asked for.
-        name: String,
-        /// The registered ones.
-        known: String,
-    },
-    /// The module's constructor failed.
-    #[error("module `{module}` could not be built: {source}")]
-    Build {
-        /// The module.
-        module: String,
-        /// Why.
-        source: ModuleError,
-    },
-    /// Adding the module (or switching) would leave a habitat's active set unsortable.
-    #[error("habitat `{habitat}`: {source}")]
-    Sort {
-        /// The habitat.
-        habitat: String,
-        /// The double writer or algebraic loop.
-        source: SortError,
-    },
-    /// Two active modules in different habitats would write one CSMat.
-    #[error("CSMat `{mat}` would be written by `{first}` and `{second}`")]
-    DoubleWriter {
-        /// The CSMat.
-        mat: String,
-        /// One writer.
-        first: String,
-        /// The other.
-        second: String,
-    },
-    /// A CSMat created with another shape than it already has.
-    #[error("CSMat `{name}` is already {rows}x{cols}; cannot create it as {new_rows}x{new_cols}")]
-    ShapeConflict {
-        /// The CSMat.
-        name: String,
-        /// Its rows.
-        rows: usize,
-        /// Its columns.
-        cols: usize,
-        /// Rows asked for.
-        new_rows: usize,
-        /// Columns asked for.
-        new_cols: usize,
-    },
-    /// A group used with a category it does not belong to.
-    #[error("module group `{group}` belongs to category `{actual}`, not `{category}`")]
-    WrongCategory {
-        /// The group.
-        group: String,
-        /// The category named.
-        category: String,
-        /// Its category.
-        actual: String,
-    },
-    /// Network bindings and services need a participant.
-    #[error("runtime `{0}` has no participant: create it with Runtime::with_participant")]
-    NoParticipant(String),
-    /// A producer or consumer could not be declared.
-    #[error("declaring topic `{topic}`: {source}")]
-    Declare {
-        /// The topic.
-        topic: String,
-        /// Why.
-        source: DeclareError,
-    },
-    /// A habitat operation failed.
-    #[error(transparent)]
-    Habitat(#[from] HabitatError),
-}
+use crate::{CallbackConsumer, Participant};
 
 pub(crate) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
@@ -138,13 +31,13 @@ pub(crate) struct Inner {
     db: Mutex<Database>,
     pub(crate) participant: Option<Participant>,
     registry: Mutex<Registry>,
-    services: Mutex<Option<Services>>,
+    pub(crate) services: Mutex<Option<Services>>,
 }
 
-struct Services {
-    stop: Arc<AtomicBool>,
-    stats: Option<JoinHandle<()>>,
-    _commands: CallbackConsumer,
+pub(crate) struct Services {
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) stats: Option<JoinHandle<()>>,
+    pub(crate) _commands: CallbackConsumer,
 }
 
 impl Inner {
@@ -189,7 +82,7 @@ impl Drop for Inner {
 /// ```
 #[derive(Clone)]
 pub struct Runtime {
-    inner: Arc<Inner>,
+    pub(crate) inner: Arc<Inner>,
 }
 
 impl std::fmt::Debug for Runtime {
@@ -200,7 +93,7 @@ impl std::fmt::Debug for Runtime {
     }
 }
 
-fn check_name(kind: ObjectKind, name: &str) -> Result<(), RuntimeError> {
+pub(crate) fn check_name(kind: ObjectKind, name: &str) -> Result<(), RuntimeError> {
     let slash = kind == ObjectKind::Habitat && name.contains('/');
     let why = if name.is_empty() {
         "empty"
@@ -254,49 +147,6 @@ impl Runtime {
         Ok(rt)
     }
 
-    fn start_services(&self, participant: &Participant) -> Result<(), RuntimeError> {
-        let topic = format!("cs/{}/configure", self.inner.name);
-        let qos = ConsumerQos {
-            reliability: Reliability::Reliable { depth: 64 },
-            depth: 64,
-            ..ConsumerQos::default()
-        };
-        let consumer = participant
-            .consumer::<String>(&topic, qos)
-            .map_err(|source| RuntimeError::Declare {
-                topic: topic.clone(),
-                source,
-            })?;
-        let weak = Arc::downgrade(&self.inner);
-        let commands = consumer
-            .on_sample(move |sample| {
-                if let Some(inner) = weak.upgrade() {
-                    let rt = Runtime { inner };
-                    match rt.switch(sample.value.trim()) {
-                        Ok(()) => tracing::info!(runtime = %rt.name(), configuration = %sample.value, "configuration switched from the network"),
-                        Err(err) => tracing::warn!(runtime = %rt.name(), error = %err, "configuration command refused"),
-                    }
-                }
-            })
-            .map_err(|err| RuntimeError::Build {
-                module: topic,
-                source: ModuleError::Failed(err.to_string()),
-            })?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let weak = Arc::downgrade(&self.inner);
-        let stop_flag = Arc::clone(&stop);
-        let stats = std::thread::Builder::new()
-            .name(format!("cs-{}-stats", self.inner.name))
-            .spawn(move || publish_stats(&weak, &stop_flag))
-            .ok();
-        *lock(&self.inner.services) = Some(Services {
-            stop,
-            stats,
-            _commands: commands,
-        });
-        Ok(())
-    }
-
     /// Its name.
     pub fn name(&self) -> &str {
         &self.inner.name
@@ -307,7 +157,7 @@ impl Runtime {
         self.inner.participant.as_ref()
     }
 
-    fn db(&self) -> MutexGuard<'_, Database> {
+    pub(crate) fn db(&self) -> MutexGuard<'_, Database> {
         lock(&self.inner.db)
     }
 
@@ -381,7 +231,7 @@ impl Runtime {
         self.habitat_in(&mut db, name)
     }
 
-    fn habitat_in(&self, db: &mut Database, name: &str) -> Habitat {
+    pub(crate) fn habitat_in(&self, db: &mut Database, name: &str) -> Habitat {
         db.habitats
             .entry(name.to_owned())
             .or_insert_with(|| Habitat::placeholder(name, Arc::downgrade(&self.inner)))
@@ -615,234 +465,6 @@ impl Runtime {
         self.inner.verify()
     }
 
-    // ----- configuration manager -----
-
-    /// Creates module group `group` in `category` with `modules` (which may be installed
-    /// later). The first group of a category becomes its active group.
-    pub fn group(&self, category: &str, group: &str, modules: &[&str]) -> Result<(), RuntimeError> {
-        check_name(ObjectKind::Category, category)?;
-        check_name(ObjectKind::Group, group)?;
-        let mut db = self.db();
-        if db.groups.contains_key(group) {
-            return Err(RuntimeError::Duplicate {
-                kind: ObjectKind::Group,
-                name: group.to_owned(),
-            });
-        }
-        let before = db.active_groups();
-        db.groups.insert(
-            group.to_owned(),
-            GroupEntry {
-                category: category.to_owned(),
-                modules: modules.iter().map(|m| (*m).to_owned()).collect(),
-            },
-        );
-        let entry = db.categories.entry(category.to_owned()).or_default();
-        entry.groups.push(group.to_owned());
-        if entry.active.is_none() {
-            entry.active = Some(group.to_owned());
-        }
-        let after = db.active_groups();
-        if let Err(err) = self.apply(&mut db, &after) {
-            db.groups.remove(group);
-            let entry = db.categories.entry(category.to_owned()).or_default();
-            entry.groups.retain(|g| g != group);
-            entry.active = before.get(category).cloned().flatten();
-            if entry.groups.is_empty() {
-                db.categories.remove(category);
-            }
-            return Err(err);
-        }
-        Ok(())
-    }
-
-    /// Names configuration `name`: which group is active in each category it lists (groups
-    /// may be created later; categories it does not list keep their active group).
-    pub fn configuration(
-        &self,
-        name: &str,
-        selections: &[(&str, &str)],
-    ) -> Result<(), RuntimeError> {
-        check_name(ObjectKind::Configuration, name)?;
-        let mut db = self.db();
-        if db.configurations.contains_key(name) {
-            return Err(RuntimeError::Duplicate {
-                kind: ObjectKind::Configuration,
-                name: name.to_owned(),
-            });
-        }
-        let mut map = BTreeMap::new();
-        for (category, group) in selections {
-            if map
-                .insert((*category).to_owned(), (*group).to_owned())
-                .is_some()
-            {
-                return Err(RuntimeError::Duplicate {
-                    kind: ObjectKind::Category,
-                    name: format!("{category} (listed twice in configuration `{name}`)"),
-                });
-            }
-        }
-        db.configurations.insert(name.to_owned(), map);
-        Ok(())
-    }
-
-    /// Switches to configuration `name`, atomically at each habitat's next sample boundary:
-    /// the leaving modules' `disable`, then the entering modules' `enable` (which can still
-    /// read the leaving modules' outputs), then the lists are re-sorted. If the new active
-    /// set cannot be sorted nothing changes.
-    pub fn switch(&self, name: &str) -> Result<(), RuntimeError> {
-        let mut db = self.db();
-        let selections =
-            db.configurations
-                .get(name)
-                .cloned()
-                .ok_or_else(|| RuntimeError::Unknown {
-                    kind: ObjectKind::Configuration,
-                    name: name.to_owned(),
-                })?;
-        let mut active = db.active_groups();
-        for (category, group) in &selections {
-            Self::check_group(&db, category, group)?;
-            active.insert(category.clone(), Some(group.clone()));
-        }
-        self.apply(&mut db, &active)?;
-        db.current = Some(name.to_owned());
-        Ok(())
-    }
-
-    /// Makes `group` the active group of `category` (the configuration becomes unnamed).
-    pub fn activate_group(&self, category: &str, group: &str) -> Result<(), RuntimeError> {
-        let mut db = self.db();
-        Self::check_group(&db, category, group)?;
-        let mut active = db.active_groups();
-        active.insert(category.to_owned(), Some(group.to_owned()));
-        self.apply(&mut db, &active)?;
-        db.current = None;
-        Ok(())
-    }
-
-    fn check_group(db: &Database, category: &str, group: &str) -> Result<(), RuntimeError> {
-        match db.groups.get(group) {
-            None => Err(RuntimeError::Unknown {
-                kind: ObjectKind::Group,
-                name: group.to_owned(),
-            }),
-            Some(entry) if entry.category != category => Err(RuntimeError::WrongCategory {
-                group: group.to_owned(),
-                category: category.to_owned(),
-                actual: entry.category.clone(),
-            }),
-            Some(_) => Ok(()),
-        }
-    }
-
-    /// The configuration last switched to, if the active groups still are its.
-    pub fn current_configuration(&self) -> Option<String> {
-        self.db().current.clone()
-    }
-
-    /// Each category's active group.
-    pub fn active_groups(&self) -> BTreeMap<String, String> {
-        self.db()
-            .categories
-            .iter()
-            .filter_map(|(c, e)| e.active.clone().map(|g| (c.clone(), g)))
-            .collect()
-    }
-
-    /// Applies a new set of active groups to every habitat, all or nothing.
-    fn apply(
-        &self,
-        db: &mut Database,
-        active: &BTreeMap<String, Option<String>>,
-    ) -> Result<(), RuntimeError> {
-        // Writers in different habitats, from the database (no lock needed); writers in one
-        // habitat are the sort's to refuse, with its own error.
-        let mut writers: BTreeMap<&str, (&str, &str)> = BTreeMap::new();
-        for (name, entry) in &db.modules {
-            if !db.is_active_with(name, active) {
-                continue;
-            }
-            for mat in entry.interface.output_names() {
-                match writers.get(mat) {
-                    Some((first, habitat)) if *habitat != entry.habitat => {
-                        return Err(RuntimeError::DoubleWriter {
-                            mat: mat.to_owned(),
-                            first: (*first).to_owned(),
-                            second: name.clone(),
-                        });
-                    }
-                    Some(_) => {}
-                    None => {
-                        writers.insert(mat, (name, &entry.habitat));
-                    }
-                }
-            }
-        }
-        // Only the habitats whose active set changes are locked (each at its next sample
-        // boundary, all together, in name order), so a switch never waits on the others.
-        let affected: Vec<Habitat> = db
-            .habitats
-            .values()
-            .filter(|h| {
-                db.modules.iter().any(|(name, m)| {
-                    m.habitat == h.name() && m.active != db.is_active_with(name, active)
-                })
-            })
-            .cloned()
-            .collect();
-        let mut lists: Vec<MutexGuard<'_, ExecList>> =
-            affected.iter().map(|h| lock(&h.shared.list)).collect();
-        let mut plans = Vec::with_capacity(lists.len());
-        for (habitat, list) in affected.iter().zip(&lists) {
-            let next: Vec<bool> = list
-                .slots
-                .iter()
-                .map(|slot| db.is_active_with(&slot.name, active))
-                .collect();
-            let order = list
-                .plan(|i| next[i])
-                .map_err(|source| RuntimeError::Sort {
-                    habitat: habitat.name().to_owned(),
-                    source,
-                })?;
-            plans.push((next, order));
-        }
-        drop(writers);
-        for (list, (next, _)) in lists.iter_mut().zip(&plans) {
-            list.leave(next);
-        }
-        for (list, (next, order)) in lists.iter_mut().zip(plans) {
-            list.enter(&next, order);
-        }
-        drop(lists);
-        let flags: Vec<(String, bool)> = db
-            .modules
-            .keys()
-            .map(|name| (name.clone(), db.is_active_with(name, active)))
-            .collect();
-        for (name, on) in flags {
-            if let Some(entry) = db.modules.get_mut(&name) {
-                entry.active = on;
-            }
-        }
-        for (category, group) in active {
-            if let Some(entry) = db.categories.get_mut(category) {
-                entry.active = group.clone();
-            } else if let Some(group) = group {
-                db.categories.insert(
-                    category.clone(),
-                    CategoryEntry {
-                        groups: vec![group.clone()],
-                        active: Some(group.clone()),
-                    },
-                );
-            }
-        }
-        Ok(())
-    }
-
     // ----- habitats -----
 
     /// Starts every created habitat that is not sampling (verifying once, first).
@@ -876,134 +498,5 @@ impl Runtime {
         stats.runtime = self.inner.name.clone();
         stats.configuration = self.current_configuration().unwrap_or_default();
         stats
-    }
-
-    // ----- network bindings -----
-
-    fn participant_or_err(&self) -> Result<&Participant, RuntimeError> {
-        self.inner
-            .participant
-            .as_ref()
-            .ok_or_else(|| RuntimeError::NoParticipant(self.inner.name.clone()))
-    }
-
-    /// Publishes CSMat `mat` on `topic` every sample: a module `publish:<topic>` in
-    /// `habitat`, ordered after the CSMat's writer. A reliable producer here never blocks the
-    /// habitat: its `when_full` is made [`WhenFull::DropOldest`](crate::WhenFull), so a slow
-    /// consumer loses old samples (and is told so) instead of stalling the loop.
-    pub fn publish(
-        &self,
-        habitat: &str,
-        mat: &str,
-        topic: &str,
-        qos: ProducerQos,
-    ) -> Result<(), RuntimeError> {
-        let producer: Producer<CsMat> =
-            self.participant_or_err()?
-                .producer(topic, qos)
-                .map_err(|source| RuntimeError::Declare {
-                    topic: topic.to_owned(),
-                    source,
-                })?;
-        self.install(habitat, &format!("publish:{topic}"), |b| {
-            Ok(Publisher::new(b, mat, producer))
-        })
-    }
-
-    /// Writes the newest sample received on `topic` into CSMat `mat` (created with `shape`
-    /// if it does not exist) at the start of each sample: a module `subscribe:<topic>` in
-    /// `habitat`, which is the CSMat's writer.
-    pub fn subscribe(
-        &self,
-        habitat: &str,
-        mat: &str,
-        shape: impl Into<super::module::Shape>,
-        topic: &str,
-        qos: ConsumerQos,
-    ) -> Result<(), RuntimeError> {
-        let shape = shape.into();
-        let consumer = self
-            .participant_or_err()?
-            .raw_consumer(topic, crate::TypeDescription::of::<CsMat>(), qos)
-            .map_err(|source| RuntimeError::Declare {
-                topic: topic.to_owned(),
-                source,
-            })?;
-        self.install(habitat, &format!("subscribe:{topic}"), |b| {
-            Ok(Subscriber::new(b, mat, shape, consumer))
-        })
-    }
-
-    /// Passes CSMat `from.1` (written in habitat `from.0`) to CSMat `to.1` read in habitat
-    /// `to.0`, whatever their rates: module `<name>.in` copies it into a buffer each sample of
-    /// the source habitat, module `<name>.out` copies the newest complete value out at the
-    /// start of each sample of the destination. Neither ever sees a half-written matrix.
-    pub fn rate_transition(
-        &self,
-        name: &str,
-        from: (&str, &str),
-        to: (&str, &str),
-    ) -> Result<(), RuntimeError> {
-        let source = self.db().mat(from.1);
-        let buffer = Arc::new(Mutex::new(None));
-        let shared = Arc::clone(&buffer);
-        self.install(from.0, &format!("{name}.in"), |b| {
-            Ok(RateIn::new(b, from.1, shared))
-        })?;
-        let result = self.install(to.0, &format!("{name}.out"), |b| {
-            Ok(RateOut::new(b, to.1, &source, buffer))
-        });
-        if result.is_err() {
-            let _ = self.remove(&format!("{name}.in"));
-        }
-        result
-    }
-}
-
-/// The statistics service: every habitat's stats on `cs/<runtime>/<habitat>/stats`.
-fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
-    let mut producers: BTreeMap<String, Producer<HabitatStats>> = BTreeMap::new();
-    let tick = Duration::from_millis(100);
-    let mut next: BTreeMap<String, std::time::Instant> = BTreeMap::new();
-    while !stop.load(Ordering::Acquire) {
-        std::thread::sleep(tick);
-        let Some(inner) = weak.upgrade() else { return };
-        let rt = Runtime { inner };
-        let Some(participant) = rt.inner.participant.clone() else {
-            return;
-        };
-        for habitat in rt.habitats() {
-            if !habitat.is_created() {
-                continue;
-            }
-            let now = std::time::Instant::now();
-            let interval = habitat.stats_interval();
-            let due = next.entry(habitat.name().to_owned()).or_insert(now);
-            if now < *due {
-                continue;
-            }
-            *due = now
-                .checked_add(interval)
-                .unwrap_or(now + Duration::from_secs(3600));
-            let name = habitat.name().to_owned();
-            if !producers.contains_key(&name) {
-                let topic = format!("cs/{}/{}/stats", rt.inner.name, name);
-                match participant.producer::<HabitatStats>(&topic, ProducerQos::default()) {
-                    Ok(p) => {
-                        producers.insert(name.clone(), p);
-                    }
-                    Err(err) => {
-                        tracing::warn!(topic, error = %err, "cannot publish habitat statistics");
-                        continue;
-                    }
-                }
-            }
-            let stats = rt.habitat_stats(&habitat);
-            if let Some(producer) = producers.get(&name)
-                && let Err(err) = producer.write(&stats)
-            {
-                tracing::debug!(habitat = %name, error = %err, "habitat statistics not sent");
-            }
-        }
     }
 }
