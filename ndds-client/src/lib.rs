@@ -37,6 +37,7 @@
 pub mod consumer;
 pub mod embedded;
 pub mod error;
+pub mod fsm;
 mod link;
 pub mod participant;
 mod peers;
