@@ -1,6 +1,7 @@
 //! The subcommands, one per file, collected in one clap enum.
 
 mod echo;
+mod fsm;
 mod hz;
 mod nodes;
 mod perf;
@@ -35,6 +36,8 @@ enum Command {
     Hz(hz::Args),
     /// Measure latency (ping/pong) and throughput (pub/sub), or the raw-UDP baseline.
     Perf(perf::Args),
+    /// Send stimuli to a state machine, or show its state.
+    Fsm(fsm::Args),
 }
 
 /// Runs the parsed command line.
@@ -46,5 +49,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pub(args) => publish::run(&cli.daemon, &args),
         Command::Hz(args) => hz::run(&cli.daemon, &args),
         Command::Perf(args) => perf::run(&cli.daemon, &args),
+        Command::Fsm(args) => fsm::run(&cli.daemon, &args),
     }
 }

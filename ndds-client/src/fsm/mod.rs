@@ -5,11 +5,14 @@
 //! any state: a *global* transition) when its condition, a boolean expression over stimuli
 //! ([`Expr`]), holds; it runs an action whose integer code picks the next state, or *calls* a
 //! sub-machine whose return state gives the code. [`Machine`] is the engine, without threads;
-//! [`verify`] reports what would go wrong before anything runs.
+//! [`verify`] reports what would go wrong before anything runs; [`StateMachine`] runs a
+//! program on its own thread, fed by one queue from any thread and from the network, with
+//! actions ([`ActionSet::runtime`]) that switch configurations and start or stop habitats.
 
 mod def;
 mod engine;
 mod expr;
+mod task;
 #[cfg(test)]
 mod tests;
 mod verify;
@@ -19,4 +22,5 @@ pub use engine::{
     Actions, Fault, Fired, MAX_CALL_DEPTH, MAX_STEPS, Machine, MachineState, Outcome, Stimulus,
 };
 pub use expr::{Expr, ParseError, Stimuli};
+pub use task::{ActionSet, FsmError, QUEUE_LIMIT, StateMachine};
 pub use verify::{FsmProblem, verify};

@@ -1,0 +1,354 @@
+//! [`StateMachine`]: a state program running on its own thread, fed by one event queue from
+//! any thread and from the network, with actions that drive a [`Runtime`].
+//!
+//! On the network (when built with a participant) a machine whose main machine is `M`:
+//! - takes stimuli ([`Stimulus`]) from the reliable topic `fsm/M/events`, in arrival order with
+//!   the local ones;
+//! - publishes its [`MachineState`] on `fsm/M/state` after every stimulus and once a second.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::def::Program;
+use super::engine::{Actions, Machine, MachineState, Stimulus};
+use super::verify::{FsmProblem, verify};
+use crate::runtime::Runtime;
+use crate::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+
+/// Stimuli waiting in a machine's queue at most; more are refused.
+pub const QUEUE_LIMIT: usize = 4096;
+
+type ActionFn = Box<dyn FnMut(Option<&str>) -> Result<i32, String> + Send>;
+
+/// Named actions with the codes each can return (what [`verify`] checks successors against).
+#[derive(Default)]
+pub struct ActionSet {
+    actions: BTreeMap<String, (Vec<i32>, ActionFn)>,
+}
+
+impl ActionSet {
+    /// No actions.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The runtime's actions: `switch CONFIGURATION`, `start HABITAT`, `stop HABITAT`, `reset
+    /// HABITAT` — each returns 0 when done, 1 when refused (the refusal is logged).
+    pub fn runtime(runtime: &Runtime) -> Self {
+        let mut set = Self::new();
+        let rt = runtime.clone();
+        set.add("switch", &[0, 1], move |arg| {
+            let name = arg.ok_or("`switch` needs a configuration name")?;
+            Ok(refused(rt.switch(name).map_err(|e| e.to_string())))
+        });
+        let rt = runtime.clone();
+        set.add("start", &[0, 1], move |arg| {
+            let name = arg.ok_or("`start` needs a habitat name")?;
+            Ok(refused(rt.habitat(name).start().map_err(|e| e.to_string())))
+        });
+        let rt = runtime.clone();
+        set.add("stop", &[0], move |arg| {
+            rt.habitat(arg.ok_or("`stop` needs a habitat name")?).stop();
+            Ok(0)
+        });
+        let rt = runtime.clone();
+        set.add("reset", &[0], move |arg| {
+            rt.habitat(arg.ok_or("`reset` needs a habitat name")?)
+                .reset();
+            Ok(0)
+        });
+        set
+    }
+
+    /// Adds (or replaces) action `name`, which returns one of `codes`.
+    pub fn add(
+        &mut self,
+        name: &str,
+        codes: &[i32],
+        action: impl FnMut(Option<&str>) -> Result<i32, String> + Send + 'static,
+    ) -> &mut Self {
+        self.actions
+            .insert(name.to_owned(), (codes.to_vec(), Box::new(action)));
+        self
+    }
+
+    /// The codes `name` can return, or `None` if there is no such action.
+    pub fn codes(&self, name: &str) -> Option<Vec<i32>> {
+        self.actions.get(name).map(|(codes, _)| codes.clone())
+    }
+}
+
+fn refused(result: Result<(), String>) -> i32 {
+    match result {
+        Ok(()) => 0,
+        Err(err) => {
+            tracing::warn!(error = %err, "state machine action refused");
+            1
+        }
+    }
+}
+
+impl Actions for ActionSet {
+    fn run(&mut self, name: &str, argument: Option<&str>) -> Result<i32, String> {
+        match self.actions.get_mut(name) {
+            Some((_, action)) => action(argument),
+            None => Err(format!("no action `{name}`")),
+        }
+    }
+}
+
+/// Why a state machine could not start or take a stimulus.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FsmError {
+    /// The program does not verify.
+    #[error("state program `{machine}` does not verify:\n{}", list(.problems))]
+    Verify {
+        /// The main machine.
+        machine: String,
+        /// Every problem.
+        problems: Vec<FsmProblem>,
+    },
+    /// The queue holds [`QUEUE_LIMIT`] stimuli already.
+    #[error("state machine `{0}`: queue full ({QUEUE_LIMIT} stimuli waiting)")]
+    QueueFull(String),
+    /// The machine was stopped.
+    #[error("state machine `{0}` is stopped")]
+    Stopped(String),
+    /// A topic could not be declared.
+    #[error("state machine `{machine}`: topic `{topic}`: {reason}")]
+    Topic {
+        /// The main machine.
+        machine: String,
+        /// The topic.
+        topic: String,
+        /// Why.
+        reason: String,
+    },
+    /// The thread could not start.
+    #[error("state machine `{0}`: cannot spawn its thread: {1}")]
+    Spawn(String, std::io::Error),
+}
+
+fn list(problems: &[FsmProblem]) -> String {
+    problems
+        .iter()
+        .map(|p| format!("  - {p}"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+struct Shared {
+    name: String,
+    queue: Mutex<Queue>,
+    ready: Condvar,
+    state: Mutex<MachineState>,
+    changed: Condvar,
+    stop: AtomicBool,
+}
+
+#[derive(Default)]
+struct Queue {
+    items: std::collections::VecDeque<Stimulus>,
+}
+
+/// A running state machine. Dropping the last handle stops it.
+pub struct StateMachine {
+    shared: Arc<Shared>,
+    thread: Option<JoinHandle<()>>,
+    _events: Option<CallbackConsumer>,
+}
+
+impl StateMachine {
+    /// Verifies `program` against `actions` and runs it on its own thread (no network).
+    pub fn start(program: Program, actions: ActionSet) -> Result<Self, FsmError> {
+        Self::launch(program, actions, None)
+    }
+
+    /// The same, on the network: stimuli also come from `fsm/<main>/events` and the state is
+    /// published on `fsm/<main>/state`.
+    pub fn start_on(
+        program: Program,
+        actions: ActionSet,
+        participant: &Participant,
+    ) -> Result<Self, FsmError> {
+        Self::launch(program, actions, Some(participant))
+    }
+
+    fn launch(
+        program: Program,
+        mut actions: ActionSet,
+        participant: Option<&Participant>,
+    ) -> Result<Self, FsmError> {
+        let name = program.main.clone();
+        let problems = verify(&program, &|action| actions.codes(action));
+        if !problems.is_empty() {
+            return Err(FsmError::Verify {
+                machine: name,
+                problems,
+            });
+        }
+        let machine = Machine::new(Arc::new(program));
+        let shared = Arc::new(Shared {
+            name: name.clone(),
+            queue: Mutex::new(Queue::default()),
+            ready: Condvar::new(),
+            state: Mutex::new(machine.snapshot()),
+            changed: Condvar::new(),
+            stop: AtomicBool::new(false),
+        });
+        let topic_error = |topic: &str, reason: String| FsmError::Topic {
+            machine: name.clone(),
+            topic: topic.to_owned(),
+            reason,
+        };
+        let (events, publisher) = match participant {
+            None => (None, None),
+            Some(participant) => {
+                let topic = format!("fsm/{name}/events");
+                let qos = ConsumerQos {
+                    reliability: Reliability::Reliable { depth: 256 },
+                    depth: 256,
+                    ..ConsumerQos::default()
+                };
+                let weak = Arc::downgrade(&shared);
+                let events = participant
+                    .consumer::<Stimulus>(&topic, qos)
+                    .map_err(|e| topic_error(&topic, e.to_string()))?
+                    .on_sample(move |sample| {
+                        if let Some(shared) = weak.upgrade()
+                            && let Err(err) = enqueue(&shared, sample.value)
+                        {
+                            tracing::warn!(error = %err, "stimulus from the network dropped");
+                        }
+                    })
+                    .map_err(|e| topic_error(&topic, e.to_string()))?;
+                let topic = format!("fsm/{name}/state");
+                let producer = participant
+                    .producer::<MachineState>(&topic, ProducerQos::default())
+                    .map_err(|e| topic_error(&topic, e.to_string()))?;
+                (Some(events), Some(producer))
+            }
+        };
+        let worker = Arc::clone(&shared);
+        let thread = std::thread::Builder::new()
+            .name(format!("fsm-{name}"))
+            .spawn(move || run(&worker, machine, &mut actions, publisher.as_ref()))
+            .map_err(|e| FsmError::Spawn(name.clone(), e))?;
+        Ok(Self {
+            shared,
+            thread: Some(thread),
+            _events: events,
+        })
+    }
+
+    /// Queues a stimulus (from any thread); it is processed after those queued before it.
+    pub fn send(&self, stimulus: Stimulus) -> Result<(), FsmError> {
+        if self.shared.stop.load(Ordering::Acquire) {
+            return Err(FsmError::Stopped(self.shared.name.clone()));
+        }
+        enqueue(&self.shared, stimulus)
+    }
+
+    /// The machine now (after the last processed stimulus).
+    pub fn snapshot(&self) -> MachineState {
+        self.shared
+            .state
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// Waits until the innermost running machine is in `state`; false after `timeout`.
+    pub fn wait_for_state(&self, state: &str, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        let mut current = self.shared.state.lock().unwrap_or_else(|p| p.into_inner());
+        while current.state != state {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            current = self
+                .shared
+                .changed
+                .wait_timeout(current, left)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
+        }
+        true
+    }
+}
+
+impl Drop for StateMachine {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Release);
+        self.shared.ready.notify_all();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn enqueue(shared: &Shared, stimulus: Stimulus) -> Result<(), FsmError> {
+    let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());
+    if queue.items.len() >= QUEUE_LIMIT {
+        return Err(FsmError::QueueFull(shared.name.clone()));
+    }
+    queue.items.push_back(stimulus);
+    shared.ready.notify_one();
+    Ok(())
+}
+
+const REPUBLISH: Duration = Duration::from_secs(1);
+
+fn run(
+    shared: &Shared,
+    mut machine: Machine,
+    actions: &mut ActionSet,
+    publisher: Option<&Producer<MachineState>>,
+) {
+    let publish = |state: &MachineState| {
+        if let Some(p) = publisher
+            && let Err(err) = p.write(state)
+        {
+            tracing::debug!(error = %err, "state not published");
+        }
+    };
+    publish(&machine.snapshot());
+    let mut last_publish = Instant::now();
+    while !shared.stop.load(Ordering::Acquire) {
+        let next = {
+            let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());
+            if queue.items.is_empty() {
+                queue = shared
+                    .ready
+                    .wait_timeout(queue, REPUBLISH)
+                    .unwrap_or_else(|p| p.into_inner())
+                    .0;
+            }
+            queue.items.pop_front()
+        };
+        match next {
+            Some(stimulus) => {
+                let outcome = machine.handle(&stimulus, actions);
+                for fired in &outcome.fired {
+                    tracing::info!(machine = %shared.name, from = %fired.from, to = %fired.to,
+                        condition = %fired.condition, action = %fired.action, "transition");
+                }
+                let state = machine.snapshot();
+                *shared.state.lock().unwrap_or_else(|p| p.into_inner()) = state.clone();
+                shared.changed.notify_all();
+                publish(&state);
+                last_publish = Instant::now();
+            }
+            None if last_publish.elapsed() >= REPUBLISH => {
+                publish(&machine.snapshot());
+                last_publish = Instant::now();
+            }
+            None => {}
+        }
+    }
+}
