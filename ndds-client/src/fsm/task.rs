@@ -75,6 +75,31 @@ impl ActionSet {
         self
     }
 
+    /// Adds a sample module as action `name` (ControlShell's "CSM module executed when the
+    /// transition occurs"): its `execute` runs, code 0 when it succeeds and 1 when it fails.
+    pub fn add_module(
+        &mut self,
+        name: &str,
+        mut module: impl crate::runtime::SampleModule,
+    ) -> &mut Self {
+        let mut sample = 0u64;
+        self.add(name, &[0, 1], move |_| {
+            let ctx = crate::runtime::SampleContext {
+                period: Duration::ZERO,
+                sample,
+                time: Duration::ZERO,
+            };
+            sample += 1;
+            Ok(match module.execute(&ctx) {
+                Ok(()) => 0,
+                Err(err) => {
+                    tracing::warn!(error = %err, "state machine module action failed");
+                    1
+                }
+            })
+        })
+    }
+
     /// The codes `name` can return, or `None` if there is no such action.
     pub fn codes(&self, name: &str) -> Option<Vec<i32>> {
         self.actions.get(name).map(|(codes, _)| codes.clone())
