@@ -15,6 +15,8 @@
 //! - `protocol.md`: the protocol specification.
 //! - `runtime.md`: the ControlShell runtime guide; `tests/runtime_guide.rs` checks its code
 //!   excerpts and tables against the code.
+//! - `fsm.md`: the state machine guide; `tests/fsm_guide.rs` checks its example program (it is
+//!   the example file, and it verifies), excerpts and tables.
 //! - [`markdown`]: headings, pipe tables and fenced blocks of a document, with line numbers.
 //! - [`report`]: every mismatch found, each naming the document line to update.
 //! - `tests/protocol_tables.rs`: message kinds, `Data` and `Feedback` submessage kinds, drop

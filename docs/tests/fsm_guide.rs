@@ -1,0 +1,98 @@
+//! `docs/fsm.md` against the code: its example program is the example file, loads and
+//! verifies with the runtime's actions; its code excerpts are verbatim; its tables list the
+//! stimulus kinds and the published state's fields exactly.
+
+use std::path::Path;
+
+use ndds_client::fsm::{ActionSet, MachineState, Program, verify};
+use ndds_client::runtime::Runtime;
+use ndds_docs::markdown::{Doc, Table};
+
+fn doc() -> Doc {
+    Doc::load("fsm.md")
+}
+
+fn source(relative: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(relative);
+    std::fs::read_to_string(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()))
+}
+
+fn table(doc: &Doc, columns: &[&str]) -> Table {
+    let mut found: Vec<Table> = doc
+        .tables()
+        .into_iter()
+        .filter(|t| t.starts_with(columns))
+        .collect();
+    assert_eq!(found.len(), 1, "one table with columns {columns:?}");
+    found.pop().unwrap()
+}
+
+#[test]
+fn the_example_program_is_the_file_and_verifies() {
+    let doc = doc();
+    let block = doc
+        .blocks()
+        .into_iter()
+        .find(|b| b.info == "toml" && b.text().starts_with("# from "))
+        .expect("the example program");
+    let text = block.text();
+    let (first, body) = text.split_once('\n').unwrap();
+    let file = first.trim_start_matches("# from ").trim();
+    let original = source(file);
+    // The file starts with its own comment lines; the rest must be the same.
+    let original_body: String = original
+        .lines()
+        .skip_while(|l| l.starts_with('#'))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_eq!(body.trim(), original_body.trim(), "docs/fsm.md line {}", block.line);
+    let program = Program::from_toml(&original).unwrap();
+    let actions = ActionSet::runtime(&Runtime::new("docs"));
+    let problems = verify(&program, &|name| actions.codes(name));
+    assert!(problems.is_empty(), "{problems:?}");
+}
+
+#[test]
+fn rust_excerpts_are_verbatim() {
+    let doc = doc();
+    let mut excerpts = 0;
+    for block in doc.blocks().into_iter().filter(|b| b.info == "rust") {
+        let lines: Vec<&str> = block.lines.iter().map(|(_, l)| l.as_str()).collect();
+        let Some(file) = lines.first().and_then(|l| l.strip_prefix("// from ")) else {
+            continue;
+        };
+        excerpts += 1;
+        let text = source(file.trim());
+        let all: Vec<&str> = text.lines().collect();
+        let body = &lines[1..];
+        assert!(
+            all.windows(body.len().max(1)).any(|w| w == body),
+            "docs/fsm.md line {}: not a verbatim part of {file}",
+            block.line
+        );
+    }
+    assert!(excerpts >= 1);
+}
+
+#[test]
+fn tables_list_the_kinds_and_the_state_fields() {
+    let doc = doc();
+    let kinds: Vec<String> = table(&doc, &["kind", "value", "lifetime"])
+        .rows
+        .iter()
+        .map(|r| r.plain(0))
+        .collect();
+    assert_eq!(kinds, ["transient", "latched", "condition"]);
+    for kind in &kinds {
+        let text = format!("main = \"m\"\n[stimuli]\nx = \"{kind}\"\n");
+        assert!(Program::from_toml(&text).is_ok(), "{kind} is a kind the loader accepts");
+    }
+    let value = serde_json::to_value(MachineState::default()).unwrap();
+    let fields: Vec<String> = value.as_object().unwrap().keys().cloned().collect();
+    let listed: Vec<String> = table(&doc, &["field", "meaning"])
+        .rows
+        .iter()
+        .map(|r| r.plain(0))
+        .collect();
+    assert_eq!(listed, fields);
+}
