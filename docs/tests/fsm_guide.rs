@@ -13,7 +13,9 @@ fn doc() -> Doc {
 }
 
 fn source(relative: &str) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(relative);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(relative);
     std::fs::read_to_string(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()))
 }
 
@@ -45,7 +47,12 @@ fn the_example_program_is_the_file_and_verifies() {
         .skip_while(|l| l.starts_with('#'))
         .collect::<Vec<_>>()
         .join("\n");
-    assert_eq!(body.trim(), original_body.trim(), "docs/fsm.md line {}", block.line);
+    assert_eq!(
+        body.trim(),
+        original_body.trim(),
+        "docs/fsm.md line {}",
+        block.line
+    );
     let program = Program::from_toml(&original).unwrap();
     let actions = ActionSet::runtime(&Runtime::new("docs"));
     let problems = verify(&program, &|name| actions.codes(name));
@@ -85,7 +92,10 @@ fn tables_list_the_kinds_and_the_state_fields() {
     assert_eq!(kinds, ["transient", "latched", "condition"]);
     for kind in &kinds {
         let text = format!("main = \"m\"\n[stimuli]\nx = \"{kind}\"\n");
-        assert!(Program::from_toml(&text).is_ok(), "{kind} is a kind the loader accepts");
+        assert!(
+            Program::from_toml(&text).is_ok(),
+            "{kind} is a kind the loader accepts"
+        );
     }
     let value = serde_json::to_value(MachineState::default()).unwrap();
     let fields: Vec<String> = value.as_object().unwrap().keys().cloned().collect();
