@@ -189,7 +189,7 @@ fn actions_switch_configurations_start_and_stop_habitats_and_run_modules() {
             &[(0, "Checked"), (1, "Failed")],
         )
         .unwrap()
-        .transition("*", "Halt", "stop servo", &[(0, "Off")])
+        .transition("*", "Halt", "stop servo", &[(0, "Off"), (1, "Failed")])
         .unwrap();
     let runs = Arc::new(AtomicU32::new(0));
     let mut actions = ActionSet::runtime(&rt);
@@ -281,4 +281,63 @@ fn stimuli_and_conditions_arrive_from_the_network_and_the_state_is_published() {
     assert!(last.latched.is_empty());
     let t = last.last_transition.unwrap();
     assert_eq!((t.from.as_str(), t.to.as_str()), ("Idle", "Tracking"));
+}
+
+#[test]
+fn a_panicking_action_is_a_fault_and_the_machine_goes_on() {
+    let mut p = Program::new("brittle", "A");
+    p.stimulus("Go", StimulusKind::Transient)
+        .stimulus("Reset", StimulusKind::Transient);
+    p.machine("brittle", "A")
+        .states(&["B"])
+        .transition("A", "Go", "explode", &[(0, "B")])
+        .unwrap()
+        .transition("Error", "Reset", "none", &[(0, "A")])
+        .unwrap();
+    let mut actions = ActionSet::new();
+    actions.add("explode", &[0], |_| panic!("boom"));
+    let fsm = StateMachine::start(p, actions).unwrap();
+    fsm.send(Stimulus::event("Go")).unwrap();
+    assert!(fsm.wait_for_state("Error", WAIT));
+    assert!(
+        fsm.snapshot().last_fault.contains("boom"),
+        "{:?}",
+        fsm.snapshot()
+    );
+    fsm.send(Stimulus::event("Reset")).unwrap();
+    assert!(fsm.wait_for_state("A", WAIT), "the thread still runs");
+}
+
+#[test]
+fn undeclared_and_oversized_stimuli_are_refused_and_counted() {
+    let (program, actions) = counter(Arc::default());
+    let fsm = StateMachine::start(program, actions).unwrap();
+    assert!(matches!(
+        fsm.send(Stimulus::event("Tock")),
+        Err(FsmError::Undeclared { .. })
+    ));
+    let long = "T".repeat(ndds_client::fsm::MAX_NAME_LEN + 1);
+    assert!(matches!(
+        fsm.send(Stimulus::event(&long)),
+        Err(FsmError::Oversized { .. })
+    ));
+    assert_eq!(fsm.snapshot().dropped, 2);
+    fsm.send(Stimulus::event("Tick")).unwrap();
+    assert!(fsm.wait_for_state("Odd", WAIT));
+}
+
+#[test]
+fn a_misspelt_habitat_is_refused_not_created() {
+    let rt = Runtime::new("typo");
+    let mut p = Program::new("m", "A");
+    p.stimulus("Go", StimulusKind::Transient);
+    p.machine("m", "A")
+        .states(&["Stopped", "Refused"])
+        .transition("A", "Go", "stop servoo", &[(0, "Stopped"), (1, "Refused")])
+        .unwrap();
+    let fsm = StateMachine::start(p, ActionSet::runtime(&rt)).unwrap();
+    fsm.send(Stimulus::event("Go")).unwrap();
+    assert!(fsm.wait_for_state("Refused", WAIT), "{:?}", fsm.snapshot());
+    assert!(rt.habitats().is_empty(), "no placeholder habitat was made");
+    assert!(rt.verify().is_ok());
 }

@@ -197,10 +197,16 @@ impl Program {
             machines: BTreeMap::new(),
         };
         for machine in file.machine {
+            let mut states = machine.states;
+            for state in std::iter::once(&machine.start).chain(machine.returns.keys()) {
+                if !states.contains(state) {
+                    states.push(state.clone());
+                }
+            }
             let mut def = MachineDef {
                 name: machine.name.clone(),
                 start: machine.start,
-                states: machine.states,
+                states,
                 returns: machine.returns,
                 transitions: Vec::new(),
             };

@@ -5,17 +5,21 @@
 //! 1. A condition stimulus sets its value, a latched one is remembered, a transient one exists
 //!    for this step only. Undeclared stimuli, a condition without a value or a value on another
 //!    kind are faults and change nothing.
-//! 2. The current machine's transitions are tried in priority order: those from the current
-//!    state, then the global ones (`from = "*"`), then, if none matched, the wildcard ones
-//!    (state, then global). The first whose condition holds fires.
+//! 2. Transitions are tried in priority order: the innermost running machine's transitions
+//!    from its current state, then its global ones (`from = "*"`), then the global ones of the
+//!    machines that called it (innermost first; firing one ends the calls below it), then, if
+//!    none matched, the innermost machine's wildcard ones (state, then global). The first
+//!    whose condition holds fires.
 //! 3. Firing consumes the latched stimuli its condition names, runs its action and takes the
 //!    successor of the action's code. A `call` enters a sub-machine at its start state; when a
 //!    sub-machine reaches a return state, the caller's transition continues with that state's
-//!    code. A code without successor, a failed action, an unknown machine or a call deeper than
-//!    [`MAX_CALL_DEPTH`] is a fault: the main machine goes to the program's error state.
+//!    code. A code without successor, a failed action, an unknown machine, a call with
+//!    [`MAX_CALL_DEPTH`] machines running already, or more than [`MAX_STEPS`] transitions for
+//!    one stimulus is a fault: every call is ended and the main machine goes to the program's
+//!    error state.
 //! 4. Latched stimuli still waiting are tried again in the new state (that is what they wait
-//!    for): a transition whose condition names a waiting latched stimulus may fire, up to
-//!    [`MAX_STEPS`] transitions per stimulus. A transient stimulus no transition took vanishes.
+//!    for): a transition whose condition names a waiting latched stimulus may fire. A transient
+//!    stimulus no transition took vanishes.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -25,7 +29,8 @@ use serde::{Deserialize, Serialize};
 use super::def::{ActionRef, Program, StimulusKind, TransitionDef};
 use super::expr::Stimuli;
 
-/// Calls nested deeper than this are a fault.
+/// Machines running at once at most (the main one and the machines it called); a call beyond
+/// is a fault.
 pub const MAX_CALL_DEPTH: usize = 16;
 /// Transitions one stimulus may cause at most (a cycle of latched re-tries is a fault).
 pub const MAX_STEPS: usize = 64;
@@ -138,8 +143,10 @@ pub enum Fault {
         /// The callee.
         called: String,
     },
-    /// Calls nested deeper than [`MAX_CALL_DEPTH`].
-    #[error("machine `{machine}`: calls nested deeper than {MAX_CALL_DEPTH} (recursion?)")]
+    /// A call with [`MAX_CALL_DEPTH`] machines running already.
+    #[error(
+        "machine `{machine}`: more than {MAX_CALL_DEPTH} machines running at once (recursion?)"
+    )]
     RecursionLimit {
         /// The machine that made the call.
         machine: String,
@@ -221,6 +228,8 @@ pub struct MachineState {
     pub faults: u64,
     /// The last fault, in words.
     pub last_fault: String,
+    /// Stimuli refused before reaching the machine (queue full, undeclared, oversized).
+    pub dropped: u64,
 }
 
 impl Machine {
@@ -299,6 +308,7 @@ impl Machine {
                 .as_ref()
                 .map(ToString::to_string)
                 .unwrap_or_default(),
+            dropped: 0,
         }
     }
 
@@ -333,7 +343,8 @@ impl Machine {
         }
         let mut arriving = Some((name.to_owned(), kind));
         for _ in 0..MAX_STEPS {
-            let Some((index, wildcard)) = self.select(transient.as_deref(), arriving.is_some())
+            let Some((depth, index, wildcard)) =
+                self.select(transient.as_deref(), arriving.is_some())
             else {
                 if transient.is_some() {
                     out.vanished = true;
@@ -343,27 +354,25 @@ impl Machine {
             if wildcard && let Some((name, StimulusKind::Latched)) = &arriving {
                 self.latched.remove(name);
             }
+            // An outer machine's global transition ends the calls below it.
+            self.stack.truncate(depth + 1);
             self.fire(index, actions, &mut out);
             transient = None;
             arriving = None;
         }
-        self.fault(&mut out, Fault::Runaway);
+        self.fail(Fault::Runaway, &mut out);
         out
     }
 
-    /// The transition to fire: its index in the current machine, and whether it is a
-    /// wildcard one.
-    fn select(&self, transient: Option<&str>, arriving: bool) -> Option<(usize, bool)> {
-        let frame = self.stack.last()?;
-        let machine = self.program.machines.get(&frame.machine)?;
+    /// The transition to fire: the depth of the machine it belongs to (in the call stack), its
+    /// index there, and whether it is a wildcard one. The innermost machine's state and global
+    /// transitions come first, then the global transitions of the machines that called it
+    /// (innermost first: an outer `Abort` still works during a call), then wildcards.
+    fn select(&self, transient: Option<&str>, arriving: bool) -> Option<(usize, usize, bool)> {
         let view = View {
             latched: &self.latched,
             conditions: &self.conditions,
             transient,
-        };
-        let applies = |t: &TransitionDef, global: bool| match &t.from {
-            Some(from) => !global && *from == frame.state,
-            None => global,
         };
         // Without an arriving stimulus only waiting latched stimuli may fire a transition.
         let eligible = |t: &TransitionDef| {
@@ -373,23 +382,31 @@ impl Machine {
                     .iter()
                     .any(|n| self.latched.contains(*n))
         };
-        for wildcard in [false, true] {
-            if wildcard && !arriving {
-                break;
-            }
-            for global in [false, true] {
-                for (index, t) in machine.transitions.iter().enumerate() {
-                    if applies(t, global)
-                        && t.when.has_wildcard() == wildcard
-                        && eligible(t)
-                        && t.when.eval(&view, wildcard)
-                    {
-                        return Some((index, wildcard));
-                    }
-                }
-            }
+        let innermost = self.stack.len().checked_sub(1)?;
+        let find = |depth: usize, global: bool, wildcard: bool| {
+            let frame = &self.stack[depth];
+            let machine = self.program.machines.get(&frame.machine)?;
+            machine.transitions.iter().position(|t| {
+                let applies = match &t.from {
+                    Some(from) => !global && *from == frame.state,
+                    None => global,
+                };
+                applies
+                    && t.when.has_wildcard() == wildcard
+                    && eligible(t)
+                    && t.when.eval(&view, wildcard)
+            })
+        };
+        let mut order: Vec<(usize, bool, bool)> =
+            vec![(innermost, false, false), (innermost, true, false)];
+        order.extend((0..innermost).rev().map(|depth| (depth, true, false)));
+        if arriving {
+            order.push((innermost, false, true));
+            order.push((innermost, true, true));
         }
-        None
+        order.into_iter().find_map(|(depth, global, wildcard)| {
+            find(depth, global, wildcard).map(|index| (depth, index, wildcard))
+        })
     }
 
     fn fire(&mut self, index: usize, actions: &mut dyn Actions, out: &mut Outcome) {

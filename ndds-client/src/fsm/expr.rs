@@ -176,14 +176,25 @@ impl fmt::Display for Expr {
 }
 
 fn quote(value: &str) -> String {
-    if !value.is_empty()
-        && value.chars().all(word_char)
-        && value.chars().next().is_some_and(word_start)
-    {
-        value.to_owned()
-    } else {
-        format!("{value:?}")
+    let keyword = matches!(value.to_ascii_lowercase().as_str(), "and" | "or" | "not");
+    let plain = value.chars().all(word_char)
+        && value
+            .chars()
+            .next()
+            .is_some_and(|c| word_start(c) || c.is_ascii_digit());
+    if plain && !keyword {
+        return value.to_owned();
     }
+    let mut out = String::with_capacity(value.len() + 2);
+    out.push('"');
+    for c in value.chars() {
+        if matches!(c, '"' | '\\') {
+            out.push('\\');
+        }
+        out.push(c);
+    }
+    out.push('"');
+    out
 }
 
 fn word_start(c: char) -> bool {
@@ -439,6 +450,9 @@ mod tests {
             r#"x != "two words""#,
             "not (a and b) or *",
             "a.b-c = 3",
+            r#"a = "and""#,
+            r#"a = "quote \" and \\ tab	""#,
+            "a = 3x",
         ] {
             let e = Expr::parse(text).unwrap();
             assert_eq!(Expr::parse(&e.to_string()).unwrap(), e, "{text}");

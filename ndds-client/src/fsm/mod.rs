@@ -22,5 +22,5 @@ pub use engine::{
     Actions, Fault, Fired, MAX_CALL_DEPTH, MAX_STEPS, Machine, MachineState, Outcome, Stimulus,
 };
 pub use expr::{Expr, ParseError, Stimuli};
-pub use task::{ActionSet, FsmError, QUEUE_LIMIT, StateMachine};
+pub use task::{ActionSet, FsmError, MAX_NAME_LEN, MAX_VALUE_LEN, QUEUE_LIMIT, StateMachine};
 pub use verify::{FsmProblem, verify};

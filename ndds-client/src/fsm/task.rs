@@ -20,6 +20,10 @@ use crate::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, R
 
 /// Stimuli waiting in a machine's queue at most; more are refused.
 pub const QUEUE_LIMIT: usize = 4096;
+/// Longest stimulus name accepted (bytes).
+pub const MAX_NAME_LEN: usize = 128;
+/// Longest condition value accepted (bytes).
+pub const MAX_VALUE_LEN: usize = 1024;
 
 type ActionFn = Box<dyn FnMut(Option<&str>) -> Result<i32, String> + Send>;
 
@@ -36,7 +40,8 @@ impl ActionSet {
     }
 
     /// The runtime's actions: `switch CONFIGURATION`, `start HABITAT`, `stop HABITAT`, `reset
-    /// HABITAT` — each returns 0 when done, 1 when refused (the refusal is logged).
+    /// HABITAT` — each returns 0 when done, 1 when refused (unknown configuration or habitat,
+    /// a system that does not verify; the refusal is logged).
     pub fn runtime(runtime: &Runtime) -> Self {
         let mut set = Self::new();
         let rt = runtime.clone();
@@ -44,21 +49,26 @@ impl ActionSet {
             let name = arg.ok_or("`switch` needs a configuration name")?;
             Ok(refused(rt.switch(name).map_err(|e| e.to_string())))
         });
+        // Habitats are looked up, never created: a misspelt name is refused (code 1).
+        let find = |rt: &Runtime, arg: Option<&str>, action: &str| {
+            let name = arg.ok_or_else(|| format!("`{action}` needs a habitat name"))?;
+            rt.find_habitat(name)
+                .ok_or_else(|| format!("`{action} {name}`: no habitat `{name}`"))
+        };
         let rt = runtime.clone();
         set.add("start", &[0, 1], move |arg| {
-            let name = arg.ok_or("`start` needs a habitat name")?;
-            Ok(refused(rt.habitat(name).start().map_err(|e| e.to_string())))
+            let habitat = find(&rt, arg, "start");
+            Ok(refused(
+                habitat.and_then(|h| h.start().map_err(|e| e.to_string())),
+            ))
         });
         let rt = runtime.clone();
-        set.add("stop", &[0], move |arg| {
-            rt.habitat(arg.ok_or("`stop` needs a habitat name")?).stop();
-            Ok(0)
+        set.add("stop", &[0, 1], move |arg| {
+            Ok(refused(find(&rt, arg, "stop").map(|h| h.stop())))
         });
         let rt = runtime.clone();
-        set.add("reset", &[0], move |arg| {
-            rt.habitat(arg.ok_or("`reset` needs a habitat name")?)
-                .reset();
-            Ok(0)
+        set.add("reset", &[0, 1], move |arg| {
+            Ok(refused(find(&rt, arg, "reset").map(|h| h.reset())))
         });
         set
     }
@@ -117,11 +127,22 @@ fn refused(result: Result<(), String>) -> i32 {
 }
 
 impl Actions for ActionSet {
+    /// Runs the action; a panic is a failure (the machine goes to its error state) instead of
+    /// the end of the machine's thread.
     fn run(&mut self, name: &str, argument: Option<&str>) -> Result<i32, String> {
-        match self.actions.get_mut(name) {
-            Some((_, action)) => action(argument),
-            None => Err(format!("no action `{name}`")),
-        }
+        let Some((_, action)) = self.actions.get_mut(name) else {
+            return Err(format!("no action `{name}`"));
+        };
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| action(argument))).unwrap_or_else(
+            |payload| {
+                let text = payload
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_owned())
+                    .or_else(|| payload.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                Err(format!("panicked: {text}"))
+            },
+        )
     }
 }
 
@@ -143,6 +164,26 @@ pub enum FsmError {
     /// The machine was stopped.
     #[error("state machine `{0}` is stopped")]
     Stopped(String),
+    /// A stimulus the program does not declare.
+    #[error("state machine `{machine}`: undeclared stimulus `{stimulus}`")]
+    Undeclared {
+        /// The main machine.
+        machine: String,
+        /// The stimulus.
+        stimulus: String,
+    },
+    /// A name over [`MAX_NAME_LEN`] or a value over [`MAX_VALUE_LEN`] bytes.
+    #[error(
+        "state machine `{machine}`: stimulus too large (name {name_len} bytes, value {value_len} bytes; at most {MAX_NAME_LEN} and {MAX_VALUE_LEN})"
+    )]
+    Oversized {
+        /// The main machine.
+        machine: String,
+        /// The name's length.
+        name_len: usize,
+        /// The value's length.
+        value_len: usize,
+    },
     /// A topic could not be declared.
     #[error("state machine `{machine}`: topic `{topic}`: {reason}")]
     Topic {
@@ -168,6 +209,8 @@ fn list(problems: &[FsmProblem]) -> String {
 
 struct Shared {
     name: String,
+    declared: BTreeMap<String, super::def::StimulusKind>,
+    dropped: std::sync::atomic::AtomicU64,
     queue: Mutex<Queue>,
     ready: Condvar,
     state: Mutex<MachineState>,
@@ -216,9 +259,12 @@ impl StateMachine {
                 problems,
             });
         }
+        let declared = program.stimuli.clone();
         let machine = Machine::new(Arc::new(program));
         let shared = Arc::new(Shared {
             name: name.clone(),
+            declared,
+            dropped: std::sync::atomic::AtomicU64::new(0),
             queue: Mutex::new(Queue::default()),
             ready: Condvar::new(),
             state: Mutex::new(machine.snapshot()),
@@ -280,11 +326,14 @@ impl StateMachine {
 
     /// The machine now (after the last processed stimulus).
     pub fn snapshot(&self) -> MachineState {
-        self.shared
+        let mut state = self
+            .shared
             .state
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .clone()
+            .clone();
+        state.dropped = self.shared.dropped.load(Ordering::Relaxed);
+        state
     }
 
     /// Waits until the innermost running machine is in `state`; false after `timeout`.
@@ -310,7 +359,12 @@ impl StateMachine {
 impl Drop for StateMachine {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
-        self.shared.ready.notify_all();
+        {
+            // Under the queue's lock, so the thread cannot miss the wake-up between its check
+            // of `stop` and its wait.
+            let _queue = self.shared.queue.lock().unwrap_or_else(|p| p.into_inner());
+            self.shared.ready.notify_all();
+        }
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
@@ -318,9 +372,28 @@ impl Drop for StateMachine {
 }
 
 fn enqueue(shared: &Shared, stimulus: Stimulus) -> Result<(), FsmError> {
+    let refuse = |error: FsmError| {
+        shared.dropped.fetch_add(1, Ordering::Relaxed);
+        Err(error)
+    };
+    let value_len = stimulus.value.as_ref().map_or(0, String::len);
+    if stimulus.name.len() > MAX_NAME_LEN || value_len > MAX_VALUE_LEN {
+        return refuse(FsmError::Oversized {
+            machine: shared.name.clone(),
+            name_len: stimulus.name.len(),
+            value_len,
+        });
+    }
+    if !shared.declared.contains_key(&stimulus.name) {
+        return refuse(FsmError::Undeclared {
+            machine: shared.name.clone(),
+            stimulus: stimulus.name,
+        });
+    }
     let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());
     if queue.items.len() >= QUEUE_LIMIT {
-        return Err(FsmError::QueueFull(shared.name.clone()));
+        drop(queue);
+        return refuse(FsmError::QueueFull(shared.name.clone()));
     }
     queue.items.push_back(stimulus);
     shared.ready.notify_one();
@@ -336,10 +409,12 @@ fn run(
     publisher: Option<&Producer<MachineState>>,
 ) {
     let publish = |state: &MachineState| {
+        let mut state = state.clone();
+        state.dropped = shared.dropped.load(Ordering::Relaxed);
         if let Some(p) = publisher
-            && let Err(err) = p.write(state)
+            && let Err(err) = p.write(&state)
         {
-            tracing::debug!(error = %err, "state not published");
+            tracing::warn!(machine = %shared.name, error = %err, "state not published");
         }
     };
     publish(&machine.snapshot());
@@ -347,7 +422,7 @@ fn run(
     while !shared.stop.load(Ordering::Acquire) {
         let next = {
             let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());
-            if queue.items.is_empty() {
+            if queue.items.is_empty() && !shared.stop.load(Ordering::Acquire) {
                 queue = shared
                     .ready
                     .wait_timeout(queue, REPUBLISH)

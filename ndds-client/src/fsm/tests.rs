@@ -446,3 +446,101 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn an_outer_global_transition_ends_the_calls_below_it() {
+    let mut p = with_subchain();
+    p.stimulus("Abort", StimulusKind::Transient);
+    p.machine("main", "Idle")
+        .states(&["Aborted"])
+        .transition("*", "Abort", "none", &[(0, "Aborted")])
+        .unwrap();
+    let mut m = Machine::new(Arc::new(p));
+    send(&mut m, "Start");
+    send(&mut m, "Closed");
+    assert_eq!(m.stack().len(), 2);
+    let out = send(&mut m, "Abort");
+    assert_eq!(
+        m.stack(),
+        [("main".to_owned(), "Aborted".to_owned())],
+        "{out:?}"
+    );
+}
+
+#[test]
+fn a_runaway_of_latched_retries_is_a_fault_that_leads_to_the_error_state() {
+    let mut p = Program::new("m", "Waiting");
+    p.stimulus("Go", StimulusKind::Transient);
+    let names: Vec<String> = (0..MAX_STEPS + 6).map(|i| format!("l{i}")).collect();
+    for name in &names {
+        p.stimulus(name, StimulusKind::Latched);
+    }
+    let m = p.machine("m", "Waiting");
+    m.states(&["Busy"]);
+    m.transition("Waiting", "Go", "none", &[(0, "Busy")])
+        .unwrap();
+    for name in &names {
+        m.transition("Busy", name, "none", &[(0, "Busy")]).unwrap();
+    }
+    let mut machine = Machine::new(Arc::new(p));
+    for name in &names {
+        assert!(send(&mut machine, name).fired.is_empty());
+    }
+    let out = send(&mut machine, "Go");
+    assert_eq!(out.faults, [Fault::Runaway]);
+    assert_eq!(machine.state(), "Error");
+}
+
+#[test]
+fn verify_reports_a_call_of_a_machine_that_never_returns() {
+    let mut p = with_subchain();
+    p.machine("Grasp", "Open").returns.clear();
+    let problems = verify(&p, &|_: &str| None);
+    assert!(
+        problems
+            .iter()
+            .any(|p| matches!(p, FsmProblem::NoReturn { called, .. } if called == "Grasp")),
+        "{problems:?}"
+    );
+}
+
+#[test]
+fn return_states_written_in_toml_are_states() {
+    let text = r#"
+main = "main"
+[stimuli]
+Start = "transient"
+Closed = "transient"
+[[machine]]
+name = "main"
+start = "Idle"
+states = ["Idle", "Holding"]
+[[machine.transition]]
+from = "Idle"
+when = "Start"
+action = "call Grasp"
+next = { 0 = "Holding", 1 = "Idle" }
+[[machine]]
+name = "Grasp"
+start = "Open"
+states = ["Open", "Check"]
+returns = { Done = 0, Failed = 1 }
+[[machine.transition]]
+from = "Open"
+when = "Closed"
+next = { 0 = "Done" }
+"#;
+    let p = Program::from_toml(text).unwrap();
+    let problems = verify(&p, &|_: &str| None);
+    // Only `Check` and `Failed` are unreachable in this short program.
+    assert!(
+        problems
+            .iter()
+            .all(|p| matches!(p, FsmProblem::Unreachable { machine, .. } if machine == "Grasp")),
+        "{problems:?}"
+    );
+    let mut m = Machine::new(Arc::new(p));
+    send(&mut m, "Start");
+    send(&mut m, "Closed");
+    assert_eq!(m.state(), "Holding");
+}

@@ -49,6 +49,15 @@ pub enum FsmProblem {
         /// The machine called.
         called: String,
     },
+    /// A call of a machine that has no return state: the caller never continues.
+    NoReturn {
+        /// The machine.
+        machine: String,
+        /// The transition.
+        transition: usize,
+        /// The machine called.
+        called: String,
+    },
     /// A named action nobody provides.
     UnknownAction {
         /// The machine.
@@ -111,6 +120,14 @@ impl fmt::Display for FsmProblem {
             } => write!(
                 f,
                 "machine `{machine}`, transition {transition}: calls unknown machine `{called}`"
+            ),
+            FsmProblem::NoReturn {
+                machine,
+                transition,
+                called,
+            } => write!(
+                f,
+                "machine `{machine}`, transition {transition}: calls `{called}`, which has no return state"
             ),
             FsmProblem::UnknownAction {
                 machine,
@@ -176,6 +193,14 @@ pub fn verify(
             let codes = match &t.action {
                 ActionRef::None => Some(vec![0]),
                 ActionRef::Call(sub) => match program.machines.get(sub) {
+                    Some(callee) if callee.returns.is_empty() => {
+                        problems.push(FsmProblem::NoReturn {
+                            machine: name.clone(),
+                            transition: i,
+                            called: sub.clone(),
+                        });
+                        None
+                    }
                     Some(callee) => Some(callee.returns.values().copied().collect()),
                     None => {
                         problems.push(FsmProblem::UnknownMachine {

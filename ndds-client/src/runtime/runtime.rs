@@ -271,6 +271,15 @@ impl Runtime {
         Ok(habitat)
     }
 
+    /// The habitat named `name` if it was created (a lookup that never makes a placeholder).
+    pub fn find_habitat(&self, name: &str) -> Option<Habitat> {
+        self.db()
+            .habitats
+            .get(name)
+            .filter(|h| h.is_created())
+            .cloned()
+    }
+
     /// Every habitat (created or referenced), by name.
     pub fn habitats(&self) -> Vec<Habitat> {
         self.db().habitats.values().cloned().collect()
