@@ -278,6 +278,15 @@ impl StateMachine {
         };
         let (events, publisher) = match participant {
             None => (None, None),
+            Some(_)
+                if name.is_empty() || name.contains('/') || name.chars().any(char::is_control) =>
+            {
+                return Err(topic_error(
+                    &format!("fsm/{name}/events"),
+                    "a machine on the network needs a name without `/` or control characters"
+                        .into(),
+                ));
+            }
             Some(participant) => {
                 let topic = format!("fsm/{name}/events");
                 let qos = ConsumerQos {
@@ -293,7 +302,11 @@ impl StateMachine {
                         if let Some(shared) = weak.upgrade()
                             && let Err(err) = enqueue(&shared, sample.value)
                         {
-                            tracing::warn!(error = %err, "stimulus from the network dropped");
+                            // Logged at 1, 2, 4, 8, ... drops: a flooding peer cannot flood the log.
+                            let dropped = shared.dropped.load(Ordering::Relaxed);
+                            if dropped.is_power_of_two() {
+                                tracing::warn!(error = %err, dropped, "stimulus from the network dropped");
+                            }
                         }
                     })
                     .map_err(|e| topic_error(&topic, e.to_string()))?;
