@@ -19,6 +19,7 @@
 //! - [`discovery`]: the sans-IO discovery engine and its configuration.
 //! - [`ipc`]: frames between a client or tool and its local daemon over the Unix socket.
 //! - [`domain`]: how a domain id maps to multicast group, port and socket path.
+//! - [`ports`]: the pure logic of port-directed communication (priority select).
 #![warn(missing_docs)]
 
 pub mod arbitration;
@@ -27,6 +28,7 @@ pub mod domain;
 pub mod dynamic;
 pub mod fragment;
 pub mod ipc;
+pub mod ports;
 pub mod reliability;
 pub mod types;
 pub mod wire;
