@@ -42,6 +42,7 @@ mod link;
 pub mod participant;
 mod peers;
 mod plane;
+pub mod ports;
 pub mod producer;
 pub mod qos;
 mod router;

@@ -1,0 +1,79 @@
+//! Ports: port-directed communication (Shin, 1985) carried over ndds — a named channel with
+//! exactly one owner and any number of users.
+//!
+//! So far: [`PortUser::send`] (blocks until the owner replies, or the timeout),
+//! [`PortOwner::receive`] (the next request, with a [`ReplyHandle`] naming the sender) and
+//! [`ReplyHandle::reply`] (non-blocking; replies may be given later and in any order), a
+//! second owner reported to both owners and to users, and message formats checked (type
+//! fingerprints). The pure logic lives in `ndds_core::ports` (the priority select).
+//!
+//! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
+//! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
+//! declaration, repeated every [`ANNOUNCE_PERIOD`]).
+
+mod error;
+mod owner;
+mod user;
+mod wire;
+
+use std::time::Duration;
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+pub use error::PortError;
+pub use owner::{PortOwner, ReplyHandle};
+pub use user::PortUser;
+pub use wire::{OwnerInfo, Reply, Request};
+
+use crate::{Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+
+/// How often an owner repeats its declaration; users forget an owner not heard for three.
+pub const ANNOUNCE_PERIOD: Duration = Duration::from_millis(250);
+
+fn topic(port: &str, leaf: &str) -> String {
+    format!("port/{port}/{leaf}")
+}
+
+fn check_name(port: &str) -> Result<(), PortError> {
+    if port.is_empty() || port.contains('/') || port.chars().any(char::is_control) {
+        return Err(PortError::BadName(port.to_owned()));
+    }
+    Ok(())
+}
+
+fn transport(port: &str, topic: &str, err: impl std::fmt::Display) -> PortError {
+    PortError::Transport {
+        port: port.to_owned(),
+        reason: format!("topic `{topic}`: {err}"),
+    }
+}
+
+fn reliable_consumer<T: Serialize + DeserializeOwned>(
+    participant: &Participant,
+    port: &str,
+    topic: &str,
+) -> Result<Consumer<T>, PortError> {
+    let qos = ConsumerQos {
+        reliability: Reliability::Reliable { depth: 256 },
+        depth: 256,
+        ..ConsumerQos::default()
+    };
+    participant
+        .consumer::<T>(topic, qos)
+        .map_err(|e| transport(port, topic, e))
+}
+
+fn reliable_producer<T: Serialize + DeserializeOwned>(
+    participant: &Participant,
+    port: &str,
+    topic: &str,
+) -> Result<Producer<T>, PortError> {
+    let qos = ProducerQos {
+        reliability: Reliability::Reliable { depth: 256 },
+        ..ProducerQos::default()
+    };
+    participant
+        .producer::<T>(topic, qos)
+        .map_err(|e| transport(port, topic, e))
+}

@@ -1,0 +1,234 @@
+//! [`PortOwner`]: the one task that owns a port — `receive` requests, `reply` later and in any
+//! order.
+
+use std::collections::HashMap;
+use std::marker::PhantomData;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use super::error::PortError;
+use super::wire::{OwnerInfo, Reply, Request};
+use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
+use crate::{Consumer, Participant, Producer, TypeDescription};
+
+pub(crate) struct OwnerShared {
+    port: String,
+    task: String,
+    participant: Participant,
+    replies: Mutex<HashMap<String, Producer<Reply>>>,
+    /// Another owner seen on the port (its task), if any.
+    conflict: Mutex<Option<String>>,
+    stop: AtomicBool,
+}
+
+/// The owner of a port: receives requests of type `Q` and replies with `R`.
+pub struct PortOwner<Q, R> {
+    shared: Arc<OwnerShared>,
+    requests: Consumer<Request>,
+    owners: Consumer<OwnerInfo>,
+    incarnation: u64,
+    announcer: Option<JoinHandle<()>>,
+    _types: PhantomData<fn(Q) -> R>,
+}
+
+/// Identifies one request: reply through it (once, whenever, from any thread).
+#[must_use = "a sender waits until it is replied to (or times out)"]
+pub struct ReplyHandle<R> {
+    shared: Arc<OwnerShared>,
+    id: u64,
+    user: String,
+    task: String,
+    _reply: PhantomData<fn(R)>,
+}
+
+impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner<Q, R> {
+    /// Declares `task` the owner of `port`. Another owner anywhere in the domain is reported
+    /// to both (see [`receive`](Self::receive)).
+    pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
+        check_name(port)?;
+        let requests = reliable_consumer::<Request>(participant, port, &topic(port, "request"))?;
+        let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
+        let announce = reliable_producer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
+        let incarnation = fastrand::u64(..);
+        let info = OwnerInfo {
+            task: task.to_owned(),
+            pid: std::process::id(),
+            incarnation,
+            request_format: TypeDescription::of::<Q>().fingerprint(),
+            reply_format: TypeDescription::of::<R>().fingerprint(),
+        };
+        let shared = Arc::new(OwnerShared {
+            port: port.to_owned(),
+            task: task.to_owned(),
+            participant: participant.clone(),
+            replies: Mutex::new(HashMap::new()),
+            conflict: Mutex::new(None),
+            stop: AtomicBool::new(false),
+        });
+        let flag = Arc::clone(&shared);
+        let announcer = std::thread::Builder::new()
+            .name(format!("port-{port}"))
+            .spawn(move || {
+                while !flag.stop.load(Ordering::Acquire) {
+                    let _ = announce.write(&info);
+                    let until = Instant::now() + ANNOUNCE_PERIOD;
+                    while Instant::now() < until && !flag.stop.load(Ordering::Acquire) {
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                }
+            })
+            .map_err(|e| PortError::Transport {
+                port: port.to_owned(),
+                reason: e.to_string(),
+            })?;
+        Ok(Self {
+            shared,
+            requests,
+            owners,
+            incarnation,
+            announcer: Some(announcer),
+            _types: PhantomData,
+        })
+    }
+
+    /// The port's name.
+    pub fn port(&self) -> &str {
+        &self.shared.port
+    }
+
+    /// The other owner of this port, if one was seen.
+    pub fn conflict(&self) -> Option<String> {
+        self.note_other_owners();
+        self.shared
+            .conflict
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    fn note_other_owners(&self) {
+        while let Ok(sample) = self.owners.try_recv() {
+            if sample.value.incarnation != self.incarnation {
+                let other = format!("{} (pid {})", sample.value.task, sample.value.pid);
+                tracing::warn!(port = %self.shared.port, owner = %self.shared.task, other = %other,
+                    "a second owner declared this port");
+                *self
+                    .shared
+                    .conflict
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner()) = Some(other);
+            }
+        }
+    }
+
+    /// Waits for the next request (at most `timeout`): the message and the handle to reply
+    /// with. Fails while another owner of the port exists.
+    pub fn receive(&self, timeout: Duration) -> Result<(Q, ReplyHandle<R>), PortError> {
+        let start = Instant::now();
+        loop {
+            if let Some(other) = self.conflict() {
+                return Err(PortError::SecondOwner {
+                    port: self.shared.port.clone(),
+                    first: self.shared.task.clone(),
+                    second: other,
+                });
+            }
+            let left = timeout.saturating_sub(start.elapsed());
+            let slice = left.min(Duration::from_millis(50));
+            match self.requests.recv_timeout(slice) {
+                Ok(sample) => {
+                    let request = sample.value;
+                    let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| {
+                        PortError::Codec {
+                            port: self.shared.port.clone(),
+                            what: "decoding a request",
+                            reason: e.to_string(),
+                        }
+                    })?;
+                    return Ok((
+                        value,
+                        ReplyHandle {
+                            shared: Arc::clone(&self.shared),
+                            id: request.id,
+                            user: request.user,
+                            task: request.task,
+                            _reply: PhantomData,
+                        },
+                    ));
+                }
+                Err(_) if left.is_zero() => {
+                    return Err(PortError::Timeout {
+                        port: self.shared.port.clone(),
+                        operation: "receive",
+                        task: self.shared.task.clone(),
+                        owner: None,
+                        waited: start.elapsed(),
+                    });
+                }
+                Err(_) => {}
+            }
+        }
+    }
+}
+
+impl<Q, R> Drop for PortOwner<Q, R> {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.announcer.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// How long an owner waits for a new user's reply topic to match before replying anyway.
+const REPLY_MATCH: Duration = Duration::from_secs(2);
+
+impl<R> std::fmt::Debug for ReplyHandle<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReplyHandle")
+            .field("port", &self.shared.port)
+            .field("id", &self.id)
+            .field("sender", &self.task)
+            .finish()
+    }
+}
+
+impl<R: Serialize> ReplyHandle<R> {
+    /// The task that sent the request.
+    pub fn sender(&self) -> &str {
+        &self.task
+    }
+
+    /// Replies (does not wait for the sender).
+    pub fn reply(self, value: &R) -> Result<(), PortError> {
+        let shared = &self.shared;
+        let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
+            port: shared.port.clone(),
+            what: "encoding a reply",
+            reason: e.to_string(),
+        })?;
+        let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
+        if !replies.contains_key(&self.user) {
+            let name = topic(&shared.port, &format!("reply/{}", self.user));
+            let producer = reliable_producer::<Reply>(&shared.participant, &shared.port, &name)?;
+            // A reliable stream starts at the match: wait for the sender's reply consumer.
+            producer.wait_for_consumers(1, REPLY_MATCH);
+            replies.insert(self.user.clone(), producer);
+        }
+        let producer = &replies[&self.user];
+        producer
+            .write(&Reply {
+                id: self.id,
+                payload,
+            })
+            .map_err(|e| PortError::Transport {
+                port: shared.port.clone(),
+                reason: format!("replying to `{}`: {e}", self.task),
+            })
+    }
+}

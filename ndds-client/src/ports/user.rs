@@ -1,0 +1,200 @@
+//! [`PortUser`]: a task that uses a port — `send` blocks until the owner replies (or the
+//! timeout). Several threads may send through one user at once; each gets its own reply.
+
+use std::collections::HashMap;
+use std::marker::PhantomData;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use super::error::PortError;
+use super::wire::{OwnerInfo, Reply, Request};
+use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
+use crate::{Consumer, Participant, Producer, TypeDescription};
+
+/// A user of a port: sends requests of type `Q`, gets replies of type `R`.
+pub struct PortUser<Q, R> {
+    port: String,
+    task: String,
+    user: String,
+    requests: Producer<Request>,
+    replies: Consumer<Reply>,
+    owners: Consumer<OwnerInfo>,
+    next_id: AtomicU64,
+    demux: Mutex<Demux>,
+    arrived: Condvar,
+    formats: (u64, u64),
+    _types: PhantomData<fn(Q) -> R>,
+}
+
+#[derive(Default)]
+struct Demux {
+    /// Replies taken off the topic by one sender for another.
+    waiting: HashMap<u64, Reply>,
+    /// A sender is reading the reply topic now.
+    reading: bool,
+    /// Owners seen recently: incarnation -> (description, when last seen).
+    owners: HashMap<u64, (OwnerInfo, Instant)>,
+}
+
+impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<Q, R> {
+    /// Declares `task` a user of `port`.
+    pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
+        check_name(port)?;
+        let user = format!("{:016x}", fastrand::u64(..));
+        Ok(Self {
+            requests: reliable_producer::<Request>(participant, port, &topic(port, "request"))?,
+            replies: reliable_consumer::<Reply>(
+                participant,
+                port,
+                &topic(port, &format!("reply/{user}")),
+            )?,
+            owners: reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?,
+            port: port.to_owned(),
+            task: task.to_owned(),
+            user,
+            next_id: AtomicU64::new(1),
+            demux: Mutex::new(Demux::default()),
+            arrived: Condvar::new(),
+            formats: (
+                TypeDescription::of::<Q>().fingerprint(),
+                TypeDescription::of::<R>().fingerprint(),
+            ),
+            _types: PhantomData,
+        })
+    }
+
+    /// The port's name.
+    pub fn port(&self) -> &str {
+        &self.port
+    }
+
+    /// The owner now: its task, or an error when there are two or the formats differ; `None`
+    /// while none is known.
+    fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
+        while let Ok(sample) = self.owners.try_recv() {
+            demux
+                .owners
+                .insert(sample.value.incarnation, (sample.value, Instant::now()));
+        }
+        // An owner not heard for three announcement periods is gone.
+        demux
+            .owners
+            .retain(|_, (_, seen)| seen.elapsed() < ANNOUNCE_PERIOD * 3);
+        let mut owners: Vec<&OwnerInfo> = demux.owners.values().map(|(o, _)| o).collect();
+        owners.sort_by(|a, b| a.task.cmp(&b.task).then(a.pid.cmp(&b.pid)));
+        match owners.as_slice() {
+            [] => Ok(None),
+            [owner] => {
+                if (owner.request_format, owner.reply_format) != self.formats {
+                    return Err(PortError::Format {
+                        port: self.port.clone(),
+                        owner: owner.task.clone(),
+                        user: self.task.clone(),
+                        owner_formats: format!(
+                            "{:016x}/{:016x}",
+                            owner.request_format, owner.reply_format
+                        ),
+                        user_formats: format!("{:016x}/{:016x}", self.formats.0, self.formats.1),
+                    });
+                }
+                Ok(Some(owner.task.clone()))
+            }
+            [a, b, ..] => Err(PortError::SecondOwner {
+                port: self.port.clone(),
+                first: format!("{} (pid {})", a.task, a.pid),
+                second: format!("{} (pid {})", b.task, b.pid),
+            }),
+        }
+    }
+
+    /// Sends `value` and waits (at most `timeout`) for the owner's reply.
+    pub fn send(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        let start = Instant::now();
+        let timed_out = |owner: Option<String>| PortError::Timeout {
+            port: self.port.clone(),
+            operation: "send",
+            task: self.task.clone(),
+            owner,
+            waited: start.elapsed(),
+        };
+        // An owner must be known (and unique, with our formats) before the request goes out.
+        let owner = loop {
+            let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(owner) = self.owner(&mut demux)? {
+                break owner;
+            }
+            drop(demux);
+            if start.elapsed() >= timeout {
+                return Err(timed_out(None));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        let left = timeout.saturating_sub(start.elapsed());
+        if !self.requests.wait_for_consumers(1, left) {
+            return Err(timed_out(Some(owner)));
+        }
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
+            port: self.port.clone(),
+            what: "encoding a request",
+            reason: e.to_string(),
+        })?;
+        self.requests
+            .write(&Request {
+                id,
+                user: self.user.clone(),
+                task: self.task.clone(),
+                payload,
+            })
+            .map_err(|e| PortError::Transport {
+                port: self.port.clone(),
+                reason: e.to_string(),
+            })?;
+        let reply = self
+            .wait_reply(id, start + timeout)
+            .ok_or_else(|| timed_out(Some(owner)))?;
+        postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
+            port: self.port.clone(),
+            what: "decoding a reply",
+            reason: e.to_string(),
+        })
+    }
+
+    /// The reply to request `id`: one waiting sender reads the topic at a time and hands the
+    /// others their replies.
+    fn wait_reply(&self, id: u64, deadline: Instant) -> Option<Reply> {
+        let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+        loop {
+            if let Some(reply) = demux.waiting.remove(&id) {
+                return Some(reply);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return None;
+            }
+            if demux.reading {
+                demux = self
+                    .arrived
+                    .wait_timeout(demux, deadline - now)
+                    .unwrap_or_else(|p| p.into_inner())
+                    .0;
+                continue;
+            }
+            demux.reading = true;
+            drop(demux);
+            let got = self
+                .replies
+                .recv_timeout((deadline - now).min(Duration::from_millis(20)));
+            demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+            demux.reading = false;
+            if let Ok(sample) = got {
+                demux.waiting.insert(sample.value.id, sample.value);
+            }
+            self.arrived.notify_all();
+        }
+    }
+}

@@ -1,0 +1,161 @@
+//! Ports between tasks (threads here, through a real daemon and the data plane): send /
+//! receive / reply with replies out of order, timeouts, a second owner, format checks.
+
+mod common;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use ndds_client::ports::{PortError, PortOwner, PortUser};
+
+const WAIT: Duration = Duration::from_secs(10);
+
+fn participant(dir: &std::path::Path, name: &str) -> ndds_client::Participant {
+    common::participant(&common::unique_config(dir, name))
+}
+
+#[test]
+fn replies_given_later_and_out_of_order_reach_each_blocked_sender() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "ports");
+    let owner = PortOwner::<u32, String>::declare(&p, "arm.cmd", "arm-server").unwrap();
+    let users: Vec<Arc<PortUser<u32, String>>> = (0..3)
+        .map(|i| Arc::new(PortUser::declare(&p, "arm.cmd", &format!("client{i}")).unwrap()))
+        .collect();
+    let senders: Vec<_> = users
+        .iter()
+        .enumerate()
+        .map(|(i, user)| {
+            let user = Arc::clone(user);
+            std::thread::spawn(move || user.send(&(i as u32 * 10), WAIT))
+        })
+        .collect();
+    // Take all three requests before replying to any, then reply in reverse order.
+    let mut pending = Vec::new();
+    for _ in 0..3 {
+        pending.push(owner.receive(WAIT).unwrap());
+    }
+    let mut senders_seen: Vec<String> =
+        pending.iter().map(|(_, h)| h.sender().to_owned()).collect();
+    senders_seen.sort();
+    assert_eq!(senders_seen, ["client0", "client1", "client2"]);
+    for (value, handle) in pending.into_iter().rev() {
+        let text = format!("{} got {value}", handle.sender());
+        handle.reply(&text).unwrap();
+    }
+    for (i, sender) in senders.into_iter().enumerate() {
+        let reply = sender.join().unwrap().unwrap();
+        assert_eq!(reply, format!("client{i} got {}", i * 10));
+    }
+
+    // Several threads sending through one user handle each get their own reply.
+    let user = Arc::clone(&users[0]);
+    let threads: Vec<_> = (0..4)
+        .map(|k| {
+            let user = Arc::clone(&user);
+            std::thread::spawn(move || (k, user.send(&k, WAIT)))
+        })
+        .collect();
+    let mut handles = Vec::new();
+    for _ in 0..4 {
+        handles.push(owner.receive(WAIT).unwrap());
+    }
+    handles.sort_by_key(|(v, _)| std::cmp::Reverse(*v));
+    for (v, h) in handles {
+        h.reply(&format!("echo {v}")).unwrap();
+    }
+    for t in threads {
+        let (k, reply) = t.join().unwrap();
+        assert_eq!(reply.unwrap(), format!("echo {k}"));
+    }
+}
+
+#[test]
+fn without_an_owner_or_a_reply_a_send_times_out_naming_the_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "timeout");
+    let user = PortUser::<u32, u32>::declare(&p, "gripper", "planner").unwrap();
+    match user.send(&1, Duration::from_millis(300)) {
+        Err(PortError::Timeout {
+            port, task, owner, ..
+        }) => {
+            assert_eq!(
+                (port.as_str(), task.as_str(), owner),
+                ("gripper", "planner", None)
+            );
+        }
+        other => panic!("expected a timeout, got {other:?}"),
+    }
+    // An owner that takes the request and never replies: the sender's timeout names it.
+    let owner = PortOwner::<u32, u32>::declare(&p, "gripper", "gripper-driver").unwrap();
+    let started = std::time::Instant::now();
+    let sender = std::thread::spawn(move || user.send(&2, Duration::from_secs(2)));
+    let (_request, _never_replied) = owner.receive(WAIT).unwrap();
+    let err = sender.join().unwrap().unwrap_err();
+    assert!(started.elapsed() >= Duration::from_secs(2));
+    let text = err.to_string();
+    assert!(
+        text.contains("port `gripper`") && text.contains("gripper-driver"),
+        "{text}"
+    );
+    // And a receive with nothing to receive.
+    let err = owner.receive(Duration::from_millis(100)).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PortError::Timeout {
+                operation: "receive",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_second_owner_is_reported_to_both_owners_and_to_users() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "owners");
+    let first = PortOwner::<u32, u32>::declare(&p, "camera", "vision-a").unwrap();
+    let second = PortOwner::<u32, u32>::declare(&p, "camera", "vision-b").unwrap();
+    let user = PortUser::<u32, u32>::declare(&p, "camera", "tracker").unwrap();
+    for (owner, me, other) in [
+        (&first, "vision-a", "vision-b"),
+        (&second, "vision-b", "vision-a"),
+    ] {
+        match owner.receive(WAIT) {
+            Err(PortError::SecondOwner {
+                port,
+                first,
+                second,
+            }) => {
+                assert_eq!((port.as_str(), first.as_str()), ("camera", me));
+                assert!(second.starts_with(other), "{second}");
+            }
+            other => panic!("expected a second-owner error, got {other:?}"),
+        }
+    }
+    assert!(common::eventually(WAIT, || matches!(
+        user.send(&1, Duration::from_millis(100)),
+        Err(PortError::SecondOwner { .. })
+    )));
+}
+
+#[test]
+fn different_message_formats_are_refused_naming_both_sides() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "formats");
+    let _owner = PortOwner::<u32, String>::declare(&p, "joints", "servo").unwrap();
+    let user = PortUser::<(f64, f64), String>::declare(&p, "joints", "teleop").unwrap();
+    let err = user.send(&(1.0, 2.0), WAIT).unwrap_err();
+    let text = err.to_string();
+    assert!(matches!(err, PortError::Format { .. }), "{text}");
+    assert!(
+        text.contains("port `joints`") && text.contains("`teleop`") && text.contains("`servo`"),
+        "{text}"
+    );
+    assert!(matches!(
+        PortUser::<u32, u32>::declare(&p, "a/b", "x"),
+        Err(PortError::BadName(_))
+    ));
+}
