@@ -159,3 +159,61 @@ fn different_message_formats_are_refused_naming_both_sides() {
         Err(PortError::BadName(_))
     ));
 }
+
+#[test]
+fn an_urgent_query_is_answered_before_less_urgent_ones_that_arrived_earlier() {
+    use ndds_client::ports::Responder;
+    use std::sync::Mutex;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "query");
+    let log = Arc::new(Mutex::new(Vec::<String>::new()));
+    let mut responder = Responder::new(&p, "arm-server").unwrap();
+    let routine_log = Arc::clone(&log);
+    responder
+        .handle("arm.status", 0, move |n: u32| {
+            routine_log.lock().unwrap().push(format!("status {n}"));
+            if n == 0 {
+                // The first query keeps the worker busy while the others queue up.
+                std::thread::sleep(Duration::from_millis(1000));
+            }
+            n + 100
+        })
+        .unwrap();
+    let urgent_log = Arc::clone(&log);
+    responder
+        .handle("arm.stop", 10, move |n: u32| {
+            urgent_log.lock().unwrap().push(format!("stop {n}"));
+            n + 1000
+        })
+        .unwrap();
+    let status = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.status", "monitor").unwrap());
+    let stop = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.stop", "operator").unwrap());
+    let query = |user: &Arc<PortUser<u32, u32>>, n: u32| {
+        let user = Arc::clone(user);
+        std::thread::spawn(move || user.query(&n, WAIT))
+    };
+    // Both users know the owner and are matched before the measured sequence.
+    assert_eq!(status.query(&50, WAIT).unwrap(), 150);
+    assert_eq!(stop.query(&99, WAIT).unwrap(), 1099);
+    log.lock().unwrap().clear();
+    let first = query(&status, 0);
+    assert!(common::eventually(WAIT, || log.lock().unwrap().len() == 1));
+    let routine: Vec<_> = (1..4)
+        .map(|n| {
+            let t = query(&status, n);
+            std::thread::sleep(Duration::from_millis(30));
+            t
+        })
+        .collect();
+    let urgent = query(&stop, 7);
+    assert_eq!(first.join().unwrap().unwrap(), 100);
+    assert_eq!(urgent.join().unwrap().unwrap(), 1007);
+    for (n, t) in routine.into_iter().enumerate() {
+        assert_eq!(t.join().unwrap().unwrap(), n as u32 + 101);
+    }
+    assert_eq!(
+        *log.lock().unwrap(),
+        ["status 0", "stop 7", "status 1", "status 2", "status 3"]
+    );
+}

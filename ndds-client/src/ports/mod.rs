@@ -5,7 +5,8 @@
 //! [`PortOwner::receive`] (the next request, with a [`ReplyHandle`] naming the sender) and
 //! [`ReplyHandle::reply`] (non-blocking; replies may be given later and in any order), a
 //! second owner reported to both owners and to users, and message formats checked (type
-//! fingerprints). The pure logic lives in `ndds_core::ports` (the priority select).
+//! fingerprints); query / response with handler priorities ([`Responder`],
+//! [`PortUser::query`]). The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
 //! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
@@ -13,6 +14,7 @@
 
 mod error;
 mod owner;
+mod respond;
 mod user;
 mod wire;
 
@@ -23,6 +25,7 @@ use serde::de::DeserializeOwned;
 
 pub use error::PortError;
 pub use owner::{PortOwner, ReplyHandle};
+pub use respond::{PENDING_PER_PORT, Responder};
 pub use user::PortUser;
 pub use wire::{OwnerInfo, Reply, Request};
 

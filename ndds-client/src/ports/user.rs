@@ -164,6 +164,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         })
     }
 
+    /// Queries the port: the owner's response handler (see [`Responder`](super::Responder))
+    /// answers. The same exchange as [`send`](Self::send).
+    pub fn query(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        self.send(value, timeout)
+    }
+
     /// The reply to request `id`: one waiting sender reads the topic at a time and hands the
     /// others their replies.
     fn wait_reply(&self, id: u64, deadline: Instant) -> Option<Reply> {
