@@ -217,3 +217,69 @@ fn an_urgent_query_is_answered_before_less_urgent_ones_that_arrived_earlier() {
         ["status 0", "stop 7", "status 1", "status 2", "status 3"]
     );
 }
+
+#[test]
+fn waitfor_joins_three_tasks_and_each_combines_every_message() {
+    use ndds_client::ports::Rendezvous;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "waitfor");
+    let tasks = ["left-arm", "right-arm", "vision"];
+    let threads: Vec<_> = tasks
+        .iter()
+        .enumerate()
+        .map(|(i, task)| {
+            let p = p.clone();
+            let task = (*task).to_owned();
+            std::thread::spawn(move || {
+                let rv = Rendezvous::<u64>::join(&p, "grasp", &task, &tasks).unwrap();
+                let mut results = Vec::new();
+                for round in 0..3u64 {
+                    // Arrive at different times each round.
+                    std::thread::sleep(Duration::from_millis(20 * ((i as u64 + round) % 3)));
+                    let mine = (i as u64 + 1) * 10 + round;
+                    let combined = rv
+                        .wait(&mine, WAIT, |all| {
+                            assert_eq!(all.len(), 3, "every message is seen");
+                            all.iter()
+                                .map(|(t, v)| format!("{t}={v}"))
+                                .collect::<Vec<_>>()
+                                .join(",")
+                        })
+                        .unwrap();
+                    results.push(combined);
+                }
+                results
+            })
+        })
+        .collect();
+    let results: Vec<Vec<String>> = threads.into_iter().map(|t| t.join().unwrap()).collect();
+    for round in 0..3 {
+        let expected = format!(
+            "left-arm={},right-arm={},vision={}",
+            10 + round,
+            20 + round,
+            30 + round
+        );
+        for r in &results {
+            assert_eq!(r[round], expected, "round {round}");
+        }
+    }
+
+    // A task that never comes: the others time out, naming it.
+    let rv = Rendezvous::<u64>::join(&p, "lonely", "a", &["a", "b"]).unwrap();
+    match rv.wait(&1, Duration::from_millis(300), |_| ()) {
+        Err(PortError::WaitFor {
+            name,
+            task,
+            missing,
+            ..
+        }) => {
+            assert_eq!(
+                (name.as_str(), task.as_str(), missing),
+                ("lonely", "a", vec!["b".to_owned()])
+            );
+        }
+        other => panic!("expected a waitfor timeout, got {other:?}"),
+    }
+}

@@ -20,6 +20,18 @@ pub enum PortError {
         /// How long it waited.
         waited: Duration,
     },
+    /// A rendezvous not complete within the timeout.
+    #[error("waitfor `{name}`: `{task}` waited {waited:?}; still missing: {}", missing.join(", "))]
+    WaitFor {
+        /// The rendezvous.
+        name: String,
+        /// The task that waited.
+        task: String,
+        /// Tasks whose arrival never came (empty: all came, but not all had this task's).
+        missing: Vec<String>,
+        /// How long it waited.
+        waited: Duration,
+    },
     /// Two owners declared the port: reported to both, and to users.
     #[error("port `{port}` has two owners: `{first}` and `{second}`")]
     SecondOwner {

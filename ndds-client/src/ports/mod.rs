@@ -6,7 +6,8 @@
 //! [`ReplyHandle::reply`] (non-blocking; replies may be given later and in any order), a
 //! second owner reported to both owners and to users, and message formats checked (type
 //! fingerprints); query / response with handler priorities ([`Responder`],
-//! [`PortUser::query`]). The pure logic lives in `ndds_core::ports` (the priority select).
+//! [`PortUser::query`]); `waitfor`, the n-way rendezvous with a combining function
+//! ([`Rendezvous`]). The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
 //! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
@@ -16,6 +17,7 @@ mod error;
 mod owner;
 mod respond;
 mod user;
+mod waitfor;
 mod wire;
 
 use std::time::Duration;
@@ -27,6 +29,7 @@ pub use error::PortError;
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
 pub use user::PortUser;
+pub use waitfor::{Arrival, REPEAT, Rendezvous};
 pub use wire::{OwnerInfo, Reply, Request};
 
 use crate::{Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};

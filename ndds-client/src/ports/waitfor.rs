@@ -1,0 +1,183 @@
+//! `waitfor`: an n-way rendezvous among named tasks. Each task arrives with a message, blocks
+//! until every named task has arrived, then runs a combining function over all the messages
+//! and continues with its result. Calls are numbered in rounds, so consecutive rendezvous never
+//! mix.
+//!
+//! On the network (reliable topic `waitfor/<name>`), each task repeats its arrival — message
+//! and the tasks whose arrival it has — every [`REPEAT`] until it has every message and every
+//! other task has its message: a task that joined late still gets everything, and nobody
+//! leaves while another still needs its message.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::marker::PhantomData;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use super::error::PortError;
+use super::{check_name, reliable_consumer, reliable_producer};
+use crate::{Consumer, Participant, Producer};
+
+/// How often an arrival is repeated while the rendezvous is incomplete.
+pub const REPEAT: Duration = Duration::from_millis(20);
+
+/// One task's arrival at a rendezvous round.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Arrival {
+    /// The round.
+    pub round: u64,
+    /// The task.
+    pub task: String,
+    /// Its message, postcard-encoded.
+    #[serde(with = "serde_bytes")]
+    pub payload: Vec<u8>,
+    /// Tasks whose arrival this task has for this round.
+    pub seen: Vec<String>,
+}
+
+/// One task's place in a named rendezvous.
+pub struct Rendezvous<T> {
+    name: String,
+    task: String,
+    tasks: BTreeSet<String>,
+    producer: Producer<Arrival>,
+    consumer: Consumer<Arrival>,
+    state: Mutex<State>,
+    _message: PhantomData<fn(T)>,
+}
+
+#[derive(Default)]
+struct State {
+    round: u64,
+    /// Arrivals of rounds not reached yet (round -> task -> arrival).
+    early: BTreeMap<u64, BTreeMap<String, Arrival>>,
+}
+
+impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
+    /// Joins rendezvous `name` as `task`; `tasks` names every participant (including `task`).
+    pub fn join(
+        participant: &Participant,
+        name: &str,
+        task: &str,
+        tasks: &[&str],
+    ) -> Result<Self, PortError> {
+        check_name(name)?;
+        let tasks: BTreeSet<String> = tasks.iter().map(|t| (*t).to_owned()).collect();
+        if !tasks.contains(task) {
+            return Err(PortError::Transport {
+                port: name.to_owned(),
+                reason: format!("task `{task}` is not among the rendezvous' tasks {tasks:?}"),
+            });
+        }
+        let topic = format!("waitfor/{name}");
+        Ok(Self {
+            producer: reliable_producer(participant, name, &topic)?,
+            consumer: reliable_consumer(participant, name, &topic)?,
+            name: name.to_owned(),
+            task: task.to_owned(),
+            tasks,
+            state: Mutex::new(State::default()),
+            _message: PhantomData,
+        })
+    }
+
+    /// Arrives with `message`, waits (at most `timeout`) for every named task, and returns
+    /// `combine` over all their messages (by task name).
+    pub fn wait<O>(
+        &self,
+        message: &T,
+        timeout: Duration,
+        combine: impl FnOnce(&BTreeMap<String, T>) -> O,
+    ) -> Result<O, PortError> {
+        let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let round = state.round;
+        let start = Instant::now();
+        let payload = postcard::to_stdvec(message).map_err(|e| PortError::Codec {
+            port: self.name.clone(),
+            what: "encoding a waitfor message",
+            reason: e.to_string(),
+        })?;
+        let mut arrivals: BTreeMap<String, Arrival> =
+            state.early.remove(&round).unwrap_or_default();
+        arrivals.insert(
+            self.task.clone(),
+            Arrival {
+                round,
+                task: self.task.clone(),
+                payload: payload.clone(),
+                seen: Vec::new(),
+            },
+        );
+        let mut last_sent: Option<Instant> = None;
+        let mut changed = true;
+        loop {
+            while let Ok(sample) = self.consumer.try_recv() {
+                let arrival = sample.value;
+                if !self.tasks.contains(&arrival.task) {
+                    continue;
+                }
+                if arrival.round == round {
+                    if arrival.task != self.task {
+                        changed |= !arrivals.contains_key(&arrival.task)
+                            || arrivals[&arrival.task].seen.len() != arrival.seen.len();
+                        arrivals.insert(arrival.task.clone(), arrival);
+                    }
+                } else if arrival.round > round {
+                    state
+                        .early
+                        .entry(arrival.round)
+                        .or_default()
+                        .insert(arrival.task.clone(), arrival);
+                }
+            }
+            let have: Vec<String> = arrivals.keys().cloned().collect();
+            if changed || last_sent.is_none_or(|t| t.elapsed() >= REPEAT) {
+                let _ = self.producer.write(&Arrival {
+                    round,
+                    task: self.task.clone(),
+                    payload: payload.clone(),
+                    seen: have.clone(),
+                });
+                last_sent = Some(Instant::now());
+                changed = false;
+            }
+            let complete = have.len() == self.tasks.len();
+            let acknowledged = arrivals
+                .values()
+                .filter(|a| a.task != self.task)
+                .all(|a| a.seen.iter().any(|t| *t == self.task));
+            if complete && acknowledged {
+                break;
+            }
+            if start.elapsed() >= timeout {
+                let missing: Vec<String> = self
+                    .tasks
+                    .iter()
+                    .filter(|t| !arrivals.contains_key(*t))
+                    .cloned()
+                    .collect();
+                return Err(PortError::WaitFor {
+                    name: self.name.clone(),
+                    task: self.task.clone(),
+                    missing,
+                    waited: start.elapsed(),
+                });
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        state.round += 1;
+        drop(state);
+        let mut messages = BTreeMap::new();
+        for (task, arrival) in arrivals {
+            let value = postcard::from_bytes(&arrival.payload).map_err(|e| PortError::Codec {
+                port: self.name.clone(),
+                what: "decoding a waitfor message",
+                reason: format!("from `{task}`: {e}"),
+            })?;
+            messages.insert(task, value);
+        }
+        Ok(combine(&messages))
+    }
+}
