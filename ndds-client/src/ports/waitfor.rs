@@ -147,7 +147,7 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
             let acknowledged = arrivals
                 .values()
                 .filter(|a| a.task != self.task)
-                .all(|a| a.seen.iter().any(|t| *t == self.task));
+                .all(|a| a.seen.contains(&self.task));
             if complete && acknowledged {
                 break;
             }
