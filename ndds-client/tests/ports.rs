@@ -283,3 +283,66 @@ fn waitfor_joins_three_tasks_and_each_combines_every_message() {
         other => panic!("expected a waitfor timeout, got {other:?}"),
     }
 }
+
+#[test]
+fn select_takes_the_highest_priority_port_first_and_fifo_within_a_port() {
+    use ndds_client::ports::{Selectable, select};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "select");
+    let low = PortOwner::<u32, u32>::declare(&p, "log", "server").unwrap();
+    let mid = PortOwner::<u32, u32>::declare(&p, "status", "server").unwrap();
+    let high = PortOwner::<u32, u32>::declare(&p, "estop", "server").unwrap();
+    low.set_priority(0);
+    mid.set_priority(5);
+    high.set_priority(9);
+    let users: Vec<Arc<PortUser<u32, u32>>> = ["log", "status", "estop"]
+        .iter()
+        .map(|port| Arc::new(PortUser::declare(&p, port, "client").unwrap()))
+        .collect();
+    // Warm up: each user knows its owner and is matched, so later sends go out at once.
+    for (user, owner) in users.iter().zip([&low, &mid, &high]) {
+        let user = Arc::clone(user);
+        let warm = std::thread::spawn(move || user.send(&99, WAIT));
+        let (_, reply) = owner.receive(WAIT).unwrap();
+        reply.reply(&99).unwrap();
+        warm.join().unwrap().unwrap();
+    }
+    // Two requests per port, sent in low-to-high order; each waits for its reply.
+    let mut senders = Vec::new();
+    for (k, user) in users.iter().enumerate() {
+        for n in 0..2 {
+            let user = Arc::clone(user);
+            let value = k as u32 * 10 + n;
+            senders.push(std::thread::spawn(move || user.send(&value, WAIT)));
+            std::thread::sleep(Duration::from_millis(30));
+        }
+    }
+    let ports: [&dyn Selectable; 3] = [&low, &mid, &high];
+    assert!(common::eventually(WAIT, || ports
+        .iter()
+        .map(|p| p.waiting())
+        .sum::<usize>()
+        == 6));
+    let mut order = Vec::new();
+    for _ in 0..6 {
+        let (value, reply) = match select(&ports, WAIT).unwrap() {
+            0 => low.receive(WAIT).unwrap(),
+            1 => mid.receive(WAIT).unwrap(),
+            _ => high.receive(WAIT).unwrap(),
+        };
+        order.push(value);
+        reply.reply(&value).unwrap();
+    }
+    assert_eq!(order, [20, 21, 10, 11, 0, 1]);
+    for s in senders {
+        s.join().unwrap().unwrap();
+    }
+    assert!(matches!(
+        select(&ports, Duration::from_millis(50)),
+        Err(PortError::Timeout {
+            operation: "select",
+            ..
+        })
+    ));
+}

@@ -7,7 +7,7 @@
 //! second owner reported to both owners and to users, and message formats checked (type
 //! fingerprints); query / response with handler priorities ([`Responder`],
 //! [`PortUser::query`]); `waitfor`, the n-way rendezvous with a combining function
-//! ([`Rendezvous`]). The pure logic lives in `ndds_core::ports` (the priority select).
+//! ([`Rendezvous`]); a priority [`select`] over several ports. The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
 //! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
@@ -33,6 +33,49 @@ pub use waitfor::{Arrival, REPEAT, Rendezvous};
 pub use wire::{OwnerInfo, Reply, Request};
 
 use crate::{Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+
+/// A port an owner can [`select`] over.
+pub trait Selectable {
+    /// The port's name.
+    fn port(&self) -> &str;
+    /// Its priority (higher first).
+    fn priority(&self) -> i32;
+    /// Requests waiting now (taking them off the network into the owner's buffer).
+    fn waiting(&self) -> usize;
+}
+
+/// Waits (at most `timeout`) until one of `ports` has a request and returns the index of the
+/// one to receive from: the highest priority among those with requests waiting, the first
+/// listed among equal priorities (deterministic); its oldest request is received next (FIFO
+/// within a port).
+pub fn select(ports: &[&dyn Selectable], timeout: Duration) -> Result<usize, PortError> {
+    let start = std::time::Instant::now();
+    loop {
+        let best = ports
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.waiting() > 0)
+            .max_by_key(|(i, p)| (p.priority(), std::cmp::Reverse(*i)))
+            .map(|(i, _)| i);
+        if let Some(index) = best {
+            return Ok(index);
+        }
+        if start.elapsed() >= timeout {
+            return Err(PortError::Timeout {
+                port: ports
+                    .iter()
+                    .map(|p| p.port())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                operation: "select",
+                task: String::new(),
+                owner: None,
+                waited: start.elapsed(),
+            });
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
 
 /// How often an owner repeats its declaration; users forget an owner not heard for three.
 pub const ANNOUNCE_PERIOD: Duration = Duration::from_millis(250);

@@ -30,6 +30,9 @@ pub(crate) struct OwnerShared {
 pub struct PortOwner<Q, R> {
     shared: Arc<OwnerShared>,
     requests: Consumer<Request>,
+    /// Requests taken off the topic by [`select`](super::select) and not received yet.
+    pending: Mutex<std::collections::VecDeque<Request>>,
+    priority: std::sync::atomic::AtomicI32,
     owners: Consumer<OwnerInfo>,
     incarnation: u64,
     announcer: Option<JoinHandle<()>>,
@@ -89,6 +92,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         Ok(Self {
             shared,
             requests,
+            pending: Mutex::new(std::collections::VecDeque::new()),
+            priority: std::sync::atomic::AtomicI32::new(0),
             owners,
             incarnation,
             announcer: Some(announcer),
@@ -99,6 +104,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// The port's name.
     pub fn port(&self) -> &str {
         &self.shared.port
+    }
+
+    /// Sets the port's priority for [`select`](super::select) (higher first; default 0).
+    pub fn set_priority(&self, priority: i32) {
+        self.priority.store(priority, Ordering::Relaxed);
     }
 
     /// The other owner of this port, if one was seen.
@@ -140,9 +150,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             }
             let left = timeout.saturating_sub(start.elapsed());
             let slice = left.min(Duration::from_millis(50));
-            match self.requests.recv_timeout(slice) {
-                Ok(sample) => {
-                    let request = sample.value;
+            let buffered = self
+                .pending
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .pop_front();
+            let next = match buffered {
+                Some(request) => Ok(request),
+                None => self.requests.recv_timeout(slice).map(|s| s.value),
+            };
+            match next {
+                Ok(request) => {
                     let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| {
                         PortError::Codec {
                             port: self.shared.port.clone(),
@@ -173,6 +191,26 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 Err(_) => {}
             }
         }
+    }
+}
+
+impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Selectable
+    for PortOwner<Q, R>
+{
+    fn port(&self) -> &str {
+        &self.shared.port
+    }
+
+    fn priority(&self) -> i32 {
+        self.priority.load(Ordering::Relaxed)
+    }
+
+    fn waiting(&self) -> usize {
+        let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
+        while let Ok(sample) = self.requests.try_recv() {
+            pending.push_back(sample.value);
+        }
+        pending.len()
     }
 }
 
