@@ -346,3 +346,44 @@ fn select_takes_the_highest_priority_port_first_and_fifo_within_a_port() {
         })
     ));
 }
+
+#[test]
+fn sendall_reaches_every_user_and_returns_on_the_first_reply() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "sendall");
+    let owner = PortOwner::<u32, String>::declare(&p, "fleet", "dispatcher").unwrap();
+    let users: Vec<_> = ["robot1", "robot2", "robot3"]
+        .iter()
+        .map(|task| PortUser::<u32, String>::declare(&p, "fleet", task).unwrap())
+        .collect();
+    assert!(common::eventually(WAIT, || owner.users() == 3));
+    let threads: Vec<_> = users
+        .into_iter()
+        .enumerate()
+        .map(|(i, user)| {
+            std::thread::spawn(move || {
+                user.receive_all(WAIT, |v| {
+                    std::thread::sleep(Duration::from_millis(50 * i as u64));
+                    format!("robot{} has {v}", i + 1)
+                })
+            })
+        })
+        .collect();
+    let replies = owner.sendall(&7, WAIT).unwrap();
+    let mut answers = vec![replies.first().clone()];
+    while let Some(next) = replies.next(Duration::from_secs(2)) {
+        answers.push(next.unwrap());
+    }
+    answers.sort();
+    assert_eq!(
+        answers,
+        [
+            ("robot1".to_owned(), "robot1 has 7".to_owned()),
+            ("robot2".to_owned(), "robot2 has 7".to_owned()),
+            ("robot3".to_owned(), "robot3 has 7".to_owned()),
+        ]
+    );
+    for t in threads {
+        assert_eq!(t.join().unwrap().unwrap(), 7);
+    }
+}

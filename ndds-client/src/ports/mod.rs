@@ -7,7 +7,8 @@
 //! second owner reported to both owners and to users, and message formats checked (type
 //! fingerprints); query / response with handler priorities ([`Responder`],
 //! [`PortUser::query`]); `waitfor`, the n-way rendezvous with a combining function
-//! ([`Rendezvous`]); a priority [`select`] over several ports. The pure logic lives in `ndds_core::ports` (the priority select).
+//! ([`Rendezvous`]); a priority [`select`] over several ports; `sendall` from the owner to
+//! every user ([`PortOwner::sendall`], [`PortUser::receive_all`]). The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
 //! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
@@ -16,6 +17,7 @@
 mod error;
 mod owner;
 mod respond;
+mod sendall;
 mod user;
 mod waitfor;
 mod wire;
@@ -28,6 +30,7 @@ use serde::de::DeserializeOwned;
 pub use error::PortError;
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
+pub use sendall::{Broadcast, BroadcastReply, Replies};
 pub use user::PortUser;
 pub use waitfor::{Arrival, REPEAT, Rendezvous};
 pub use wire::{OwnerInfo, Reply, Request};

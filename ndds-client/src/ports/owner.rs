@@ -29,6 +29,9 @@ pub(crate) struct OwnerShared {
 /// The owner of a port: receives requests of type `Q` and replies with `R`.
 pub struct PortOwner<Q, R> {
     shared: Arc<OwnerShared>,
+    broadcast: Producer<super::sendall::Broadcast>,
+    broadcast_replies: Consumer<super::sendall::BroadcastReply>,
+    broadcasts: std::sync::atomic::AtomicU64,
     requests: Consumer<Request>,
     /// Requests taken off the topic by [`select`](super::select) and not received yet.
     pending: Mutex<std::collections::VecDeque<Request>>,
@@ -90,6 +93,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 reason: e.to_string(),
             })?;
         Ok(Self {
+            broadcast: reliable_producer(participant, port, &topic(port, "all"))?,
+            broadcast_replies: reliable_consumer(participant, port, &topic(port, "all-reply"))?,
+            broadcasts: std::sync::atomic::AtomicU64::new(1),
             shared,
             requests,
             pending: Mutex::new(std::collections::VecDeque::new()),
@@ -104,6 +110,62 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// The port's name.
     pub fn port(&self) -> &str {
         &self.shared.port
+    }
+
+    /// `sendall`: sends `value` to every user of the port and waits (at most `timeout`) for
+    /// the first reply; the later replies come from the returned [`Replies`](super::Replies).
+    /// Users that declared the port after this call do not get the message.
+    pub fn sendall(
+        &self,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<super::Replies<'_, R>, PortError> {
+        let start = Instant::now();
+        let port = &self.shared.port;
+        let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
+        let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
+            port: port.clone(),
+            what: "encoding a broadcast",
+            reason: e.to_string(),
+        })?;
+        self.broadcast
+            .write(&super::sendall::Broadcast {
+                owner: self.incarnation,
+                id,
+                task: self.shared.task.clone(),
+                payload,
+            })
+            .map_err(|e| PortError::Transport {
+                port: port.clone(),
+                reason: e.to_string(),
+            })?;
+        let first = super::sendall::next_reply(
+            port,
+            &self.broadcast_replies,
+            self.incarnation,
+            id,
+            timeout,
+        )
+        .ok_or_else(|| PortError::Timeout {
+            port: port.clone(),
+            operation: "sendall",
+            task: self.shared.task.clone(),
+            owner: None,
+            waited: start.elapsed(),
+        })??;
+        Ok(super::Replies {
+            port,
+            id,
+            owner: self.incarnation,
+            source: &self.broadcast_replies,
+            first,
+            _reply: PhantomData,
+        })
+    }
+
+    /// Users matched on the broadcast topic now (who a `sendall` reaches).
+    pub fn users(&self) -> usize {
+        self.broadcast.matched().len()
     }
 
     /// Sets the port's priority for [`select`](super::select) (higher first; default 0).

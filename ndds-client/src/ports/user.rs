@@ -17,6 +17,8 @@ use crate::{Consumer, Participant, Producer, TypeDescription};
 
 /// A user of a port: sends requests of type `Q`, gets replies of type `R`.
 pub struct PortUser<Q, R> {
+    broadcasts: Consumer<super::sendall::Broadcast>,
+    broadcast_replies: Producer<super::sendall::BroadcastReply>,
     port: String,
     task: String,
     user: String,
@@ -46,6 +48,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         check_name(port)?;
         let user = format!("{:016x}", fastrand::u64(..));
         Ok(Self {
+            broadcasts: reliable_consumer(participant, port, &topic(port, "all"))?,
+            broadcast_replies: reliable_producer(participant, port, &topic(port, "all-reply"))?,
             requests: reliable_producer::<Request>(participant, port, &topic(port, "request"))?,
             replies: reliable_consumer::<Reply>(
                 participant,
@@ -162,6 +166,49 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "decoding a reply",
             reason: e.to_string(),
         })
+    }
+
+    /// Takes the next message the owner sent to all users (`sendall`), waiting at most
+    /// `timeout`, and answers it with `answer`; returns the message.
+    pub fn receive_all(
+        &self,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> R,
+    ) -> Result<Q, PortError> {
+        let start = Instant::now();
+        let broadcast = self
+            .broadcasts
+            .recv_timeout(timeout)
+            .map_err(|_| PortError::Timeout {
+                port: self.port.clone(),
+                operation: "receive_all",
+                task: self.task.clone(),
+                owner: None,
+                waited: start.elapsed(),
+            })?
+            .value;
+        let value: Q = postcard::from_bytes(&broadcast.payload).map_err(|e| PortError::Codec {
+            port: self.port.clone(),
+            what: "decoding a broadcast",
+            reason: e.to_string(),
+        })?;
+        let payload = postcard::to_stdvec(&answer(&value)).map_err(|e| PortError::Codec {
+            port: self.port.clone(),
+            what: "encoding a broadcast reply",
+            reason: e.to_string(),
+        })?;
+        self.broadcast_replies
+            .write(&super::sendall::BroadcastReply {
+                owner: broadcast.owner,
+                id: broadcast.id,
+                task: self.task.clone(),
+                payload,
+            })
+            .map_err(|e| PortError::Transport {
+                port: self.port.clone(),
+                reason: e.to_string(),
+            })?;
+        Ok(value)
     }
 
     /// Queries the port: the owner's response handler (see [`Responder`](super::Responder))
