@@ -6,7 +6,7 @@ mod common;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ndds_client::ports::{PortError, PortOwner, PortUser};
+use ndds_client::ports::{PortError, PortOwner, PortUser, Restrictions, Usage};
 
 const WAIT: Duration = Duration::from_secs(10);
 
@@ -187,8 +187,11 @@ fn an_urgent_query_is_answered_before_less_urgent_ones_that_arrived_earlier() {
             n + 1000
         })
         .unwrap();
-    let status = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.status", "monitor").unwrap());
-    let stop = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.stop", "operator").unwrap());
+    let query_user = |port: &str, task: &str| {
+        Arc::new(PortUser::<u32, u32>::declare_with(&p, port, task, &[Usage::Query]).unwrap())
+    };
+    let status = query_user("arm.status", "monitor");
+    let stop = query_user("arm.stop", "operator");
     let query = |user: &Arc<PortUser<u32, u32>>, n: u32| {
         let user = Arc::clone(user);
         std::thread::spawn(move || user.query(&n, WAIT))
@@ -354,7 +357,9 @@ fn sendall_reaches_every_user_and_returns_on_the_first_reply() {
     let owner = PortOwner::<u32, String>::declare(&p, "fleet", "dispatcher").unwrap();
     let users: Vec<_> = ["robot1", "robot2", "robot3"]
         .iter()
-        .map(|task| PortUser::<u32, String>::declare(&p, "fleet", task).unwrap())
+        .map(|task| {
+            PortUser::<u32, String>::declare_with(&p, "fleet", task, &[Usage::ReceiveAll]).unwrap()
+        })
         .collect();
     assert!(common::eventually(WAIT, || owner.users() == 3));
     let threads: Vec<_> = users
@@ -386,4 +391,114 @@ fn sendall_reaches_every_user_and_returns_on_the_first_reply() {
     for t in threads {
         assert_eq!(t.join().unwrap().unwrap(), 7);
     }
+}
+
+fn refused(result: Result<u32, PortError>) -> (String, &'static str) {
+    match result {
+        Err(PortError::Refused {
+            port,
+            owner,
+            user,
+            restriction,
+            ..
+        }) => (format!("{port}/{owner}/{user}"), restriction),
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+}
+
+#[test]
+fn each_restriction_refuses_what_it_should_naming_the_port_and_both_sides() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "restrict");
+    let short = Duration::from_secs(3);
+
+    // User list.
+    let owner = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "cell",
+        "cell-controller",
+        Restrictions {
+            users: vec!["planner".into()],
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let intruder = PortUser::<u32, u32>::declare(&p, "cell", "intruder").unwrap();
+    let (who, what) = refused(intruder.send(&1, short));
+    assert_eq!(
+        (who.as_str(), what),
+        ("cell/cell-controller/intruder", "user list")
+    );
+    let planner = Arc::new(PortUser::<u32, u32>::declare(&p, "cell", "planner").unwrap());
+    let sender = {
+        let planner = Arc::clone(&planner);
+        std::thread::spawn(move || planner.send(&2, WAIT))
+    };
+    let (v, reply) = owner.receive(WAIT).unwrap();
+    reply.reply(&(v * 2)).unwrap();
+    assert_eq!(sender.join().unwrap().unwrap(), 4);
+    assert!(common::eventually(WAIT, || owner
+        .refusals()
+        .iter()
+        .any(|r| r.contains("intruder") && r.contains("user list"))));
+
+    // Usage: the owner accepts queries only; a user declared for send is refused, and an
+    // operation a user did not declare is refused locally.
+    let _queries = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "lookup",
+        "db",
+        Restrictions {
+            usages: vec![Usage::Query],
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let sender = PortUser::<u32, u32>::declare(&p, "lookup", "writer").unwrap();
+    let (who, what) = refused(sender.send(&1, short));
+    assert_eq!((who.as_str(), what), ("lookup/db/writer", "usage"));
+    let (_, what) = refused(sender.query(&1, short));
+    assert_eq!(what, "usage");
+
+    // Maximum active users: the second user is refused while the first is active.
+    let _solo = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "tool",
+        "tool-changer",
+        Restrictions {
+            max_users: Some(1),
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let first = PortUser::<u32, u32>::declare(&p, "tool", "first").unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    let second = PortUser::<u32, u32>::declare(&p, "tool", "second").unwrap();
+    let (who, what) = refused(second.send(&1, short));
+    assert_eq!(
+        (who.as_str(), what),
+        ("tool/tool-changer/second", "maximum active users")
+    );
+    drop(first);
+
+    // Timeout: the port's 300 ms bounds a send that asked for 10 s.
+    let _slow = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "slow",
+        "sleeper",
+        Restrictions {
+            timeout_ms: Some(300),
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let user = PortUser::<u32, u32>::declare(&p, "slow", "impatient").unwrap();
+    let started = std::time::Instant::now();
+    let err = user.send(&1, Duration::from_secs(10)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    assert!(
+        started.elapsed() < Duration::from_secs(5),
+        "{:?}",
+        started.elapsed()
+    );
 }

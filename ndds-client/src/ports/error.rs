@@ -42,6 +42,20 @@ pub enum PortError {
         /// The other.
         second: String,
     },
+    /// A restriction of the port refuses this user.
+    #[error("port `{port}`: `{user}` refused by owner `{owner}`: {restriction}: {detail}")]
+    Refused {
+        /// The port.
+        port: String,
+        /// The owner.
+        owner: String,
+        /// The user.
+        user: String,
+        /// Which restriction.
+        restriction: &'static str,
+        /// Why, in words.
+        detail: String,
+    },
     /// The message formats of the two sides differ.
     #[error(
         "port `{port}`: `{user}` uses message formats {user_formats} but owner `{owner}` expects {owner_formats}"

@@ -12,7 +12,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::error::PortError;
-use super::wire::{OwnerInfo, Reply, Request};
+use super::wire::{OwnerInfo, Reply, Request, Restrictions, UserInfo};
 use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
@@ -24,6 +24,75 @@ pub(crate) struct OwnerShared {
     /// Another owner seen on the port (its task), if any.
     conflict: Mutex<Option<String>>,
     stop: AtomicBool,
+    restrictions: Restrictions,
+    /// Users heard recently, in the order first heard: (info, last heard).
+    active: Mutex<Vec<(UserInfo, Instant)>>,
+    /// Refusals so far, in words.
+    refused: Mutex<Vec<String>>,
+}
+
+impl OwnerShared {
+    /// Takes user declarations, forgets users not heard for three periods, and returns the
+    /// user handles admitted under `max_users` (all of them without it).
+    fn admit(&self, users: &Consumer<UserInfo>) -> Vec<String> {
+        let mut active = self.active.lock().unwrap_or_else(|p| p.into_inner());
+        while let Ok(sample) = users.try_recv() {
+            let info = sample.value;
+            match active.iter_mut().find(|(u, _)| u.user == info.user) {
+                Some(entry) => entry.1 = Instant::now(),
+                None => {
+                    if let Some(why) = self.refusal(&info) {
+                        self.note_refusal(&info, &why);
+                    }
+                    active.push((info, Instant::now()));
+                }
+            }
+        }
+        active.retain(|(_, seen)| seen.elapsed() < ANNOUNCE_PERIOD * 3);
+        let limit = self
+            .restrictions
+            .max_users
+            .map_or(usize::MAX, |m| m as usize);
+        active
+            .iter()
+            .filter(|(u, _)| self.refusal(u).is_none())
+            .take(limit)
+            .map(|(u, _)| u.user.clone())
+            .collect()
+    }
+
+    /// Why the user list or usage restriction refuses `user`, if it does.
+    fn refusal(&self, user: &UserInfo) -> Option<String> {
+        self.restrictions
+            .refusal(&user.task, &user.usages)
+            .map(|(what, why)| format!("{what}: {why}"))
+    }
+
+    fn note_refusal(&self, user: &UserInfo, why: &str) {
+        let text = format!("`{}` ({}): {why}", user.task, user.user);
+        tracing::warn!(port = %self.port, owner = %self.task, refusal = %text, "port user refused");
+        let mut refused = self.refused.lock().unwrap_or_else(|p| p.into_inner());
+        if refused.len() < 256 && !refused.contains(&text) {
+            refused.push(text);
+        }
+    }
+
+    /// Whether a request from user handle `user` may be served.
+    fn admitted(&self, user: &str) -> bool {
+        let active = self.active.lock().unwrap_or_else(|p| p.into_inner());
+        let limit = self
+            .restrictions
+            .max_users
+            .map_or(usize::MAX, |m| m as usize);
+        if !self.restrictions.restricted() {
+            return true;
+        }
+        active
+            .iter()
+            .filter(|(u, _)| self.refusal(u).is_none())
+            .take(limit)
+            .any(|(u, _)| u.user == user)
+    }
 }
 
 /// The owner of a port: receives requests of type `Q` and replies with `R`.
@@ -56,7 +125,20 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// Declares `task` the owner of `port`. Another owner anywhere in the domain is reported
     /// to both (see [`receive`](Self::receive)).
     pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
+        Self::declare_with(participant, port, task, Restrictions::default())
+    }
+
+    /// The same, with restrictions: users that break them are refused (each user's operations
+    /// fail with [`PortError::Refused`] naming the port, the owner and the user; the owner
+    /// drops their requests and lists them in [`refusals`](Self::refusals)).
+    pub fn declare_with(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        restrictions: Restrictions,
+    ) -> Result<Self, PortError> {
         check_name(port)?;
+        let users = reliable_consumer::<UserInfo>(participant, port, &topic(port, "users"))?;
         let requests = reliable_consumer::<Request>(participant, port, &topic(port, "request"))?;
         let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
         let announce = reliable_producer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
@@ -67,7 +149,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             incarnation,
             request_format: TypeDescription::of::<Q>().fingerprint(),
             reply_format: TypeDescription::of::<R>().fingerprint(),
+            restrictions: restrictions.clone(),
+            admitted: Vec::new(),
         };
+        let priority = restrictions.priority;
         let shared = Arc::new(OwnerShared {
             port: port.to_owned(),
             task: task.to_owned(),
@@ -75,12 +160,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             replies: Mutex::new(HashMap::new()),
             conflict: Mutex::new(None),
             stop: AtomicBool::new(false),
+            restrictions,
+            active: Mutex::new(Vec::new()),
+            refused: Mutex::new(Vec::new()),
         });
         let flag = Arc::clone(&shared);
         let announcer = std::thread::Builder::new()
             .name(format!("port-{port}"))
             .spawn(move || {
+                let mut info = info;
                 while !flag.stop.load(Ordering::Acquire) {
+                    info.admitted = flag.admit(&users);
                     let _ = announce.write(&info);
                     let until = Instant::now() + ANNOUNCE_PERIOD;
                     while Instant::now() < until && !flag.stop.load(Ordering::Acquire) {
@@ -99,7 +189,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             shared,
             requests,
             pending: Mutex::new(std::collections::VecDeque::new()),
-            priority: std::sync::atomic::AtomicI32::new(0),
+            priority: std::sync::atomic::AtomicI32::new(priority),
             owners,
             incarnation,
             announcer: Some(announcer),
@@ -168,6 +258,20 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         self.broadcast.matched().len()
     }
 
+    /// The users refused so far by the port's restrictions, in words.
+    pub fn refusals(&self) -> Vec<String> {
+        self.shared
+            .refused
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// The port's restrictions.
+    pub fn restrictions(&self) -> &Restrictions {
+        &self.shared.restrictions
+    }
+
     /// Sets the port's priority for [`select`](super::select) (higher first; default 0).
     pub fn set_priority(&self, priority: i32) {
         self.priority.store(priority, Ordering::Relaxed);
@@ -222,6 +326,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 None => self.requests.recv_timeout(slice).map(|s| s.value),
             };
             match next {
+                Ok(request) if !self.shared.admitted(&request.user) => {
+                    tracing::warn!(port = %self.shared.port, user = %request.task,
+                        "request from a user the port's restrictions refuse: dropped");
+                }
                 Ok(request) => {
                     let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| {
                         PortError::Codec {

@@ -11,12 +11,16 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::error::PortError;
-use super::wire::{OwnerInfo, Reply, Request};
+use super::wire::{OwnerInfo, Reply, Request, Usage, UserInfo};
 use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
 /// A user of a port: sends requests of type `Q`, gets replies of type `R`.
 pub struct PortUser<Q, R> {
+    usages: Vec<Usage>,
+    declared: Instant,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    announcer: Option<std::thread::JoinHandle<()>>,
     broadcasts: Consumer<super::sendall::Broadcast>,
     broadcast_replies: Producer<super::sendall::BroadcastReply>,
     port: String,
@@ -43,11 +47,49 @@ struct Demux {
 }
 
 impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<Q, R> {
-    /// Declares `task` a user of `port`.
+    /// Declares `task` a user of `port` that sends (usage [`Usage::Send`]).
     pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
+        Self::declare_with(participant, port, task, &[Usage::Send])
+    }
+
+    /// Declares `task` a user of `port` with these usages (what the owner's usage restriction
+    /// checks; an operation not declared here is refused locally).
+    pub fn declare_with(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        usages: &[Usage],
+    ) -> Result<Self, PortError> {
         check_name(port)?;
         let user = format!("{:016x}", fastrand::u64(..));
+        let announce = reliable_producer::<UserInfo>(participant, port, &topic(port, "users"))?;
+        let info = UserInfo {
+            user: user.clone(),
+            task: task.to_owned(),
+            usages: usages.to_vec(),
+        };
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = std::sync::Arc::clone(&stop);
+        let announcer = std::thread::Builder::new()
+            .name(format!("port-user-{port}"))
+            .spawn(move || {
+                while !flag.load(Ordering::Acquire) {
+                    let _ = announce.write(&info);
+                    let until = Instant::now() + ANNOUNCE_PERIOD;
+                    while Instant::now() < until && !flag.load(Ordering::Acquire) {
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                }
+            })
+            .map_err(|e| PortError::Transport {
+                port: port.to_owned(),
+                reason: e.to_string(),
+            })?;
         Ok(Self {
+            usages: usages.to_vec(),
+            declared: Instant::now(),
+            stop,
+            announcer: Some(announcer),
             broadcasts: reliable_consumer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_producer(participant, port, &topic(port, "all-reply"))?,
             requests: reliable_producer::<Request>(participant, port, &topic(port, "request"))?,
@@ -93,6 +135,27 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         match owners.as_slice() {
             [] => Ok(None),
             [owner] => {
+                let refused = |restriction: &'static str, detail: String| PortError::Refused {
+                    port: self.port.clone(),
+                    owner: owner.task.clone(),
+                    user: self.task.clone(),
+                    restriction,
+                    detail,
+                };
+                if let Some((what, why)) = owner.restrictions.refusal(&self.task, &self.usages) {
+                    return Err(refused(what, why));
+                }
+                if owner.restrictions.restricted() && !owner.admitted.contains(&self.user) {
+                    // The owner admits users on its next announcements; past that, it is full.
+                    if self.declared.elapsed() > ANNOUNCE_PERIOD * 4 {
+                        let max = owner.restrictions.max_users.unwrap_or(0);
+                        return Err(refused(
+                            "maximum active users",
+                            format!("{max} active users already"),
+                        ));
+                    }
+                    return Ok(None);
+                }
                 if (owner.request_format, owner.reply_format) != self.formats {
                     return Err(PortError::Format {
                         port: self.port.clone(),
@@ -115,9 +178,33 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         }
     }
 
-    /// Sends `value` and waits (at most `timeout`) for the owner's reply.
+    /// Sends `value` and waits (at most `timeout`, or the port's timeout restriction if
+    /// shorter) for the owner's reply.
     pub fn send(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        self.require(Usage::Send)?;
+        self.exchange(value, timeout)
+    }
+
+    /// Refuses locally an operation this user did not declare.
+    fn require(&self, usage: Usage) -> Result<(), PortError> {
+        if self.usages.contains(&usage) {
+            return Ok(());
+        }
+        Err(PortError::Refused {
+            port: self.port.clone(),
+            owner: String::new(),
+            user: self.task.clone(),
+            restriction: "usage",
+            detail: format!(
+                "{usage:?} was not declared by this user (declared: {:?})",
+                self.usages
+            ),
+        })
+    }
+
+    fn exchange(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         let start = Instant::now();
+        let mut timeout = timeout;
         let timed_out = |owner: Option<String>| PortError::Timeout {
             port: self.port.clone(),
             operation: "send",
@@ -129,6 +216,13 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         let owner = loop {
             let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
             if let Some(owner) = self.owner(&mut demux)? {
+                let declared = demux
+                    .owners
+                    .values()
+                    .find_map(|(o, _)| o.restrictions.timeout_ms);
+                if let Some(ms) = declared {
+                    timeout = timeout.min(Duration::from_millis(ms));
+                }
                 break owner;
             }
             drop(demux);
@@ -175,6 +269,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         timeout: Duration,
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
+        self.require(Usage::ReceiveAll)?;
         let start = Instant::now();
         let broadcast = self
             .broadcasts
@@ -214,7 +309,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     /// Queries the port: the owner's response handler (see [`Responder`](super::Responder))
     /// answers. The same exchange as [`send`](Self::send).
     pub fn query(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
-        self.send(value, timeout)
+        self.require(Usage::Query)?;
+        self.exchange(value, timeout)
     }
 
     /// The reply to request `id`: one waiting sender reads the topic at a time and hands the
@@ -248,6 +344,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 demux.waiting.insert(sample.value.id, sample.value);
             }
             self.arrived.notify_all();
+        }
+    }
+}
+
+impl<Q, R> Drop for PortUser<Q, R> {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.announcer.take() {
+            let _ = thread.join();
         }
     }
 }

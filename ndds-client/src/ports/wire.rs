@@ -27,6 +27,67 @@ pub struct Reply {
     pub payload: Vec<u8>,
 }
 
+/// What a user does with a port (the message direction restriction).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Usage {
+    /// `send`: a request answered by the owner's `reply`.
+    Send,
+    /// `query`: a request answered by the owner's response handler.
+    Query,
+    /// `receive_all`: messages the owner sends to every user (`sendall`).
+    ReceiveAll,
+}
+
+/// Restrictions an owner declares with its port, checked when users match it.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Restrictions {
+    /// Allowed usages (empty: any).
+    pub usages: Vec<Usage>,
+    /// Tasks allowed to use the port (empty: any).
+    pub users: Vec<String>,
+    /// At most this many active users (users heard recently), admitted first come.
+    pub max_users: Option<u32>,
+    /// Operations on the port time out after this long at most (milliseconds).
+    pub timeout_ms: Option<u64>,
+    /// The port's priority (for `select` and response handlers).
+    pub priority: i32,
+}
+
+impl Restrictions {
+    /// Which restriction refuses `task` using the port for `usages`, and why; `None` when
+    /// none does (`max_users` is the owner's to decide).
+    pub fn refusal(&self, task: &str, usages: &[Usage]) -> Option<(&'static str, String)> {
+        if !self.users.is_empty() && !self.users.iter().any(|u| u == task) {
+            return Some((
+                "user list",
+                format!("`{task}` is not among {:?}", self.users),
+            ));
+        }
+        if !self.usages.is_empty()
+            && let Some(bad) = usages.iter().find(|u| !self.usages.contains(u))
+        {
+            return Some(("usage", format!("{bad:?} is not among {:?}", self.usages)));
+        }
+        None
+    }
+
+    /// Whether the owner must admit users one by one.
+    pub fn restricted(&self) -> bool {
+        !self.users.is_empty() || !self.usages.is_empty() || self.max_users.is_some()
+    }
+}
+
+/// A user's declaration, repeated while it uses the port.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct UserInfo {
+    /// The user handle's id (its reply topic suffix).
+    pub user: String,
+    /// The using task.
+    pub task: String,
+    /// What it does with the port.
+    pub usages: Vec<Usage>,
+}
+
 /// An owner's declaration, repeated while it owns the port.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct OwnerInfo {
@@ -40,4 +101,8 @@ pub struct OwnerInfo {
     pub request_format: u64,
     /// Fingerprint of the reply type.
     pub reply_format: u64,
+    /// The port's restrictions.
+    pub restrictions: Restrictions,
+    /// With `max_users`: the user handles admitted now.
+    pub admitted: Vec<String>,
 }
