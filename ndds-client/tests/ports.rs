@@ -249,7 +249,7 @@ fn waitfor_joins_three_tasks_and_each_combines_every_message() {
                                 .collect::<Vec<_>>()
                                 .join(",")
                         })
-                        .unwrap();
+                        .unwrap_or_else(|e| panic!("{task} round {round}: {e}"));
                     results.push(combined);
                 }
                 results
@@ -501,4 +501,57 @@ fn each_restriction_refuses_what_it_should_naming_the_port_and_both_sides() {
         "{:?}",
         started.elapsed()
     );
+}
+
+#[test]
+fn a_bounded_buffer_filter_makes_sends_non_blocking_until_it_is_full() {
+    use ndds_client::ports::Filter;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "filter");
+    let owner = PortOwner::<u32, ()>::declare_with(
+        &p,
+        "conveyor",
+        "gate",
+        Restrictions {
+            filter: Some(Filter::BoundedBuffer { capacity: 3 }),
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let user = PortUser::<u32, ()>::declare(&p, "conveyor", "loader").unwrap();
+    // Three sends return without the owner receiving anything.
+    for n in 1..=3 {
+        user.send(&n, WAIT).unwrap();
+    }
+    // The fourth waits for room: with nobody receiving, it times out.
+    let err = user.send(&4, Duration::from_millis(500)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    // The owner takes one: the waiting request 4 (its sender gave up) takes the room.
+    let (first, reply) = owner.receive(WAIT).unwrap();
+    reply.reply(&()).unwrap();
+    assert_eq!(first, 1);
+    assert!(common::eventually(WAIT, || {
+        use ndds_client::ports::Selectable;
+        owner.waiting() == 3
+    }));
+    // One more taken: room for a new send, which returns at once; arrival order is kept.
+    assert_eq!(owner.receive(WAIT).unwrap().0, 2);
+    user.send(&5, WAIT).unwrap();
+    let mut rest = Vec::new();
+    for _ in 0..3 {
+        rest.push(owner.receive(WAIT).unwrap().0);
+    }
+    assert_eq!(rest, [3, 4, 5]);
+    // A filter that answers at once needs a reply type of ().
+    let bad = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "other",
+        "gate",
+        Restrictions {
+            filter: Some(Filter::BoundedBuffer { capacity: 1 }),
+            ..Restrictions::default()
+        },
+    );
+    assert!(bad.is_err());
 }

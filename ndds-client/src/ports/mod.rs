@@ -33,7 +33,7 @@ pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Broadcast, BroadcastReply, Replies};
 pub use user::PortUser;
 pub use waitfor::{Arrival, REPEAT, Rendezvous};
-pub use wire::{OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
+pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
 
 use crate::{Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
 

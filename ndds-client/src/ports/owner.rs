@@ -12,7 +12,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::error::PortError;
-use super::wire::{OwnerInfo, Reply, Request, Restrictions, UserInfo};
+use super::wire::{Filter, OwnerInfo, Reply, Request, Restrictions, UserInfo};
 use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
@@ -101,9 +101,12 @@ pub struct PortOwner<Q, R> {
     broadcast: Producer<super::sendall::Broadcast>,
     broadcast_replies: Consumer<super::sendall::BroadcastReply>,
     broadcasts: std::sync::atomic::AtomicU64,
-    requests: Consumer<Request>,
-    /// Requests taken off the topic by [`select`](super::select) and not received yet.
-    pending: Mutex<std::collections::VecDeque<Request>>,
+    /// `None` when a filter thread reads the topic.
+    requests: Option<Consumer<Request>>,
+    /// Requests taken off the topic (by [`select`](super::select) or the filter) and not
+    /// received yet.
+    pending: Arc<Mutex<std::collections::VecDeque<Request>>>,
+    filter: Option<JoinHandle<()>>,
     priority: std::sync::atomic::AtomicI32,
     owners: Consumer<OwnerInfo>,
     incarnation: u64,
@@ -115,6 +118,8 @@ pub struct PortOwner<Q, R> {
 #[must_use = "a sender waits until it is replied to (or times out)"]
 pub struct ReplyHandle<R> {
     shared: Arc<OwnerShared>,
+    /// The filter answered the sender already: replying does nothing.
+    answered: bool,
     id: u64,
     user: String,
     task: String,
@@ -164,6 +169,30 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             active: Mutex::new(Vec::new()),
             refused: Mutex::new(Vec::new()),
         });
+        let pending = Arc::new(Mutex::new(std::collections::VecDeque::new()));
+        let (requests, filter) = match shared.restrictions.filter {
+            None => (Some(requests), None),
+            Some(Filter::BoundedBuffer { capacity }) => {
+                if TypeDescription::of::<R>().fingerprint()
+                    != TypeDescription::of::<()>().fingerprint()
+                {
+                    return Err(PortError::Transport {
+                        port: port.to_owned(),
+                        reason: "a bounded-buffer filter answers sends at once: the reply type must be ()".into(),
+                    });
+                }
+                let shared = Arc::clone(&shared);
+                let buffer = Arc::clone(&pending);
+                let thread = std::thread::Builder::new()
+                    .name(format!("port-filter-{port}"))
+                    .spawn(move || bounded_buffer(&shared, &requests, &buffer, capacity as usize))
+                    .map_err(|e| PortError::Transport {
+                        port: port.to_owned(),
+                        reason: e.to_string(),
+                    })?;
+                (None, Some(thread))
+            }
+        };
         let flag = Arc::clone(&shared);
         let announcer = std::thread::Builder::new()
             .name(format!("port-{port}"))
@@ -188,7 +217,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             broadcasts: std::sync::atomic::AtomicU64::new(1),
             shared,
             requests,
-            pending: Mutex::new(std::collections::VecDeque::new()),
+            pending,
+            filter,
             priority: std::sync::atomic::AtomicI32::new(priority),
             owners,
             incarnation,
@@ -323,7 +353,16 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 .pop_front();
             let next = match buffered {
                 Some(request) => Ok(request),
-                None => self.requests.recv_timeout(slice).map(|s| s.value),
+                None => match &self.requests {
+                    Some(requests) => requests
+                        .recv_timeout(slice)
+                        .map(|s| s.value)
+                        .map_err(|_| ()),
+                    None => {
+                        std::thread::sleep(slice.min(Duration::from_millis(2)));
+                        Err(())
+                    }
+                },
             };
             match next {
                 Ok(request) if !self.shared.admitted(&request.user) => {
@@ -342,6 +381,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                         value,
                         ReplyHandle {
                             shared: Arc::clone(&self.shared),
+                            answered: self.filter.is_some(),
                             id: request.id,
                             user: request.user,
                             task: request.task,
@@ -377,8 +417,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
 
     fn waiting(&self) -> usize {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
-        while let Ok(sample) = self.requests.try_recv() {
-            pending.push_back(sample.value);
+        if let Some(requests) = &self.requests {
+            while let Ok(sample) = requests.try_recv() {
+                pending.push_back(sample.value);
+            }
         }
         pending.len()
     }
@@ -387,7 +429,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
 impl<Q, R> Drop for PortOwner<Q, R> {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
-        if let Some(thread) = self.announcer.take() {
+        for thread in [self.announcer.take(), self.filter.take()]
+            .into_iter()
+            .flatten()
+        {
             let _ = thread.join();
         }
     }
@@ -414,29 +459,74 @@ impl<R: Serialize> ReplyHandle<R> {
 
     /// Replies (does not wait for the sender).
     pub fn reply(self, value: &R) -> Result<(), PortError> {
-        let shared = &self.shared;
+        if self.answered {
+            return Ok(());
+        }
         let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
-            port: shared.port.clone(),
+            port: self.shared.port.clone(),
             what: "encoding a reply",
             reason: e.to_string(),
         })?;
-        let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
-        if !replies.contains_key(&self.user) {
-            let name = topic(&shared.port, &format!("reply/{}", self.user));
-            let producer = reliable_producer::<Reply>(&shared.participant, &shared.port, &name)?;
-            // A reliable stream starts at the match: wait for the sender's reply consumer.
-            producer.wait_for_consumers(1, REPLY_MATCH);
-            replies.insert(self.user.clone(), producer);
+        send_reply(&self.shared, &self.user, &self.task, self.id, payload)
+    }
+}
+
+/// Writes a reply to user handle `user` (its reply topic is matched on first use).
+fn send_reply(
+    shared: &OwnerShared,
+    user: &str,
+    task: &str,
+    id: u64,
+    payload: Vec<u8>,
+) -> Result<(), PortError> {
+    let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
+    if !replies.contains_key(user) {
+        let name = topic(&shared.port, &format!("reply/{user}"));
+        let producer = reliable_producer::<Reply>(&shared.participant, &shared.port, &name)?;
+        // A reliable stream starts at the match: wait for the sender's reply consumer.
+        producer.wait_for_consumers(1, REPLY_MATCH);
+        replies.insert(user.to_owned(), producer);
+    }
+    replies[user]
+        .write(&Reply { id, payload })
+        .map_err(|e| PortError::Transport {
+            port: shared.port.clone(),
+            reason: format!("replying to `{task}`: {e}"),
+        })
+}
+
+/// The bounded-buffer filter: takes requests off the topic while the buffer has room and
+/// answers each at once (so the sender goes on); when the buffer is full, it stops taking
+/// them, and senders wait for room.
+fn bounded_buffer(
+    shared: &OwnerShared,
+    requests: &Consumer<Request>,
+    buffer: &Mutex<std::collections::VecDeque<Request>>,
+    capacity: usize,
+) {
+    let empty = postcard::to_stdvec(&()).unwrap_or_default();
+    while !shared.stop.load(Ordering::Acquire) {
+        let room = buffer.lock().unwrap_or_else(|p| p.into_inner()).len() < capacity;
+        if !room {
+            std::thread::sleep(Duration::from_millis(1));
+            continue;
         }
-        let producer = &replies[&self.user];
-        producer
-            .write(&Reply {
-                id: self.id,
-                payload,
-            })
-            .map_err(|e| PortError::Transport {
-                port: shared.port.clone(),
-                reason: format!("replying to `{}`: {e}", self.task),
-            })
+        let Ok(sample) = requests.recv_timeout(Duration::from_millis(20)) else {
+            continue;
+        };
+        let request = sample.value;
+        if let Err(err) = send_reply(
+            shared,
+            &request.user,
+            &request.task,
+            request.id,
+            empty.clone(),
+        ) {
+            tracing::warn!(port = %shared.port, error = %err, "filter could not answer a sender");
+        }
+        buffer
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push_back(request);
     }
 }

@@ -40,6 +40,8 @@ pub struct PortUser<Q, R> {
 struct Demux {
     /// Replies taken off the topic by one sender for another.
     waiting: HashMap<u64, Reply>,
+    /// Requests whose senders still wait (replies to others are dropped).
+    awaiting: std::collections::HashSet<u64>,
     /// A sender is reading the reply topic now.
     reading: bool,
     /// Owners seen recently: incarnation -> (description, when last seen).
@@ -241,20 +243,33 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "encoding a request",
             reason: e.to_string(),
         })?;
-        self.requests
-            .write(&Request {
-                id,
-                user: self.user.clone(),
-                task: self.task.clone(),
-                payload,
-            })
-            .map_err(|e| PortError::Transport {
+        self.demux
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .awaiting
+            .insert(id);
+        let written = self.requests.write(&Request {
+            id,
+            user: self.user.clone(),
+            task: self.task.clone(),
+            payload,
+        });
+        let reply = match written {
+            Ok(()) => self.wait_reply(id, start + timeout),
+            Err(_) => None,
+        };
+        {
+            let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+            demux.awaiting.remove(&id);
+            demux.waiting.remove(&id);
+        }
+        if let Err(e) = written {
+            return Err(PortError::Transport {
                 port: self.port.clone(),
                 reason: e.to_string(),
-            })?;
-        let reply = self
-            .wait_reply(id, start + timeout)
-            .ok_or_else(|| timed_out(Some(owner)))?;
+            });
+        }
+        let reply = reply.ok_or_else(|| timed_out(Some(owner)))?;
         postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a reply",
@@ -340,7 +355,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 .recv_timeout((deadline - now).min(Duration::from_millis(20)));
             demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
             demux.reading = false;
-            if let Ok(sample) = got {
+            if let Ok(sample) = got
+                && demux.awaiting.contains(&sample.value.id)
+            {
                 demux.waiting.insert(sample.value.id, sample.value);
             }
             self.arrived.notify_all();

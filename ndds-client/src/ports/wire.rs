@@ -51,6 +51,20 @@ pub struct Restrictions {
     pub timeout_ms: Option<u64>,
     /// The port's priority (for `select` and response handlers).
     pub priority: i32,
+    /// A filter spliced in at the owner's end.
+    pub filter: Option<Filter>,
+}
+
+/// A filter task spliced into a port (Shin's port filter restriction).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Filter {
+    /// Accepts up to `capacity` requests ahead of the owner and answers each at once, so a
+    /// `send` does not block until the buffer is full (then it waits for room). Needs the
+    /// reply type `()`.
+    BoundedBuffer {
+        /// Requests held at most.
+        capacity: u32,
+    },
 }
 
 impl Restrictions {
