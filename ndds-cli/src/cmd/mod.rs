@@ -5,6 +5,7 @@ mod fsm;
 mod hz;
 mod nodes;
 mod perf;
+mod ports;
 mod publish;
 mod topics;
 
@@ -38,6 +39,8 @@ enum Command {
     Perf(perf::Args),
     /// Send stimuli to a state machine, or show its state.
     Fsm(fsm::Args),
+    /// List ports with their owner, users, restrictions and queue.
+    Ports(ports::Args),
 }
 
 /// Runs the parsed command line.
@@ -50,5 +53,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Hz(args) => hz::run(&cli.daemon, &args),
         Command::Perf(args) => perf::run(&cli.daemon, &args),
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
+        Command::Ports(args) => ports::run(&cli.daemon, &args),
     }
 }

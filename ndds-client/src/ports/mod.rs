@@ -35,7 +35,9 @@ pub use user::PortUser;
 pub use waitfor::{Arrival, REPEAT, Rendezvous};
 pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
 
-use crate::{Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+use crate::{
+    Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability, TypeDescription,
+};
 
 /// A port an owner can [`select`] over.
 pub trait Selectable {
@@ -101,7 +103,42 @@ fn transport(port: &str, topic: &str, err: impl std::fmt::Display) -> PortError 
     }
 }
 
-fn reliable_consumer<T: Serialize + DeserializeOwned>(
+/// The message types ports put on the network, with the type description each is announced
+/// with (tools decode them from it).
+pub trait PortWire: Serialize + DeserializeOwned {
+    /// The announced type description.
+    fn description() -> TypeDescription {
+        TypeDescription::of::<Self>()
+    }
+}
+
+impl PortWire for Request {}
+impl PortWire for Reply {}
+impl PortWire for Arrival {}
+impl PortWire for Broadcast {}
+impl PortWire for BroadcastReply {}
+
+impl PortWire for OwnerInfo {
+    fn description() -> TypeDescription {
+        // Its enums sit behind a Vec and an Option, where tracing cannot see their variants.
+        TypeDescription::describer()
+            .with::<Usage>()
+            .with::<Filter>()
+            .describe::<OwnerInfo>()
+            .unwrap_or_else(|_| TypeDescription::of::<OwnerInfo>())
+    }
+}
+
+impl PortWire for UserInfo {
+    fn description() -> TypeDescription {
+        TypeDescription::describer()
+            .with::<Usage>()
+            .describe::<UserInfo>()
+            .unwrap_or_else(|_| TypeDescription::of::<UserInfo>())
+    }
+}
+
+fn reliable_consumer<T: PortWire>(
     participant: &Participant,
     port: &str,
     topic: &str,
@@ -112,11 +149,11 @@ fn reliable_consumer<T: Serialize + DeserializeOwned>(
         ..ConsumerQos::default()
     };
     participant
-        .consumer::<T>(topic, qos)
+        .consumer_with_type::<T>(topic, T::description(), qos)
         .map_err(|e| transport(port, topic, e))
 }
 
-fn reliable_producer<T: Serialize + DeserializeOwned>(
+fn reliable_producer<T: PortWire>(
     participant: &Participant,
     port: &str,
     topic: &str,
@@ -126,6 +163,6 @@ fn reliable_producer<T: Serialize + DeserializeOwned>(
         ..ProducerQos::default()
     };
     participant
-        .producer::<T>(topic, qos)
+        .producer_with_type::<T>(topic, T::description(), qos)
         .map_err(|e| transport(port, topic, e))
 }

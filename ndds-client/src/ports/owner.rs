@@ -156,6 +156,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             reply_format: TypeDescription::of::<R>().fingerprint(),
             restrictions: restrictions.clone(),
             admitted: Vec::new(),
+            queue: 0,
         };
         let priority = restrictions.priority;
         let shared = Arc::new(OwnerShared {
@@ -194,12 +195,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             }
         };
         let flag = Arc::clone(&shared);
+        let queued = Arc::clone(&pending);
         let announcer = std::thread::Builder::new()
             .name(format!("port-{port}"))
             .spawn(move || {
                 let mut info = info;
                 while !flag.stop.load(Ordering::Acquire) {
                     info.admitted = flag.admit(&users);
+                    let queue = queued.lock().unwrap_or_else(|p| p.into_inner()).len();
+                    info.queue = u32::try_from(queue).unwrap_or(u32::MAX);
                     let _ = announce.write(&info);
                     let until = Instant::now() + ANNOUNCE_PERIOD;
                     while Instant::now() < until && !flag.stop.load(Ordering::Acquire) {

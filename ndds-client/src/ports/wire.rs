@@ -119,4 +119,6 @@ pub struct OwnerInfo {
     pub restrictions: Restrictions,
     /// With `max_users`: the user handles admitted now.
     pub admitted: Vec<String>,
+    /// Requests buffered at the owner and not received yet (by its filter or `select`).
+    pub queue: u32,
 }

@@ -1,0 +1,162 @@
+//! `ndds ports`: the ports of a live system (`ndds_client::ports`) — owner, users,
+//! restrictions and the owner's queue, from the ports' own declaration topics.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use ndds_client::ConsumerQos;
+use ndds_client::ports::{OwnerInfo, PortWire, UserInfo};
+use serde::Serialize;
+
+use crate::connect::{DaemonArgs, connect};
+use crate::seconds;
+
+/// Options of `ndds ports`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Seconds to listen for the ports' declarations (owners and users repeat theirs every
+    /// 250 ms).
+    #[arg(long, value_parser = seconds::parse, default_value = "0.8")]
+    listen: Duration,
+}
+
+#[derive(Debug, Default, Serialize)]
+struct PortView {
+    port: String,
+    owners: Vec<OwnerInfo>,
+    users: Vec<UserInfo>,
+}
+
+/// Runs `ndds ports`.
+pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    let participant = connect(daemon)?;
+    let graph = participant.graph()?;
+    let names: std::collections::BTreeSet<String> = graph
+        .endpoints
+        .iter()
+        .filter_map(|e| {
+            let rest = e.info.topic.strip_prefix("port/")?;
+            let (port, leaf) = rest.split_once('/')?;
+            matches!(leaf, "request" | "owner" | "users").then(|| port.to_owned())
+        })
+        .collect();
+    let qos = ConsumerQos {
+        depth: 256,
+        ..ConsumerQos::default()
+    };
+    let mut listeners = Vec::new();
+    for port in &names {
+        let owners = participant.consumer_with_type::<OwnerInfo>(
+            &format!("port/{port}/owner"),
+            OwnerInfo::description(),
+            qos,
+        )?;
+        let users = participant.consumer_with_type::<UserInfo>(
+            &format!("port/{port}/users"),
+            UserInfo::description(),
+            qos,
+        )?;
+        listeners.push((port.clone(), owners, users));
+    }
+    let mut views: BTreeMap<String, PortView> = BTreeMap::new();
+    let until = Instant::now() + args.listen;
+    while Instant::now() < until {
+        for (port, owners, users) in &listeners {
+            let view = views.entry(port.clone()).or_insert_with(|| PortView {
+                port: port.clone(),
+                ..PortView::default()
+            });
+            while let Ok(sample) = owners.try_recv() {
+                let info = sample.value;
+                match view
+                    .owners
+                    .iter_mut()
+                    .find(|o| o.incarnation == info.incarnation)
+                {
+                    Some(known) => *known = info,
+                    None => view.owners.push(info),
+                }
+            }
+            while let Ok(sample) = users.try_recv() {
+                let info = sample.value;
+                if !view.users.iter().any(|u| u.user == info.user) {
+                    view.users.push(info);
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let views: Vec<PortView> = views.into_values().collect();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({ "ports": views }))?
+        );
+        return Ok(());
+    }
+    if views.is_empty() {
+        println!("no ports");
+    }
+    for view in &views {
+        print(view);
+    }
+    Ok(())
+}
+
+fn print(view: &PortView) {
+    println!("{}", view.port);
+    match view.owners.as_slice() {
+        [] => println!("  owner     (none heard)"),
+        [owner] => println!(
+            "  owner     {} (pid {}), queue {}",
+            owner.task, owner.pid, owner.queue
+        ),
+        owners => {
+            let all: Vec<String> = owners
+                .iter()
+                .map(|o| format!("{} (pid {})", o.task, o.pid))
+                .collect();
+            println!("  owner     CONFLICT: {}", all.join(" and "));
+        }
+    }
+    if let Some(r) = view.owners.first().map(|o| &o.restrictions) {
+        let mut parts = Vec::new();
+        if !r.usages.is_empty() {
+            parts.push(format!("usages {:?}", r.usages));
+        }
+        if !r.users.is_empty() {
+            parts.push(format!("users {:?}", r.users));
+        }
+        if let Some(max) = r.max_users {
+            parts.push(format!("max users {max}"));
+        }
+        if let Some(ms) = r.timeout_ms {
+            parts.push(format!("timeout {ms} ms"));
+        }
+        if r.priority != 0 {
+            parts.push(format!("priority {}", r.priority));
+        }
+        if let Some(filter) = &r.filter {
+            parts.push(format!("filter {filter:?}"));
+        }
+        if !parts.is_empty() {
+            println!("  restrict  {}", parts.join(", "));
+        }
+    }
+    let users: Vec<String> = view
+        .users
+        .iter()
+        .map(|u| format!("{} {:?}", u.task, u.usages))
+        .collect();
+    println!(
+        "  users     {}",
+        if users.is_empty() {
+            "(none heard)".to_owned()
+        } else {
+            users.join(", ")
+        }
+    );
+}
