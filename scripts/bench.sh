@@ -253,6 +253,7 @@ fi
 ELAPSED=$(($(date +%s) - START))
 DDSPERF_VERSION=$(dpkg-query -W -f '${Package} ${Version}' cyclonedds-tools 2>/dev/null || echo "not installed")
 RUNTIME_SECTION=$(scripts/bench-runtime.sh) || RUNTIME_SECTION="scripts/bench-runtime.sh failed."
+PORTS_SECTION=$(scripts/bench-ports.sh) || PORTS_SECTION="scripts/bench-ports.sh failed."
 say "measured in ${ELAPSED} s; writing $OUT"
 
 # ---------------------------------------------------------------------------- the report
@@ -433,6 +434,8 @@ $(sed "s#--socket \$WORK/ndds.sock#--socket \$WORK/ndds.sock#" "$CMDS")
 \`\`\`
 
 $RUNTIME_SECTION
+
+$PORTS_SECTION
 EOF
 } >"$OUT"
 say "done: $OUT"

@@ -15,6 +15,7 @@
 mod latency;
 mod ping;
 mod pong;
+mod port;
 mod publish;
 mod runtime;
 mod sample;
@@ -48,6 +49,9 @@ enum Mode {
     Pub(publish::Args),
     /// Receive samples and report their rate, bandwidth and loss over a steady window.
     Sub(subscribe::Args),
+    /// Round trips through a port (send/receive/reply, or query with --query); start one
+    /// with --serve first.
+    Port(port::Args),
     /// The ControlShell runtime's per-sample overhead and a timer habitat's jitter (no
     /// network, no daemon).
     Runtime(runtime::Args),
@@ -61,6 +65,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         Mode::Pub(args) => publish::run(daemon, args),
         Mode::Sub(args) => subscribe::run(daemon, args),
         Mode::Runtime(args) => runtime::run(args),
+        Mode::Port(args) => port::run(daemon, args),
     }
 }
 
