@@ -17,6 +17,8 @@
 //!   excerpts and tables against the code.
 //! - `fsm.md`: the state machine guide; `tests/fsm_guide.rs` checks its example program (it is
 //!   the example file, and it verifies), excerpts and tables.
+//! - `ports.md`: the ports guide; `tests/ports_guide.rs` checks its excerpts and the
+//!   restrictions table.
 //! - [`markdown`]: headings, pipe tables and fenced blocks of a document, with line numbers.
 //! - [`report`]: every mismatch found, each naming the document line to update.
 //! - `tests/protocol_tables.rs`: message kinds, `Data` and `Feedback` submessage kinds, drop
