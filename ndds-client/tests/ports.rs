@@ -555,3 +555,65 @@ fn a_bounded_buffer_filter_makes_sends_non_blocking_until_it_is_full() {
     );
     assert!(bad.is_err());
 }
+
+#[test]
+fn every_primitive_has_an_async_form() {
+    use ndds_client::ports::{Rendezvous, Responder};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "async");
+    let owner = Arc::new(PortOwner::<u32, u32>::declare(&p, "async.cmd", "server").unwrap());
+    let user = Arc::new(
+        PortUser::<u32, u32>::declare_with(
+            &p,
+            "async.cmd",
+            "client",
+            &[Usage::Send, Usage::ReceiveAll],
+        )
+        .unwrap(),
+    );
+    let mut responder = Responder::new(&p, "server").unwrap();
+    responder.handle("async.query", 0, |n: u32| n * 3).unwrap();
+    let asker = Arc::new(
+        PortUser::<u32, u32>::declare_with(&p, "async.query", "asker", &[Usage::Query]).unwrap(),
+    );
+    let left =
+        Arc::new(Rendezvous::<u32>::join(&p, "async.rv", "left", &["left", "right"]).unwrap());
+    let right =
+        Arc::new(Rendezvous::<u32>::join(&p, "async.rv", "right", &["left", "right"]).unwrap());
+
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    // send / receive / reply on one single-threaded executor: neither side blocks it, so the
+    // owner's future can serve the user's request while the user's future waits.
+    let reply = runtime.block_on(async {
+        let sent = user.send_async(7, WAIT);
+        let serve = async {
+            let (n, handle) = owner.receive_async(WAIT).await.unwrap();
+            handle.reply(&(n + 1)).unwrap();
+        };
+        let (reply, ()) = tokio::join!(sent, serve);
+        reply
+    });
+    assert_eq!(reply.unwrap(), 8);
+    let queried = runtime.block_on(asker.query_async(4, WAIT)).unwrap();
+    assert_eq!(queried, 12);
+    let (a, b) = runtime.block_on(async {
+        tokio::join!(
+            left.wait_async(1, WAIT, |all| all.values().sum::<u32>()),
+            right.wait_async(2, WAIT, |all| all.values().sum::<u32>())
+        )
+    });
+    assert_eq!((a.unwrap(), b.unwrap()), (3, 3));
+    assert!(common::eventually(WAIT, || owner.users() == 1));
+    let (first, answered) = runtime.block_on(async {
+        tokio::join!(
+            owner.sendall_async(9, WAIT),
+            user.receive_all_async(WAIT, |v| v * 10)
+        )
+    });
+    assert_eq!(first.unwrap(), ("client".to_owned(), 90));
+    assert_eq!(answered.unwrap(), 9);
+}

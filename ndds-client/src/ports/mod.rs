@@ -8,12 +8,15 @@
 //! fingerprints); query / response with handler priorities ([`Responder`],
 //! [`PortUser::query`]); `waitfor`, the n-way rendezvous with a combining function
 //! ([`Rendezvous`]); a priority [`select`] over several ports; `sendall` from the owner to
-//! every user ([`PortOwner::sendall`], [`PortUser::receive_all`]). The pure logic lives in `ndds_core::ports` (the priority select).
+//! every user ([`PortOwner::sendall`], [`PortUser::receive_all`]). Every blocking primitive
+//! also has an async form (`send_async`, `query_async`, `receive_async`, `sendall_async`,
+//! `receive_all_async`, `wait_async`). The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
 //! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
 //! declaration, repeated every [`ANNOUNCE_PERIOD`]).
 
+mod asynch;
 mod error;
 mod owner;
 mod respond;

@@ -83,6 +83,11 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
         })
     }
 
+    /// The rendezvous' name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
     /// Arrives with `message`, waits (at most `timeout`) for every named task, and returns
     /// `combine` over all their messages (by task name).
     pub fn wait<O>(
