@@ -14,10 +14,13 @@
 //! `--reliable DEPTH` makes either side reliable; `--type blob --payload BYTES` writes samples
 //! of any size whose bytes a consumer checks (`len`, `intact`).
 //!
-//! Layout: `produce.rs` and `consume.rs` (one role each), `samples.rs` (the sample types),
-//! `report.rs` (the JSON lines).
+//! `port own|send|waitfor` play the roles of ports (see `ports.rs`).
+//!
+//! Layout: `produce.rs` and `consume.rs` (one role each), `ports.rs` (port roles),
+//! `samples.rs` (the sample types), `report.rs` (the JSON lines).
 
 mod consume;
+mod ports;
 mod produce;
 mod report;
 mod samples;
@@ -43,11 +46,22 @@ enum Role {
     Produce(produce::Args),
     /// Read samples and print each one.
     Consume(consume::Args),
+    /// A port role: own, send or waitfor.
+    Port {
+        /// Which role.
+        #[arg(value_enum)]
+        mode: ports::Mode,
+        #[command(flatten)]
+        args: ports::Args,
+    },
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let participant = Participant::connect().context("connect to the test daemon")?;
+    if let Role::Port { mode, args } = &cli.role {
+        return ports::run(&participant, *mode, args);
+    }
     match (&cli.role, cli.sample_type) {
         (Role::Produce(args), SampleType::Telemetry) => {
             produce::run::<Telemetry>(&participant, args)
@@ -63,5 +77,6 @@ fn main() -> anyhow::Result<()> {
         }
         (Role::Produce(args), SampleType::Blob) => produce::run::<Blob>(&participant, args),
         (Role::Consume(args), SampleType::Blob) => consume::run::<Blob>(&participant, args),
+        (Role::Port { .. }, _) => Ok(()),
     }
 }
