@@ -20,9 +20,10 @@ pub(crate) struct OwnerShared {
     port: String,
     task: String,
     participant: Participant,
-    replies: Mutex<HashMap<String, Producer<Reply>>>,
+    /// Reply streams by user handle, with when each was last used.
+    replies: Mutex<HashMap<String, (Producer<Reply>, Instant)>>,
     /// Another owner seen on the port (its task), if any.
-    conflict: Mutex<Option<String>>,
+    conflict: Mutex<Option<(String, Instant)>>,
     stop: AtomicBool,
     restrictions: Restrictions,
     /// Users heard recently, in the order first heard: (info, last heard).
@@ -38,8 +39,10 @@ impl OwnerShared {
         let mut active = self.active.lock().unwrap_or_else(|p| p.into_inner());
         while let Ok(sample) = users.try_recv() {
             let info = sample.value;
+            let full = active.len() >= ACTIVE_LIMIT;
             match active.iter_mut().find(|(u, _)| u.user == info.user) {
                 Some(entry) => entry.1 = Instant::now(),
+                None if full => {}
                 None => {
                     if let Some(why) = self.refusal(&info) {
                         self.note_refusal(&info, &why);
@@ -101,6 +104,7 @@ pub struct PortOwner<Q, R> {
     broadcast: Producer<super::sendall::Broadcast>,
     broadcast_replies: Consumer<super::sendall::BroadcastReply>,
     broadcasts: std::sync::atomic::AtomicU64,
+    sendall_turn: Mutex<()>,
     /// `None` when a filter thread reads the topic.
     requests: Option<Consumer<Request>>,
     /// Requests taken off the topic (by [`select`](super::select) or the filter) and not
@@ -173,6 +177,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         let pending = Arc::new(Mutex::new(std::collections::VecDeque::new()));
         let (requests, filter) = match shared.restrictions.filter {
             None => (Some(requests), None),
+            Some(Filter::BoundedBuffer { capacity: 0 }) => {
+                return Err(PortError::Transport {
+                    port: port.to_owned(),
+                    reason: "a bounded-buffer filter needs a capacity of at least 1".into(),
+                });
+            }
             Some(Filter::BoundedBuffer { capacity }) => {
                 if TypeDescription::of::<R>().fingerprint()
                     != TypeDescription::of::<()>().fingerprint()
@@ -219,6 +229,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             broadcast: reliable_producer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_consumer(participant, port, &topic(port, "all-reply"))?,
             broadcasts: std::sync::atomic::AtomicU64::new(1),
+            sendall_turn: Mutex::new(()),
             shared,
             requests,
             pending,
@@ -246,6 +257,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     ) -> Result<super::Replies<'_, R>, PortError> {
         let start = Instant::now();
         let port = &self.shared.port;
+        // One broadcast at a time per owner: they share the reply stream.
+        let _turn = self.sendall_turn.lock().unwrap_or_else(|p| p.into_inner());
         let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
         let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
             port: port.clone(),
@@ -314,24 +327,35 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// The other owner of this port, if one was seen.
     pub fn conflict(&self) -> Option<String> {
         self.note_other_owners();
-        self.shared
+        let mut conflict = self
+            .shared
             .conflict
             .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone()
+            .unwrap_or_else(|p| p.into_inner());
+        // The other owner is gone once it has not been heard for three periods.
+        if conflict
+            .as_ref()
+            .is_some_and(|(_, seen)| seen.elapsed() >= ANNOUNCE_PERIOD * 3)
+        {
+            *conflict = None;
+        }
+        conflict.as_ref().map(|(other, _)| other.clone())
     }
 
     fn note_other_owners(&self) {
         while let Ok(sample) = self.owners.try_recv() {
             if sample.value.incarnation != self.incarnation {
                 let other = format!("{} (pid {})", sample.value.task, sample.value.pid);
-                tracing::warn!(port = %self.shared.port, owner = %self.shared.task, other = %other,
-                    "a second owner declared this port");
-                *self
+                let mut conflict = self
                     .shared
                     .conflict
                     .lock()
-                    .unwrap_or_else(|p| p.into_inner()) = Some(other);
+                    .unwrap_or_else(|p| p.into_inner());
+                if conflict.is_none() {
+                    tracing::warn!(port = %self.shared.port, owner = %self.shared.task, other = %other,
+                        "a second owner declared this port");
+                }
+                *conflict = Some((other, Instant::now()));
             }
         }
     }
@@ -370,8 +394,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             };
             match next {
                 Ok(request) if !self.shared.admitted(&request.user) => {
-                    tracing::warn!(port = %self.shared.port, user = %request.task,
+                    tracing::debug!(port = %self.shared.port, user = %request.task,
                         "request from a user the port's restrictions refuse: dropped");
+                    if left.is_zero() {
+                        return Err(PortError::Timeout {
+                            port: self.shared.port.clone(),
+                            operation: "receive",
+                            task: self.shared.task.clone(),
+                            owner: None,
+                            waited: start.elapsed(),
+                        });
+                    }
                 }
                 Ok(request) => {
                     let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| {
@@ -422,8 +455,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
     fn waiting(&self) -> usize {
         let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(requests) = &self.requests {
-            while let Ok(sample) = requests.try_recv() {
-                pending.push_back(sample.value);
+            // Taken off the topic up to a bound; the rest waits there (flow control).
+            while pending.len() < PENDING_LIMIT {
+                match requests.try_recv() {
+                    Ok(sample) => pending.push_back(sample.value),
+                    Err(_) => break,
+                }
             }
         }
         pending.len()
@@ -441,6 +478,13 @@ impl<Q, R> Drop for PortOwner<Q, R> {
         }
     }
 }
+
+/// Requests `select` takes off the topic ahead of `receive`, at most.
+const PENDING_LIMIT: usize = 1024;
+/// Users whose reply streams an owner keeps at most (the least recently used goes first).
+const REPLY_STREAMS: usize = 1024;
+/// Users an owner tracks at most.
+const ACTIVE_LIMIT: usize = 1024;
 
 /// How long an owner waits for a new user's reply topic to match before replying anyway.
 const REPLY_MATCH: Duration = Duration::from_secs(2);
@@ -475,7 +519,8 @@ impl<R: Serialize> ReplyHandle<R> {
     }
 }
 
-/// Writes a reply to user handle `user` (its reply topic is matched on first use).
+/// Writes a reply to user handle `user`. The first reply to a user waits (at most
+/// [`REPLY_MATCH`]) until its reply stream matches — outside the lock, so other replies go on.
 fn send_reply(
     shared: &OwnerShared,
     user: &str,
@@ -483,20 +528,42 @@ fn send_reply(
     id: u64,
     payload: Vec<u8>,
 ) -> Result<(), PortError> {
-    let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
-    if !replies.contains_key(user) {
-        let name = topic(&shared.port, &format!("reply/{user}"));
-        let producer = reliable_producer::<Reply>(&shared.participant, &shared.port, &name)?;
-        // A reliable stream starts at the match: wait for the sender's reply consumer.
-        producer.wait_for_consumers(1, REPLY_MATCH);
-        replies.insert(user.to_owned(), producer);
-    }
-    replies[user]
-        .write(&Reply { id, payload })
-        .map_err(|e| PortError::Transport {
+    let reply = Reply { id, payload };
+    let write = |producer: &Producer<Reply>| {
+        producer.write(&reply).map_err(|e| PortError::Transport {
             port: shared.port.clone(),
             reason: format!("replying to `{task}`: {e}"),
         })
+    };
+    {
+        let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((producer, used)) = replies.get_mut(user) {
+            *used = Instant::now();
+            return write(producer);
+        }
+    }
+    if check_name(user).is_err() {
+        return Err(PortError::Transport {
+            port: shared.port.clone(),
+            reason: format!("`{task}` gave an unusable reply id"),
+        });
+    }
+    let name = topic(&shared.port, &format!("reply/{user}"));
+    let producer = reliable_producer::<Reply>(&shared.participant, &shared.port, &name)?;
+    // A reliable stream starts at the match: wait for the sender's reply consumer.
+    producer.wait_for_consumers(1, REPLY_MATCH);
+    let result = write(&producer);
+    let mut replies = shared.replies.lock().unwrap_or_else(|p| p.into_inner());
+    if replies.len() >= REPLY_STREAMS
+        && let Some(oldest) = replies
+            .iter()
+            .min_by_key(|(_, (_, used))| *used)
+            .map(|(k, _)| k.clone())
+    {
+        replies.remove(&oldest);
+    }
+    replies.insert(user.to_owned(), (producer, Instant::now()));
+    result
 }
 
 /// The bounded-buffer filter: takes requests off the topic while the buffer has room and
@@ -519,6 +586,9 @@ fn bounded_buffer(
             continue;
         };
         let request = sample.value;
+        if !shared.admitted(&request.user) {
+            continue; // refused users get no answer: their own side reports the refusal
+        }
         if let Err(err) = send_reply(
             shared,
             &request.user,

@@ -74,6 +74,9 @@ pub(crate) fn next_reply<R: DeserializeOwned>(
     let start = Instant::now();
     loop {
         let left = timeout.saturating_sub(start.elapsed());
+        if left.is_zero() {
+            return None;
+        }
         let sample = source
             .recv_timeout(left.min(Duration::from_millis(50)))
             .ok();
@@ -90,8 +93,6 @@ pub(crate) fn next_reply<R: DeserializeOwned>(
                         }),
                 );
             }
-        } else if left.is_zero() {
-            return None;
         }
     }
 }

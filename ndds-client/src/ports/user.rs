@@ -46,6 +46,8 @@ struct Demux {
     reading: bool,
     /// Owners seen recently: incarnation -> (description, when last seen).
     owners: HashMap<u64, (OwnerInfo, Instant)>,
+    /// When each owner incarnation was first seen (admission takes a few announcements).
+    first_seen: HashMap<u64, Instant>,
 }
 
 impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<Q, R> {
@@ -125,9 +127,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
         while let Ok(sample) = self.owners.try_recv() {
             demux
+                .first_seen
+                .entry(sample.value.incarnation)
+                .or_insert_with(Instant::now);
+            demux
                 .owners
                 .insert(sample.value.incarnation, (sample.value, Instant::now()));
         }
+        let known: Vec<u64> = demux.owners.keys().copied().collect();
+        demux.first_seen.retain(|k, _| known.contains(k));
         // An owner not heard for three announcement periods is gone.
         demux
             .owners
@@ -149,8 +157,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 }
                 if owner.restrictions.restricted() && !owner.admitted.contains(&self.user) {
                     // The owner admits users on its next announcements; past that, it is full.
-                    if self.declared.elapsed() > ANNOUNCE_PERIOD * 4 {
-                        let max = owner.restrictions.max_users.unwrap_or(0);
+                    let since = demux
+                        .first_seen
+                        .get(&owner.incarnation)
+                        .copied()
+                        .unwrap_or_else(Instant::now)
+                        .max(self.declared);
+                    if let Some(max) = owner.restrictions.max_users
+                        && since.elapsed() > ANNOUNCE_PERIOD * 4
+                    {
                         return Err(refused(
                             "maximum active users",
                             format!("{max} active users already"),
@@ -254,8 +269,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             task: self.task.clone(),
             payload,
         });
+        let deadline = start
+            .checked_add(timeout)
+            .unwrap_or(start + Duration::from_secs(86_400 * 365));
         let reply = match written {
-            Ok(()) => self.wait_reply(id, start + timeout),
+            Ok(()) => self.wait_reply(id, deadline),
             Err(_) => None,
         };
         {

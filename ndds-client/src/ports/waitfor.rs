@@ -129,7 +129,7 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
                             || arrivals[&arrival.task].seen.len() != arrival.seen.len();
                         arrivals.insert(arrival.task.clone(), arrival);
                     }
-                } else if arrival.round > round {
+                } else if arrival.round == round + 1 {
                     state
                         .early
                         .entry(arrival.round)
@@ -157,6 +157,13 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
                 break;
             }
             if start.elapsed() >= timeout {
+                // Keep what came: a retry of this round still has the other tasks' messages.
+                let others: BTreeMap<String, Arrival> = arrivals
+                    .iter()
+                    .filter(|(t, _)| **t != self.task)
+                    .map(|(t, a)| (t.clone(), a.clone()))
+                    .collect();
+                state.early.insert(round, others);
                 let missing: Vec<String> = self
                     .tasks
                     .iter()
