@@ -19,6 +19,7 @@
 //!   the example file, and it verifies), excerpts and tables.
 //! - `ports.md`: the ports guide; `tests/ports_guide.rs` checks its excerpts and the
 //!   restrictions table.
+//! - [`excerpts`]: code excerpts in the guides checked against the files they quote.
 //! - [`markdown`]: headings, pipe tables and fenced blocks of a document, with line numbers.
 //! - [`report`]: every mismatch found, each naming the document line to update.
 //! - `tests/protocol_tables.rs`: message kinds, `Data` and `Feedback` submessage kinds, drop
@@ -30,5 +31,6 @@
 //!   not public constants are observed through the discovery engine's behaviour.
 #![warn(missing_docs)]
 
+pub mod excerpts;
 pub mod markdown;
 pub mod report;

@@ -2,21 +2,13 @@
 //! verifies with the runtime's actions; its code excerpts are verbatim; its tables list the
 //! stimulus kinds and the published state's fields exactly.
 
-use std::path::Path;
-
 use ndds_client::fsm::{ActionSet, MachineState, Program, verify};
 use ndds_client::runtime::Runtime;
+use ndds_docs::excerpts::{self, source};
 use ndds_docs::markdown::{Doc, Table};
 
 fn doc() -> Doc {
     Doc::load("fsm.md")
-}
-
-fn source(relative: &str) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(relative);
-    std::fs::read_to_string(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()))
 }
 
 fn table(doc: &Doc, columns: &[&str]) -> Table {
@@ -61,24 +53,12 @@ fn the_example_program_is_the_file_and_verifies() {
 
 #[test]
 fn rust_excerpts_are_verbatim() {
-    let doc = doc();
-    let mut excerpts = 0;
-    for block in doc.blocks().into_iter().filter(|b| b.info == "rust") {
-        let lines: Vec<&str> = block.lines.iter().map(|(_, l)| l.as_str()).collect();
-        let Some(file) = lines.first().and_then(|l| l.strip_prefix("// from ")) else {
-            continue;
-        };
-        excerpts += 1;
-        let text = source(file.trim());
-        let all: Vec<&str> = text.lines().collect();
-        let body = &lines[1..];
-        assert!(
-            all.windows(body.len().max(1)).any(|w| w == body),
-            "docs/fsm.md line {}: not a verbatim part of {file}",
-            block.line
-        );
-    }
-    assert!(excerpts >= 1);
+    let (count, wrong) = excerpts::check(&doc(), "rust");
+    assert!(count >= 1, "the guide quotes the example");
+    assert!(
+        wrong.is_empty(),
+        "docs/fsm.md: not verbatim (line, file): {wrong:?}"
+    );
 }
 
 #[test]

@@ -2,21 +2,13 @@
 //! name, and its tables of entry routines, verification problems, built-in components and
 //! statistics fields list exactly what the code has.
 
-use std::path::Path;
-
 use ndds_client::runtime::{HabitatStats, Runtime};
+use ndds_docs::excerpts::{self, source};
 use ndds_docs::markdown::{Doc, Table};
 use ndds_docs::report::Problems;
 
 fn doc() -> Doc {
     Doc::load("runtime.md")
-}
-
-fn source(relative: &str) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join(relative);
-    std::fs::read_to_string(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()))
 }
 
 /// The one table whose header starts with `columns`.
@@ -64,33 +56,12 @@ fn names_in_block(source: &str, opening: &str, pattern: fn(&str) -> Option<Strin
 
 #[test]
 fn code_excerpts_are_verbatim() {
-    let doc = doc();
-    let mut problems = Problems::new();
-    let mut excerpts = 0;
-    for block in doc.blocks().into_iter().filter(|b| b.info == "rust") {
-        let Some((_, first)) = block.lines.first() else {
-            continue;
-        };
-        let Some(file) = first.strip_prefix("// from ") else {
-            continue;
-        };
-        excerpts += 1;
-        let body: Vec<&str> = block.lines[1..].iter().map(|(_, l)| l.as_str()).collect();
-        let text = source(file.trim());
-        let lines: Vec<&str> = text.lines().collect();
-        let found = lines
-            .windows(body.len().max(1))
-            .any(|w| w == body.as_slice());
-        if !found {
-            problems.at(
-                &doc,
-                block.line,
-                format!("this excerpt is not a verbatim part of {file}"),
-            );
-        }
-    }
-    assert!(excerpts >= 2, "the guide quotes the example program");
-    problems.finish("docs/runtime.md code excerpts");
+    let (count, wrong) = excerpts::check(&doc(), "rust");
+    assert!(count >= 2, "the guide quotes the example program");
+    assert!(
+        wrong.is_empty(),
+        "docs/runtime.md: not verbatim (line, file): {wrong:?}"
+    );
 }
 
 #[test]
