@@ -5,57 +5,17 @@
 //! arm, and measures the time from sending a stimulus to the configuration switch having taken
 //! effect (the machine publishes its new state after the switch returned).
 
-use std::process::{Child, Command, Stdio};
+mod examples;
+
 use std::time::{Duration, Instant};
 
-use interop_tests::{TestDomain, binary, wait_until};
+use examples::{WAIT, program, settles};
+use interop_tests::{TestDomain, wait_until};
 use ndds_client::fsm::{MachineState, Stimulus};
 use ndds_client::runtime::{CsMat, HabitatStats};
 use ndds_client::{
     Consumer, ConsumerQos, EmbeddedPolicy, Participant, Producer, ProducerQos, Reliability,
 };
-
-const WAIT: Duration = Duration::from_secs(15);
-
-struct Program(Child);
-
-impl Drop for Program {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn program(domain: &TestDomain, daemon: &str, name: &str) -> Program {
-    Program(
-        Command::new(binary(name))
-            .arg("60")
-            .env("NDDS_SOCKET", domain.socket(daemon))
-            .env("NDDS_EMBEDDED", "never")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start the example program"),
-    )
-}
-
-/// Waits until the last 100 tip positions are within `tolerance` of `target`.
-fn settles(tips: &Consumer<CsMat>, target: f64, tolerance: f64) -> bool {
-    let mut inside = 0;
-    wait_until(WAIT, || {
-        while let Ok(sample) = tips.try_recv() {
-            let tip = sample.value.get(0, 0).unwrap_or(f64::NAN);
-            inside = if (tip - target).abs() < tolerance {
-                inside + 1
-            } else {
-                0
-            };
-        }
-        inside >= 100
-    })
-    .is_some()
-}
 
 /// Waits for a published state that satisfies `check`.
 fn published(

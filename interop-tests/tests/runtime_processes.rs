@@ -3,55 +3,12 @@
 //! exactly as users run them. The test watches the arm through ndds and switches the
 //! controller's configuration over the network.
 
-use std::process::{Child, Command, Stdio};
-use std::time::Duration;
+mod examples;
 
-use interop_tests::{TestDomain, binary, wait_until};
+use examples::{WAIT, program, settles};
+use interop_tests::{TestDomain, wait_until};
 use ndds_client::runtime::{CsMat, HabitatStats};
 use ndds_client::{ConsumerQos, EmbeddedPolicy, Participant, ProducerQos, Reliability};
-
-const WAIT: Duration = Duration::from_secs(15);
-
-/// A child process killed when the test ends, however it ends.
-struct Program(Child);
-
-impl Drop for Program {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn program(domain: &TestDomain, daemon: &str, name: &str) -> Program {
-    let child = Command::new(binary(name))
-        .arg("60")
-        .env("NDDS_SOCKET", domain.socket(daemon))
-        .env("NDDS_EMBEDDED", "never")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start the example program");
-    Program(child)
-}
-
-/// Waits until the last `window` tip positions received are all within `tolerance` of
-/// `target`.
-fn settles(tips: &ndds_client::Consumer<CsMat>, target: f64, tolerance: f64) -> bool {
-    let mut inside = 0;
-    wait_until(WAIT, || {
-        while let Ok(sample) = tips.try_recv() {
-            let tip = sample.value.get(0, 0).unwrap_or(f64::NAN);
-            inside = if (tip - target).abs() < tolerance {
-                inside + 1
-            } else {
-                0
-            };
-        }
-        inside >= 100
-    })
-    .is_some()
-}
 
 #[test]
 fn plant_and_controller_in_two_processes_close_the_loop_and_switch_over_the_network() {
