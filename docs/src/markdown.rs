@@ -173,6 +173,14 @@ impl Doc {
         tables
     }
 
+    /// The one table whose header starts with `columns`; `None` when there is none or more
+    /// than one.
+    pub fn table(&self, columns: &[&str]) -> Option<Table> {
+        let mut found = self.tables().into_iter().filter(|t| t.starts_with(columns));
+        let first = found.next()?;
+        found.next().is_none().then_some(first)
+    }
+
     /// Every fenced block, in order.
     pub fn blocks(&self) -> Vec<Block> {
         let mut blocks = Vec::new();

@@ -5,20 +5,10 @@
 use ndds_client::fsm::{ActionSet, MachineState, Program, verify};
 use ndds_client::runtime::Runtime;
 use ndds_docs::excerpts::{self, source};
-use ndds_docs::markdown::{Doc, Table};
+use ndds_docs::markdown::Doc;
 
 fn doc() -> Doc {
     Doc::load("fsm.md")
-}
-
-fn table(doc: &Doc, columns: &[&str]) -> Table {
-    let mut found: Vec<Table> = doc
-        .tables()
-        .into_iter()
-        .filter(|t| t.starts_with(columns))
-        .collect();
-    assert_eq!(found.len(), 1, "one table with columns {columns:?}");
-    found.pop().unwrap()
 }
 
 #[test]
@@ -64,7 +54,9 @@ fn rust_excerpts_are_verbatim() {
 #[test]
 fn tables_list_the_kinds_and_the_state_fields() {
     let doc = doc();
-    let kinds: Vec<String> = table(&doc, &["kind", "value", "lifetime"])
+    let kinds: Vec<String> = doc
+        .table(&["kind", "value", "lifetime"])
+        .expect("the table")
         .rows
         .iter()
         .map(|r| r.plain(0))
@@ -79,7 +71,9 @@ fn tables_list_the_kinds_and_the_state_fields() {
     }
     let value = serde_json::to_value(MachineState::default()).unwrap();
     let fields: Vec<String> = value.as_object().unwrap().keys().cloned().collect();
-    let listed: Vec<String> = table(&doc, &["field", "meaning"])
+    let listed: Vec<String> = doc
+        .table(&["field", "meaning"])
+        .expect("the table")
         .rows
         .iter()
         .map(|r| r.plain(0))

@@ -4,27 +4,16 @@
 
 use ndds_client::runtime::{HabitatStats, Runtime};
 use ndds_docs::excerpts::{self, source};
-use ndds_docs::markdown::{Doc, Table};
+use ndds_docs::markdown::Doc;
 use ndds_docs::report::Problems;
 
 fn doc() -> Doc {
     Doc::load("runtime.md")
 }
 
-/// The one table whose header starts with `columns`.
-fn table(doc: &Doc, columns: &[&str]) -> Table {
-    let mut found: Vec<Table> = doc
-        .tables()
-        .into_iter()
-        .filter(|t| t.starts_with(columns))
-        .collect();
-    assert_eq!(found.len(), 1, "one table with columns {columns:?}");
-    found.pop().unwrap()
-}
-
 /// Compares the table's first column with `expected`, in order.
 fn first_column(doc: &Doc, problems: &mut Problems, columns: &[&str], expected: &[String]) {
-    let table = table(doc, columns);
+    let table = doc.table(columns).expect("one table with these columns");
     let listed: Vec<String> = table.rows.iter().map(|r| r.plain(0)).collect();
     if listed != expected {
         problems.at(
@@ -105,7 +94,7 @@ fn built_in_components_are_the_registry() {
         .into_iter()
         .map(|(name, _)| name)
         .collect();
-    let table = table(&doc, &["type", "reads", "writes"]);
+    let table = doc.table(&["type", "reads", "writes"]).expect("the table");
     let mut listed: Vec<String> = table.rows.iter().map(|r| r.plain(0)).collect();
     registered.sort();
     listed.sort();
