@@ -54,7 +54,9 @@ pub use mat::Mat;
 pub use module::{
     Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,
 };
-pub use registry::{Factory, ParamError, ParamValue, Params, Registry};
+pub use registry::{
+    ComponentSpec, Factory, ParamError, ParamKind, ParamSpec, ParamValue, Params, Registry,
+};
 pub use runtime::Runtime;
 pub use sort::{SortError, SortNode, sort};
 pub use stats::{HabitatStats, Percentiles};

@@ -181,6 +181,29 @@ impl Runtime {
             .collect()
     }
 
+    /// Registers a documented component type: description files are checked against `spec`.
+    pub fn add_component<F, M>(&self, spec: &'static super::registry::ComponentSpec, factory: F)
+    where
+        F: Fn(&mut Binder<'_>, &super::registry::Params) -> Result<M, ModuleError>
+            + Send
+            + Sync
+            + 'static,
+        M: SampleModule,
+    {
+        lock(&self.inner.registry).add(spec, factory);
+    }
+
+    /// The documented parameters of component type `name` (`None` if unknown or registered
+    /// without a spec).
+    pub fn component_spec(&self, name: &str) -> Option<&'static super::registry::ComponentSpec> {
+        lock(&self.inner.registry).spec(name)
+    }
+
+    /// Every documented component type.
+    pub fn component_specs(&self) -> Vec<&'static super::registry::ComponentSpec> {
+        lock(&self.inner.registry).specs().collect()
+    }
+
     // ----- the linking database -----
 
     /// The CSMat named `name`: the existing one, or a placeholder (unbound, 0 × 0) that is

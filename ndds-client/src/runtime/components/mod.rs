@@ -10,8 +10,23 @@
 //! | `state_feedback`     | [`StateFeedback`]          | `estimate`, `reference` | `output` |
 //! | `mass_spring_damper` | [`MassSpringDamper`]       | `force` (state)  | `position`, `angle` |
 
+mod arm;
 mod control;
+mod dynamics;
+mod lqg;
+mod math;
 mod plant;
+mod recorder;
+mod sources;
+mod trajectory;
+
+pub use arm::*;
+pub use dynamics::*;
+pub use lqg::*;
+pub use math::*;
+pub use recorder::*;
+pub use sources::*;
+pub use trajectory::*;
 
 pub use control::{
     Estimator, LqgDesign, LqgWeights, Pd, StateFeedback, design_lqg, discretize, dlqr, kalman_gain,
@@ -191,9 +206,64 @@ impl SampleModule for LowPass {
     }
 }
 
+use super::registry::{ComponentSpec, ParamKind as K, ParamSpec as P};
+
+/// `gain`.
+pub const GAIN: ComponentSpec = ComponentSpec {
+    name: "gain",
+    summary: "y = k·u, element by element.",
+    params: &[
+        P::required("input", K::Input, "u, any shape"),
+        P::required("output", K::Output, "y, the shape of u"),
+        P::optional("k", K::Number, "1", "the gain (a 1 × 1 CSMat `<module>.k`, tunable)"),
+    ],
+};
+
+/// `lowpass`.
+pub const LOWPASS: ComponentSpec = ComponentSpec {
+    name: "lowpass",
+    summary: "First-order low-pass y += a·(u − y), a = dt/(tau + dt); starts from its input \
+              when enabled.",
+    params: &[
+        P::required("input", K::Input, "u, any shape"),
+        P::required("output", K::Output, "y, the shape of u"),
+        P::required("tau", K::Number, "time constant (s), a CSMat `<module>.tau`"),
+    ],
+};
+
+/// `pd`.
+pub const PD: ComponentSpec = ComponentSpec {
+    name: "pd",
+    summary: "PD on the measurement: u = kp·(r − y) − kd·ẏ (the derivative of the \
+              measurement, so reference steps do not kick).",
+    params: &[
+        P::required("measured", K::Input, "y (n × 1)"),
+        P::required("reference", K::Input, "r (n × 1)"),
+        P::required("output", K::Output, "u (n × 1)"),
+        P::required("kp", K::Number, "proportional gain"),
+        P::required("kd", K::Number, "derivative gain (s)"),
+    ],
+};
+
+/// `mass_spring_damper`.
+pub const MASS_SPRING_DAMPER: ComponentSpec = ComponentSpec {
+    name: "mass_spring_damper",
+    summary: "Simulated plant m·p̈ = f − c·ṗ − k·p, exact zero-order-hold integration; \
+              writes the position and a lever angle (position / length).",
+    params: &[
+        P::required("force", K::Input, "f (N, 1 × 1), read in state_update"),
+        P::required("position", K::Output, "p (m, 1 × 1)"),
+        P::required("angle", K::Output, "p / length (rad, 1 × 1)"),
+        P::optional("mass", K::Number, "1", "m (kg)"),
+        P::optional("stiffness", K::Number, "4", "k (N/m)"),
+        P::optional("damping", K::Number, "0.4", "c (N·s/m)"),
+        P::optional("length", K::Number, "0.5", "lever length (m)"),
+    ],
+};
+
 /// Registers the built-in component types.
 pub(crate) fn register_builtin(registry: &mut Registry) {
-    registry.register("gain", "y = k·u (params: input, output, k)", |b, p| {
+    registry.add(&GAIN, |b, p| {
         Gain::new(
             b,
             p.text("input")?,
@@ -201,41 +271,38 @@ pub(crate) fn register_builtin(registry: &mut Registry) {
             p.number_or("k", 1.0)?,
         )
     });
-    registry.register(
-        "lowpass",
-        "first-order low-pass (params: input, output, tau seconds)",
-        |b, p| LowPass::new(b, p.text("input")?, p.text("output")?, p.number("tau")?),
-    );
-    registry.register(
-        "pd",
-        "PD on the measurement (params: measured, reference, output, kp, kd)",
-        |b, p| {
-            Pd::new(
-                b,
-                p.text("measured")?,
-                p.text("reference")?,
-                p.text("output")?,
-                p.number("kp")?,
-                p.number("kd")?,
-            )
-        },
-    );
-    registry.register(
-        "mass_spring_damper",
-        "simulated plant (params: force, position, angle, mass, stiffness, damping, length)",
-        |b, p| {
-            MassSpringDamper::new(
-                b,
-                p.text("force")?,
-                p.text("position")?,
-                p.text("angle")?,
-                Physical {
-                    mass: p.number_or("mass", 1.0)?,
-                    stiffness: p.number_or("stiffness", 4.0)?,
-                    damping: p.number_or("damping", 0.4)?,
-                    length: p.number_or("length", 0.5)?,
-                },
-            )
-        },
-    );
+    registry.add(&LOWPASS, |b, p| {
+        LowPass::new(b, p.text("input")?, p.text("output")?, p.number("tau")?)
+    });
+    registry.add(&PD, |b, p| {
+        Pd::new(
+            b,
+            p.text("measured")?,
+            p.text("reference")?,
+            p.text("output")?,
+            p.number("kp")?,
+            p.number("kd")?,
+        )
+    });
+    registry.add(&MASS_SPRING_DAMPER, |b, p| {
+        MassSpringDamper::new(
+            b,
+            p.text("force")?,
+            p.text("position")?,
+            p.text("angle")?,
+            Physical {
+                mass: p.number_or("mass", 1.0)?,
+                stiffness: p.number_or("stiffness", 4.0)?,
+                damping: p.number_or("damping", 0.4)?,
+                length: p.number_or("length", 0.5)?,
+            },
+        )
+    });
+    sources::register(registry);
+    math::register(registry);
+    dynamics::register(registry);
+    trajectory::register(registry);
+    recorder::register(registry);
+    arm::register(registry);
+    lqg::register(registry);
 }
