@@ -51,6 +51,7 @@ pub mod sample;
 mod session;
 mod slot;
 mod sync;
+pub mod system;
 
 pub use consumer::{
     CallbackConsumer, Consumer, ConsumerStats, DirectConsumer, EventStream, RawConsumer,

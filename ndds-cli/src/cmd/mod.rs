@@ -7,6 +7,7 @@ mod nodes;
 mod perf;
 mod ports;
 mod publish;
+mod run;
 mod topics;
 
 use clap::{Parser, Subcommand};
@@ -41,6 +42,8 @@ enum Command {
     Fsm(fsm::Args),
     /// List ports with their owner, users, restrictions and queue.
     Ports(ports::Args),
+    /// Load a system description file, verify it and run it, with a live status.
+    Run(run::Args),
 }
 
 /// Runs the parsed command line.
@@ -54,5 +57,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Perf(args) => perf::run(&cli.daemon, &args),
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
+        Command::Run(args) => run::run(&cli.daemon, &args),
     }
 }

@@ -369,6 +369,17 @@ impl StateMachine {
     }
 }
 
+impl StateMachine {
+    /// Stops the machine's thread after the stimulus it is handling (queued ones are dropped);
+    /// later [`send`](Self::send)s fail with [`FsmError::Stopped`]. Dropping it does the same
+    /// and waits for the thread.
+    pub fn stop(&self) {
+        self.shared.stop.store(true, Ordering::Release);
+        let _queue = self.shared.queue.lock().unwrap_or_else(|p| p.into_inner());
+        self.shared.ready.notify_all();
+    }
+}
+
 impl Drop for StateMachine {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);

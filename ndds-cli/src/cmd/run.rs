@@ -1,0 +1,257 @@
+//! `ndds run FILE`: load a system description (`ndds_client::system`), verify it, run it on
+//! the local daemon (or an embedded one on loopback when none runs), print a compact live
+//! status, and shut it down cleanly (disable and shutdown routines) on Ctrl-C.
+//!
+//! Several `ndds run` processes, on one host or several, form one distributed system: their
+//! CSMats meet on the topics the files publish and subscribe.
+
+use std::io::{IsTerminal as _, Write as _};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use ndds_client::runtime::CsMat;
+use ndds_client::system::{Status, System, SystemError};
+use ndds_client::{EmbeddedPolicy, Participant};
+
+use crate::connect::DaemonArgs;
+use crate::seconds;
+
+/// Options of `ndds run`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The system description (TOML; see docs/description-files.md).
+    file: PathBuf,
+    /// Stop after this many seconds (default: run until Ctrl-C).
+    #[arg(long, value_parser = seconds::parse)]
+    seconds: Option<Duration>,
+    /// Load and verify only: print what would run, start nothing, exit 0 if it verifies.
+    #[arg(long)]
+    check: bool,
+    /// Seconds between status reports.
+    #[arg(long, value_parser = seconds::parse_interval, default_value = "1")]
+    interval: Duration,
+    /// Never start an embedded daemon: fail if no daemon runs.
+    #[arg(long)]
+    no_embedded: bool,
+    /// Append each status report instead of redrawing it in place.
+    #[arg(long)]
+    plain: bool,
+}
+
+/// Runs `ndds run`.
+pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    if args.check {
+        let system = System::load(&args.file, None).or_else(|err| match err {
+            // Network bindings need a daemon to be built; check against one if it runs.
+            SystemError::Invalid(ref d)
+                if d.0.iter().any(|x| x.message.contains("need a connection")) =>
+            {
+                let participant = connect(daemon, true, &args.file)?;
+                System::load(&args.file, Some(&participant))
+            }
+            other => Err(other),
+        });
+        let system = system.map_err(|e| describe_error(&args.file, e))?;
+        print_plan(&system);
+        return Ok(());
+    }
+    let participant = connect(daemon, args.no_embedded, &args.file)?;
+    let system =
+        System::load(&args.file, Some(&participant)).map_err(|e| describe_error(&args.file, e))?;
+
+    // First Ctrl-C (or SIGTERM): stop cleanly; a second one exits at once.
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&stop))
+            .context("cannot catch signals")?;
+        signal_hook::flag::register(signal, Arc::clone(&stop)).context("cannot catch signals")?;
+    }
+
+    system.start().context("starting the system")?;
+    println!(
+        "ndds run: system `{}` running ({} habitat{}, {}); Ctrl-C stops it",
+        system.name(),
+        system.runtime().habitats().len(),
+        if system.runtime().habitats().len() == 1 {
+            ""
+        } else {
+            "s"
+        },
+        match system.runtime().current_configuration() {
+            Some(c) => format!("configuration `{c}`"),
+            None => "no configurations".to_owned(),
+        }
+    );
+    let begun = Instant::now();
+    let redraw = !args.plain && std::io::stdout().is_terminal();
+    let mut drawn = 0usize;
+    let mut next = begun + args.interval;
+    loop {
+        if stop.load(Ordering::Acquire) {
+            println!("ndds run: interrupted");
+            break;
+        }
+        if args.seconds.is_some_and(|s| begun.elapsed() >= s) {
+            break;
+        }
+        let now = Instant::now();
+        if now >= next {
+            let text = render(&system.status(), begun.elapsed());
+            let mut out = std::io::stdout().lock();
+            if redraw && drawn > 0 {
+                // Up over the last report and clear to the end of the screen.
+                let _ = write!(out, "\x1b[{drawn}A\x1b[J");
+            }
+            let _ = out.write_all(text.as_bytes());
+            let _ = out.flush();
+            drawn = text.lines().count();
+            next += args.interval;
+            if next < now {
+                next = now + args.interval;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    system.stop();
+    let status = system.status();
+    let errors: u64 = status.habitats.iter().map(|h| h.module_errors).sum();
+    println!(
+        "ndds run: stopped `{}` after {:.1} s (shutdown routines ran; {} module error{})",
+        system.name(),
+        begun.elapsed().as_secs_f64(),
+        errors,
+        if errors == 1 { "" } else { "s" }
+    );
+    Ok(())
+}
+
+fn connect(
+    daemon: &DaemonArgs,
+    no_embedded: bool,
+    file: &std::path::Path,
+) -> anyhow::Result<Participant> {
+    let name = file.file_stem().map_or_else(
+        || "ndds-run".to_owned(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    let mut builder = Participant::builder().name(&name).embedded(if no_embedded {
+        EmbeddedPolicy::Never
+    } else {
+        EmbeddedPolicy::Auto
+    });
+    if let Some(domain) = daemon.domain {
+        builder = builder.domain(domain);
+    }
+    if let Some(socket) = &daemon.socket {
+        builder = builder.socket(socket);
+    }
+    builder
+        .connect()
+        .context("cannot connect to a daemon or start an embedded one")
+}
+
+fn describe_error(file: &std::path::Path, err: SystemError) -> anyhow::Error {
+    match err {
+        SystemError::Invalid(d) => anyhow::anyhow!(
+            "{} does not describe a system that can run ({} problem{}); nothing was started:\n{d}",
+            file.display(),
+            d.0.len(),
+            if d.0.len() == 1 { "" } else { "s" }
+        ),
+        other => anyhow::Error::new(other).context(format!("loading {}", file.display())),
+    }
+}
+
+fn print_plan(system: &System) {
+    let rt = system.runtime();
+    println!("system `{}`: verified, nothing started", system.name());
+    if let Some(d) = system.description() {
+        println!("  {d}");
+    }
+    for file in system.files() {
+        println!("  file {}", file.display());
+    }
+    for h in rt.habitats() {
+        println!(
+            "  habitat {} at {:.6} Hz: {}",
+            h.name(),
+            1.0 / h.period().as_secs_f64(),
+            h.order().join(" -> ")
+        );
+    }
+    let groups = rt.active_groups();
+    if !groups.is_empty() {
+        let active: Vec<String> = groups.iter().map(|(c, g)| format!("{c}/{g}")).collect();
+        println!(
+            "  configuration {} (active groups {})",
+            rt.current_configuration().unwrap_or_else(|| "-".into()),
+            active.join(", ")
+        );
+    }
+    for m in system.machine_names() {
+        println!("  state machine {m}");
+    }
+}
+
+/// The status block: one line per habitat, the configuration, machines and displayed CSMats.
+pub fn render(status: &Status, elapsed: Duration) -> String {
+    let mut out = format!(
+        "{}  t={:.1}s  configuration {}\n",
+        status.system,
+        elapsed.as_secs_f64(),
+        status.configuration.as_deref().unwrap_or("-")
+    );
+    out.push_str(&format!(
+        "  {:<12} {:>9} {:>9} {:>11} {:>9} {:>8} {:>6}\n",
+        "habitat", "rate Hz", "samples", "jitter p99", "exec p50", "overruns", "errors"
+    ));
+    for h in &status.habitats {
+        out.push_str(&format!(
+            "  {:<12} {:>9.1} {:>9} {:>8.1} us {:>6.1} us {:>8} {:>6}{}\n",
+            h.habitat,
+            h.rate_hz,
+            h.samples,
+            h.period_jitter.p99_us,
+            h.exec.p50_us,
+            h.overruns,
+            h.module_errors,
+            if h.running { "" } else { "  (stopped)" }
+        ));
+    }
+    for m in &status.machines {
+        out.push_str(&format!(
+            "  fsm {:<8} state {:<12} transitions {}{}\n",
+            m.machine,
+            m.state,
+            m.transitions,
+            if m.faults > 0 {
+                format!("  faults {} ({})", m.faults, m.last_fault)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    for (name, value) in &status.display {
+        out.push_str(&format!("  {name} = {}\n", show(value)));
+    }
+    out
+}
+
+fn show(m: &CsMat) -> String {
+    let unit = |i: usize| {
+        m.row_fields()
+            .get(i)
+            .map(|f| f.unit.as_str())
+            .filter(|u| !u.is_empty())
+            .map(|u| format!(" {u}"))
+            .unwrap_or_default()
+    };
+    let values: Vec<String> = (0..m.rows())
+        .flat_map(|r| (0..m.cols()).map(move |c| (r, c)))
+        .map(|(r, c)| format!("{:+.4}{}", m.matrix()[(r, c)], unit(r)))
+        .collect();
+    format!("[{}]", values.join(", "))
+}

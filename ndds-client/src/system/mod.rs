@@ -1,0 +1,286 @@
+//! Systems built at run time from description files (ControlShell's way of assembling whole
+//! control hierarchies from data): habitats, CSMats, components from the library, module
+//! groups and configurations, network bindings, rate transitions, state machines, triggers
+//! and ports, in TOML files that may include each other.
+//!
+//! [`System::load`] reads and checks every file, reporting each problem where it was written
+//! (`file:line:column: what is wrong; expected what`), builds the system through the linking
+//! database and runs [`verify`](crate::runtime::Runtime::verify) before anything goes live;
+//! [`System::start`] starts the habitats, state machines and ports; [`System::stop`] (or
+//! dropping it) stops them through their shutdown routines. The format is described in
+//! `docs/description-files.md`.
+//!
+//! ```
+//! use ndds_client::system::System;
+//!
+//! let text = r#"
+//! [[habitat]]
+//! name = "servo"
+//! rate = 100.0
+//! clock = "manual"
+//!
+//! [[component]]
+//! name = "source"
+//! type = "constant"
+//! habitat = "servo"
+//! value = [1.5]
+//! output = "setpoint"
+//!
+//! [[component]]
+//! name = "double"
+//! type = "gain"
+//! habitat = "servo"
+//! input = "setpoint"
+//! output = "out"
+//! k = 2.0
+//! "#;
+//! let system = System::from_str("servo.toml", text, None)?;
+//! system.start()?;
+//! system.runtime().habitat("servo").step()?;
+//! assert_eq!(system.runtime().mat("out").value(0, 0), 3.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod build;
+mod decl;
+mod source;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
+
+pub use decl::{SECTION_KEYS, SECTIONS, Serves};
+pub use source::{Diagnostic, Diagnostics, Location, MAX_FILE_BYTES, MAX_FILES, MAX_INCLUDE_DEPTH};
+
+use crate::Participant;
+use crate::fsm::{FsmError, MachineState, StateMachine};
+use crate::runtime::{HabitatStats, Runtime, RuntimeError};
+
+/// Why a system could not be loaded or started.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SystemError {
+    /// The description is wrong: every problem, each where it was written.
+    #[error("{0}")]
+    Invalid(Diagnostics),
+    /// The runtime refused to start.
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+    /// A state machine refused to start.
+    #[error(transparent)]
+    Fsm(#[from] FsmError),
+    /// A port could not be declared.
+    #[error("port `{port}`: {message}")]
+    Port {
+        /// The port.
+        port: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// [`System::start`] was called twice.
+    #[error("system `{0}` was started already")]
+    AlreadyStarted(String),
+}
+
+/// A state machine's slot: filled when the system starts.
+pub(crate) type MachineSlot = Arc<OnceLock<StateMachine>>;
+
+/// A loaded system: its runtime (the linking database with everything the files declared),
+/// the state machines and ports it starts.
+pub struct System {
+    name: String,
+    files: Vec<PathBuf>,
+    runtime: Runtime,
+    participant: Option<Participant>,
+    description: Option<String>,
+    display: Vec<String>,
+    machines: BTreeMap<String, (MachineSlot, build::PendingMachine)>,
+    ports: Vec<decl::PortDecl>,
+    servers: Mutex<Vec<build::PortServer>>,
+    started: Mutex<bool>,
+}
+
+impl System {
+    /// Reads `path` and the files it includes, checks them, builds the system and verifies
+    /// it. With a participant, network bindings, state machines and ports are on the network;
+    /// without one, a description that publishes or subscribes is refused.
+    pub fn load(
+        path: impl AsRef<Path>,
+        participant: Option<&Participant>,
+    ) -> Result<Self, SystemError> {
+        let path = path.as_ref();
+        let files = source::read_all(path).map_err(SystemError::Invalid)?;
+        let stem = path
+            .file_stem()
+            .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
+        build::build(files, &stem, participant)
+    }
+
+    /// Reads `path` into an existing runtime (one with component types of your own
+    /// registered, see [`Runtime::register_component`]); the runtime's name and participant are
+    /// used, `[system] name` is not.
+    pub fn load_into(runtime: Runtime, path: impl AsRef<Path>) -> Result<Self, SystemError> {
+        let files = source::read_all(path.as_ref()).map_err(SystemError::Invalid)?;
+        let participant = runtime.participant().cloned();
+        build::build_into(files, runtime, participant.as_ref())
+    }
+
+    /// The same from text (named `name` in messages; includes are relative to the current
+    /// directory).
+    pub fn from_str(
+        name: &str,
+        text: &str,
+        participant: Option<&Participant>,
+    ) -> Result<Self, SystemError> {
+        let files = source::read_text(name, text, Path::new(".")).map_err(SystemError::Invalid)?;
+        let stem = Path::new(name)
+            .file_stem()
+            .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
+        build::build(files, &stem, participant)
+    }
+
+    /// The system's name (`[system] name`, else the top file's name without extension); also
+    /// its runtime's name, so its habitats' statistics are on `cs/<name>/<habitat>/stats`.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// `[system] description`.
+    pub fn description(&self) -> Option<&str> {
+        self.description.as_deref()
+    }
+
+    /// The files read, the top file last.
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
+    }
+
+    /// The runtime the system was built in.
+    pub fn runtime(&self) -> &Runtime {
+        &self.runtime
+    }
+
+    /// The CSMats `[system] display` names.
+    pub fn display(&self) -> &[String] {
+        &self.display
+    }
+
+    /// Names of the state machines.
+    pub fn machine_names(&self) -> Vec<String> {
+        self.machines.keys().cloned().collect()
+    }
+
+    /// The running state machine `name` (after [`start`](Self::start)).
+    pub fn machine(&self, name: &str) -> Option<&StateMachine> {
+        self.machines.get(name).and_then(|(slot, _)| slot.get())
+    }
+
+    /// Starts the habitats, then the state machines and ports.
+    pub fn start(&self) -> Result<(), SystemError> {
+        let mut started = lock(&self.started);
+        if *started {
+            return Err(SystemError::AlreadyStarted(self.name.clone()));
+        }
+        self.runtime.start_all()?;
+        for (name, (slot, pending)) in &self.machines {
+            let machine = pending.start(&self.runtime, self.participant.as_ref());
+            match machine {
+                Ok(machine) => {
+                    let _ = slot.set(machine);
+                }
+                Err(err) => {
+                    tracing::error!(machine = %name, "state machine did not start: {err}");
+                    self.runtime.stop_all();
+                    return Err(err.into());
+                }
+            }
+        }
+        if let Some(participant) = &self.participant {
+            let mut servers = lock(&self.servers);
+            for port in &self.ports {
+                match build::PortServer::start(self, participant, port) {
+                    Ok(server) => servers.push(server),
+                    Err(err) => {
+                        drop(servers);
+                        self.stop_inner();
+                        return Err(err);
+                    }
+                }
+            }
+        }
+        *started = true;
+        Ok(())
+    }
+
+    /// Stops ports, state machines and habitats (their disable and shutdown routines run).
+    /// Stopping a stopped system does nothing.
+    pub fn stop(&self) {
+        self.stop_inner();
+    }
+
+    fn stop_inner(&self) {
+        for server in lock(&self.servers).drain(..) {
+            server.stop();
+        }
+        for (slot, _) in self.machines.values() {
+            if let Some(machine) = slot.get() {
+                machine.stop();
+            }
+        }
+        self.runtime.stop_all();
+    }
+
+    /// What the system is doing now: habitats with rate and jitter, the configuration, state
+    /// machines, and the displayed CSMats.
+    pub fn status(&self) -> Status {
+        Status {
+            system: self.name.clone(),
+            configuration: self.runtime.current_configuration(),
+            habitats: self
+                .runtime
+                .habitats()
+                .iter()
+                .filter(|h| h.is_created())
+                .map(|h| self.runtime.habitat_stats(h))
+                .collect(),
+            machines: self
+                .machines
+                .iter()
+                .filter_map(|(_, (slot, _))| slot.get().map(StateMachine::snapshot))
+                .collect(),
+            display: self
+                .display
+                .iter()
+                .map(|name| {
+                    let value = self.runtime.mat(name).read().clone();
+                    (name.clone(), value)
+                })
+                .collect(),
+        }
+    }
+}
+
+impl Drop for System {
+    fn drop(&mut self) {
+        self.stop_inner();
+    }
+}
+
+/// A snapshot of a running system, as `ndds run` prints it.
+#[derive(Clone, Debug)]
+pub struct Status {
+    /// The system's name.
+    pub system: String,
+    /// The active configuration (`None` before any switch).
+    pub configuration: Option<String>,
+    /// Each habitat's statistics.
+    pub habitats: Vec<HabitatStats>,
+    /// Each state machine's state.
+    pub machines: Vec<MachineState>,
+    /// The displayed CSMats' values.
+    pub display: Vec<(String, crate::runtime::CsMat)>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
