@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use super::decl::{self, PortDecl, Serves, TriggerDecl};
 use super::source::{Diagnostics, Location, RawValue, SourceFile};
-use super::{MachineSlot, System, SystemError};
+use super::{LoadOptions, MachineSlot, System, SystemError};
 use crate::Participant;
 use crate::fsm::{ActionSet, FsmError, Program, StateMachine, Stimulus};
 use crate::ports::{PortError, PortOwner};
@@ -97,19 +97,21 @@ pub(crate) fn build(
     files: Vec<SourceFile>,
     stem: &str,
     participant: Option<&Participant>,
+    options: LoadOptions,
 ) -> Result<System, SystemError> {
     let name = system_name(&files).unwrap_or_else(|| stem.to_owned());
     let runtime = match participant {
         Some(p) => Runtime::with_participant(&name, p)?,
         None => Runtime::new(&name),
     };
-    build_into(files, runtime, participant)
+    build_into(files, runtime, participant, options)
 }
 
 pub(crate) fn build_into(
     files: Vec<SourceFile>,
     rt: Runtime,
     participant: Option<&Participant>,
+    options: LoadOptions,
 ) -> Result<System, SystemError> {
     let mut p = Diagnostics::default();
     let known: Vec<String> = rt.component_types().into_iter().map(|(n, _)| n).collect();
@@ -149,7 +151,11 @@ pub(crate) fn build_into(
     };
 
     for h in &d.habitats {
-        if let Err(err) = rt.create_habitat(&h.name.name, h.options.clone()) {
+        let mut habitat_options = h.options.clone();
+        if options.simulated {
+            habitat_options.clock = crate::runtime::Clock::Manual;
+        }
+        if let Err(err) = rt.create_habitat(&h.name.name, habitat_options) {
             refuse(&mut p, &h.name.at, &err);
         }
     }

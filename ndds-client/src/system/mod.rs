@@ -49,6 +49,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
+pub use build::PortReply;
 pub use decl::{SECTION_KEYS, SECTIONS, Serves};
 pub use source::{Diagnostic, Diagnostics, Location, MAX_FILE_BYTES, MAX_FILES, MAX_INCLUDE_DEPTH};
 
@@ -108,12 +109,21 @@ impl System {
         path: impl AsRef<Path>,
         participant: Option<&Participant>,
     ) -> Result<Self, SystemError> {
+        Self::load_with(path, participant, LoadOptions::default())
+    }
+
+    /// [`load`](Self::load) with options.
+    pub fn load_with(
+        path: impl AsRef<Path>,
+        participant: Option<&Participant>,
+        options: LoadOptions,
+    ) -> Result<Self, SystemError> {
         let path = path.as_ref();
         let files = source::read_all(path).map_err(SystemError::Invalid)?;
         let stem = path
             .file_stem()
             .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
-        build::build(files, &stem, participant)
+        build::build(files, &stem, participant, options)
     }
 
     /// Reads `path` into an existing runtime (one with component types of your own
@@ -122,7 +132,7 @@ impl System {
     pub fn load_into(runtime: Runtime, path: impl AsRef<Path>) -> Result<Self, SystemError> {
         let files = source::read_all(path.as_ref()).map_err(SystemError::Invalid)?;
         let participant = runtime.participant().cloned();
-        build::build_into(files, runtime, participant.as_ref())
+        build::build_into(files, runtime, participant.as_ref(), LoadOptions::default())
     }
 
     /// The same from text (named `name` in messages; includes are relative to the current
@@ -136,7 +146,7 @@ impl System {
         let stem = Path::new(name)
             .file_stem()
             .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
-        build::build(files, &stem, participant)
+        build::build(files, &stem, participant, LoadOptions::default())
     }
 
     /// The system's name (`[system] name`, else the top file's name without extension); also
@@ -175,13 +185,13 @@ impl System {
         self.machines.get(name).and_then(|(slot, _)| slot.get())
     }
 
-    /// Starts the habitats, then the state machines and ports.
+    /// Starts the state machines (so the first trigger finds its machine), the habitats,
+    /// then the ports.
     pub fn start(&self) -> Result<(), SystemError> {
         let mut started = lock(&self.started);
         if *started {
             return Err(SystemError::AlreadyStarted(self.name.clone()));
         }
-        self.runtime.start_all()?;
         for (name, (slot, pending)) in &self.machines {
             let machine = pending.start(&self.runtime, self.participant.as_ref());
             match machine {
@@ -190,10 +200,14 @@ impl System {
                 }
                 Err(err) => {
                     tracing::error!(machine = %name, "state machine did not start: {err}");
-                    self.runtime.stop_all();
+                    self.stop_inner();
                     return Err(err.into());
                 }
             }
+        }
+        if let Err(err) = self.runtime.start_all() {
+            self.stop_inner();
+            return Err(err.into());
         }
         if let Some(participant) = &self.participant {
             let mut servers = lock(&self.servers);
@@ -210,6 +224,39 @@ impl System {
         }
         *started = true;
         Ok(())
+    }
+
+    /// Runs a system loaded with [`LoadOptions::simulated`] for `seconds` of simulated time:
+    /// each habitat samples at its own rate, in time order (habitats due at the same time in
+    /// the order they were declared), as fast as the machine allows. Returns the samples run.
+    pub fn simulate(&self, seconds: f64) -> Result<u64, SystemError> {
+        let habitats: Vec<_> = self
+            .runtime
+            .habitats()
+            .into_iter()
+            .filter(|h| h.is_created())
+            .collect();
+        let mut due: Vec<(f64, u64)> = vec![(0.0, 0); habitats.len()];
+        let mut samples = 0;
+        loop {
+            let next = due
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.0.total_cmp(&b.1.0).then(a.0.cmp(&b.0)))
+                .map(|(i, _)| i);
+            let Some(i) = next else { break };
+            if due[i].0 >= seconds {
+                break;
+            }
+            habitats[i]
+                .step()
+                .map_err(|e| SystemError::Runtime(e.into()))?;
+            samples += 1;
+            due[i].1 += 1;
+            // From the sample count, so rounding never accumulates.
+            due[i].0 = due[i].1 as f64 * habitats[i].period().as_secs_f64();
+        }
+        Ok(samples)
     }
 
     /// Stops ports, state machines and habitats (their disable and shutdown routines run).
@@ -264,6 +311,15 @@ impl Drop for System {
     fn drop(&mut self) {
         self.stop_inner();
     }
+}
+
+/// How a description is loaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// Every habitat is clocked by [`System::simulate`] (or [`Habitat::step`](
+    /// crate::runtime::Habitat::step)) instead of its timer or clock topic: simulated time,
+    /// as fast as the machine allows (for tests, and for trying a system without its hardware).
+    pub simulated: bool,
 }
 
 /// A snapshot of a running system, as `ndds run` prints it.

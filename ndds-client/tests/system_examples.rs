@@ -1,0 +1,205 @@
+//! Every description file under `examples/` loads, verifies and runs for a bounded number of
+//! samples; the closed-loop examples converge (asserted on their tracking errors); the
+//! sequencing state machine reaches its end.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use ndds_client::system::{LoadOptions, System};
+
+fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+}
+
+/// Every `.toml` under `examples/` that is a system (state machine programs, which have a
+/// top-level `main`, are loaded through the systems that name them).
+fn system_files() -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut dirs = vec![examples()];
+    while let Some(dir) = dirs.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                dirs.push(path);
+            } else if path.extension().is_some_and(|e| e == "toml") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                if !text.lines().any(|l| l.starts_with("main = ")) {
+                    out.push(path);
+                }
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+fn participant() -> (tempfile::TempDir, ndds_client::Participant) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = common::unique_config(dir.path(), "examples");
+    let participant = common::participant(&config);
+    (dir, participant)
+}
+
+fn value(system: &System, mat: &str, row: usize) -> f64 {
+    system.runtime().mat(mat).value(row, 0)
+}
+
+/// Simulates in steps of 0.1 s, giving the state machines real time to act between steps,
+/// until `done` or `limit` simulated seconds.
+fn simulate_until(system: &System, limit: f64, done: impl Fn(&System) -> bool) -> f64 {
+    let mut t = 0.0;
+    while t < limit {
+        system.simulate(0.1).expect("simulates");
+        t += 0.1;
+        if done(system) {
+            return t;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    t
+}
+
+#[test]
+fn every_example_loads_verifies_and_runs_bounded_samples() {
+    let files = system_files();
+    assert!(files.len() >= 5, "examples: {files:?}");
+    let (_dir, participant) = participant();
+    for file in &files {
+        let system = System::load_with(file, Some(&participant), LoadOptions { simulated: true })
+            .unwrap_or_else(|e| panic!("{}:\n{e}", file.display()));
+        assert!(system.runtime().verify().is_ok());
+        system.start().unwrap();
+        let samples = system.simulate(1.0).unwrap();
+        assert!(samples >= 10, "{}: {samples} samples", file.display());
+        let status = system.status();
+        for h in &status.habitats {
+            assert!(
+                h.samples > 0,
+                "{}: habitat {} ran no sample",
+                file.display(),
+                h.habitat
+            );
+            assert_eq!(h.module_errors, 0, "{}: {h:?}", file.display());
+        }
+        system.stop();
+    }
+}
+
+#[test]
+fn multirate_servo_follows_the_plan_to_the_goal() {
+    let system = System::load_with(
+        examples().join("multirate.toml"),
+        None,
+        LoadOptions { simulated: true },
+    )
+    .unwrap();
+    system.start().unwrap();
+    // Half way through the 2 s plan the servo is between start and goal, and close to the
+    // plan.
+    system.simulate(1.0).unwrap();
+    let (q1, plan1) = (value(&system, "angles", 0), value(&system, "plan", 0));
+    assert!(q1 > 0.4 && q1 < 0.9, "q1 half way: {q1}");
+    assert!(
+        (q1 - plan1).abs() < 0.05,
+        "servo lags the plan: {q1} vs {plan1}"
+    );
+    system.simulate(2.0).unwrap();
+    let error = [
+        value(&system, "angles", 0) - 1.0,
+        value(&system, "angles", 1) + 0.4,
+    ];
+    assert!(
+        error.iter().all(|e| e.abs() < 1e-3),
+        "joint error after 3 s: {error:?}"
+    );
+    let stats = system.status().habitats;
+    let samples = |name: &str| stats.iter().find(|h| h.habitat == name).unwrap().samples;
+    assert_eq!(samples("servo"), 3000);
+    assert_eq!(samples("planner"), 150);
+    assert_eq!(samples("logger"), 30);
+}
+
+#[test]
+fn sequence_visits_a_then_b_then_home() {
+    let system = System::load_with(
+        examples().join("sequence.toml"),
+        None,
+        LoadOptions { simulated: true },
+    )
+    .unwrap();
+    system.start().unwrap();
+    let task = || system.machine("task").unwrap().snapshot().state;
+    // Arrivals at A and B are seen on the way.
+    let mut seen_a = false;
+    let mut seen_b = false;
+    let t = simulate_until(&system, 30.0, |s| {
+        let p = value(s, "position", 0);
+        seen_a |= (p - 0.2).abs() < 0.002;
+        seen_b |= (p + 0.1).abs() < 0.002;
+        s.machine("task").unwrap().snapshot().state == "Done"
+    });
+    assert_eq!(task(), "Done", "after {t:.1} s simulated");
+    assert!(seen_a && seen_b, "A {seen_a}, B {seen_b}");
+    assert_eq!(
+        system.runtime().current_configuration().as_deref(),
+        Some("Home")
+    );
+    simulate_until(&system, 2.0, |_| false);
+    assert!(value(&system, "position", 0).abs() < 0.002);
+}
+
+/// The quickstart in real time: plant and controller in one process, talking over topics of
+/// an embedded daemon. JointPD settles, the supervisor switches to endptLQG, the tip reaches
+/// the endpoint goal; the port switches back.
+#[test]
+fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
+    let (_dir, participant) = participant();
+    let system = System::load(examples().join("arm.toml"), Some(&participant)).unwrap();
+    system.start().unwrap();
+    let begun = Instant::now();
+    let reached = common::eventually(Duration::from_secs(20), || {
+        let s = system.status();
+        s.configuration.as_deref() == Some("endptLQG")
+            && s.machines[0].state == "Endpoint"
+            && value(&system, "tip_error", 0).abs() < 1e-3
+            && value(&system, "tip_error", 1).abs() < 1e-3
+    });
+    assert!(
+        reached,
+        "after {:?}: {:?}, tip error [{}, {}]",
+        begun.elapsed(),
+        system.status().configuration,
+        value(&system, "tip_error", 0),
+        value(&system, "tip_error", 1)
+    );
+
+    // Another program asks for JointPD through the system's port.
+    let user = ndds_client::ports::PortUser::<String, Result<String, String>>::declare(
+        &participant,
+        "arm/configure",
+        "operator",
+    )
+    .unwrap();
+    let reply = user
+        .send(&"JointPD".to_owned(), Duration::from_secs(5))
+        .unwrap();
+    assert_eq!(reply, Ok("switched to `JointPD`".to_owned()));
+    assert_eq!(
+        system.runtime().current_configuration().as_deref(),
+        Some("JointPD")
+    );
+    let refused = user
+        .send(&"NoSuch".to_owned(), Duration::from_secs(5))
+        .unwrap();
+    assert!(refused.is_err_and(|e| e.contains("NoSuch")));
+    system.stop();
+    let errors: u64 = system
+        .status()
+        .habitats
+        .iter()
+        .map(|h| h.module_errors)
+        .sum();
+    assert_eq!(errors, 0);
+}
