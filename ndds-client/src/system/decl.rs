@@ -845,6 +845,27 @@ fn component(
                     known.join(", ")
                 ),
             );
+            // Its string parameters may be outputs: count them as provided, so one mistake
+            // gives one message.
+            let mats = r
+                .table
+                .entries
+                .iter()
+                .filter(|(k, _, _)| !reserved.contains(&k.as_str()))
+                .filter_map(|(_, _, raw)| match &raw.value {
+                    RawValue::Text(s) => Some((s.clone(), raw.at.clone(), ParamKind::Output)),
+                    _ => None,
+                })
+                .collect();
+            d.components.push(ComponentDecl {
+                name,
+                type_name,
+                habitat,
+                group,
+                params: Params::new(),
+                mats,
+                param_at: BTreeMap::new(),
+            });
             return;
         }
     };
@@ -915,7 +936,9 @@ fn component(
             }
         }
     }
-    if ok {
+    // Pushed even when a parameter is wrong (the problem is reported and nothing is built):
+    // its outputs still count as provided.
+    {
         d.components.push(ComponentDecl {
             name,
             type_name,
