@@ -210,7 +210,7 @@ pub(crate) fn build_into(
             &s.mat.name,
             s.shape,
             &s.topic,
-            s.qos.clone(),
+            s.qos,
         ) {
             refuse(&mut p, &s.at, &err);
         }
@@ -289,7 +289,7 @@ pub(crate) fn build_into(
         places
             .uses
             .insert((module, s.mat.name.clone()), s.mat.at.clone());
-        if let Err(err) = rt.publish(&s.habitat.name, &s.mat.name, &s.topic, s.qos.clone()) {
+        if let Err(err) = rt.publish(&s.habitat.name, &s.mat.name, &s.topic, s.qos) {
             refuse(&mut p, &s.at, &err);
         }
     }

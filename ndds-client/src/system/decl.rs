@@ -598,11 +598,16 @@ fn category_group(named: &Named, p: &mut Diagnostics) -> Option<(String, String,
     }
 }
 
+/// The documented parameters of a component type: `Ok(None)` for a type registered without
+/// a spec, `Err(known types)` for no such type.
+pub(crate) type SpecLookup<'a> =
+    dyn Fn(&str) -> Result<Option<&'static ComponentSpec>, Vec<String>> + 'a;
+
 /// Checks every section of every file. `spec` gives the documented parameters of a component
 /// type (`Ok(None)`: a type registered without a spec; `Err(known)`: no such type).
 pub(crate) fn describe(
     files: &[SourceFile],
-    spec: &dyn Fn(&str) -> Result<Option<&'static ComponentSpec>, Vec<String>>,
+    spec: &SpecLookup<'_>,
     p: &mut Diagnostics,
 ) -> Description {
     let mut d = Description {
@@ -822,7 +827,7 @@ fn mat(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
 fn component(
     d: &mut Description,
     r: &Reader<'_>,
-    spec_of: &dyn Fn(&str) -> Result<Option<&'static ComponentSpec>, Vec<String>>,
+    spec_of: &SpecLookup<'_>,
     p: &mut Diagnostics,
 ) {
     let reserved = keys_of("component");
