@@ -178,7 +178,7 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
     // Another program asks for JointPD through the system's port.
     let user = ndds_client::ports::PortUser::<String, Result<String, String>>::declare(
         &participant,
-        "arm/configure",
+        "arm-configure",
         "operator",
     )
     .unwrap();

@@ -44,17 +44,17 @@ pub struct Args {
 /// Runs `ndds run`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     if args.check {
-        let system = System::load(&args.file, None).or_else(|err| match err {
-            // Network bindings need a daemon to be built; check against one if it runs.
-            SystemError::Invalid(ref d)
+        // Network bindings are built against a daemon: connect only if the file has some.
+        let loaded = match System::load(&args.file, None) {
+            Err(SystemError::Invalid(d))
                 if d.0.iter().any(|x| x.message.contains("need a connection")) =>
             {
-                let participant = connect(daemon, true, &args.file)?;
+                let participant = connect(daemon, args.no_embedded, &args.file)?;
                 System::load(&args.file, Some(&participant))
             }
-            other => Err(other),
-        });
-        let system = system.map_err(|e| describe_error(&args.file, e))?;
+            other => other,
+        };
+        let system = loaded.map_err(|e| describe_error(&args.file, e))?;
         print_plan(&system);
         return Ok(());
     }
@@ -89,6 +89,8 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let redraw = !args.plain && std::io::stdout().is_terminal();
     let mut drawn = 0usize;
     let mut next = begun + args.interval;
+    let mut watch = Watch::default();
+    let _ = watch.changes(&system, Duration::ZERO);
     loop {
         if stop.load(Ordering::Acquire) {
             println!("ndds run: interrupted");
@@ -96,6 +98,18 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         }
         if args.seconds.is_some_and(|s| begun.elapsed() >= s) {
             break;
+        }
+        // Configuration switches and state changes, as they happen, above the status.
+        let events = watch.changes(&system, begun.elapsed());
+        if !events.is_empty() {
+            let mut out = std::io::stdout().lock();
+            if redraw && drawn > 0 {
+                let _ = write!(out, "\x1b[{drawn}A\x1b[J");
+                drawn = 0;
+                next = Instant::now();
+            }
+            let _ = out.write_all(events.as_bytes());
+            let _ = out.flush();
         }
         let now = Instant::now();
         if now >= next {
@@ -193,6 +207,41 @@ fn print_plan(system: &System) {
     }
     for m in system.machine_names() {
         println!("  state machine {m}");
+    }
+}
+
+/// What was seen last, to report changes.
+#[derive(Default)]
+struct Watch {
+    configuration: Option<String>,
+    states: std::collections::BTreeMap<String, String>,
+}
+
+impl Watch {
+    /// One line per change since the last call.
+    fn changes(&mut self, system: &System, elapsed: Duration) -> String {
+        let mut out = String::new();
+        let t = elapsed.as_secs_f64();
+        let configuration = system.runtime().current_configuration();
+        if configuration != self.configuration {
+            if let (Some(old), Some(new)) = (&self.configuration, &configuration) {
+                out.push_str(&format!("t={t:.1}s  configuration {old} -> {new}\n"));
+            }
+            self.configuration = configuration;
+        }
+        for name in system.machine_names() {
+            let Some(machine) = system.machine(&name) else {
+                continue;
+            };
+            let state = machine.snapshot().state;
+            match self.states.insert(name.clone(), state.clone()) {
+                Some(old) if old != state => {
+                    out.push_str(&format!("t={t:.1}s  fsm {name}: {old} -> {state}\n"));
+                }
+                _ => {}
+            }
+        }
+        out
     }
 }
 

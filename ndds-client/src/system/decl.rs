@@ -824,12 +824,7 @@ fn mat(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
     d.mats.push(MatDecl { name, value: mat });
 }
 
-fn component(
-    d: &mut Description,
-    r: &Reader<'_>,
-    spec_of: &SpecLookup<'_>,
-    p: &mut Diagnostics,
-) {
+fn component(d: &mut Description, r: &Reader<'_>, spec_of: &SpecLookup<'_>, p: &mut Diagnostics) {
     let reserved = keys_of("component");
     let name = r.required_text("name", p);
     let type_name = r.required_text("type", p);
@@ -1158,6 +1153,17 @@ fn port(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
     if let Some(prio) = r.integer("priority", (i32::MIN as i64, i32::MAX as i64), p) {
         restrictions.priority = prio as i32;
     }
+    let name = name.filter(|n| {
+        let ok = !n.name.contains('/') && !n.name.chars().any(char::is_control);
+        if !ok {
+            p.expected(
+                &n.at,
+                format!("bad port name `{}`", n.name),
+                "a name without `/` or control characters (ports live under port/NAME/...)",
+            );
+        }
+        ok
+    });
     if let (Some(name), Some(serves)) = (name, serves) {
         d.ports.push(PortDecl {
             name,
