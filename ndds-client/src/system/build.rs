@@ -205,13 +205,7 @@ pub(crate) fn build_into(
             .mats
             .entry(s.mat.name.clone())
             .or_insert_with(|| s.mat.at.clone());
-        if let Err(err) = rt.subscribe(
-            &s.habitat.name,
-            &s.mat.name,
-            s.shape,
-            &s.topic,
-            s.qos,
-        ) {
+        if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
             refuse(&mut p, &s.at, &err);
         }
     }

@@ -215,7 +215,12 @@ pub const GAIN: ComponentSpec = ComponentSpec {
     params: &[
         P::required("input", K::Input, "u, any shape"),
         P::required("output", K::Output, "y, the shape of u"),
-        P::optional("k", K::Number, "1", "the gain (a 1 × 1 CSMat `<module>.k`, tunable)"),
+        P::optional(
+            "k",
+            K::Number,
+            "1",
+            "the gain (a 1 × 1 CSMat `<module>.k`, tunable)",
+        ),
     ],
 };
 
@@ -227,7 +232,11 @@ pub const LOWPASS: ComponentSpec = ComponentSpec {
     params: &[
         P::required("input", K::Input, "u, any shape"),
         P::required("output", K::Output, "y, the shape of u"),
-        P::required("tau", K::Number, "time constant (s), a CSMat `<module>.tau`"),
+        P::required(
+            "tau",
+            K::Number,
+            "time constant (s), a CSMat `<module>.tau`",
+        ),
     ],
 };
 
