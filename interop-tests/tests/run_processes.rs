@@ -44,7 +44,7 @@ fn a_broken_file_is_refused_with_every_problem_and_nothing_starts() {
         let out = command.arg(&file).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{err}");
-        assert!(err.contains("2 problems; nothing was started"), "{err}");
+        assert!(err.contains("(2 problems); nothing was started"), "{err}");
         assert!(
             err.contains("broken.toml:9:9: unknown CSMat `nowhere`"),
             "{err}"
