@@ -197,6 +197,36 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
         system.runtime().current_configuration().as_deref(),
         Some("JointPD")
     );
+    // An operator takes over: Coarse holds joint control although the joints settle again.
+    let supervisor = system.machine("arm").unwrap();
+    supervisor
+        .send(ndds_client::fsm::Stimulus::event("Precise"))
+        .unwrap();
+    assert!(supervisor.wait_for_state("Endpoint", Duration::from_secs(5)));
+    supervisor
+        .send(ndds_client::fsm::Stimulus::event("Coarse"))
+        .unwrap();
+    assert!(supervisor.wait_for_state("Held", Duration::from_secs(5)));
+    let joints_settle = common::eventually(Duration::from_secs(10), || {
+        value(&system, "joint_error", 0).abs() < 0.005
+            && value(&system, "joint_error", 1).abs() < 0.005
+    });
+    assert!(joints_settle, "the joints never settled under JointPD");
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(supervisor.snapshot().state, "Held");
+    assert_eq!(
+        system.runtime().current_configuration().as_deref(),
+        Some("JointPD")
+    );
+    supervisor
+        .send(ndds_client::fsm::Stimulus::event("Precise"))
+        .unwrap();
+    assert!(supervisor.wait_for_state("Endpoint", Duration::from_secs(5)));
+    assert_eq!(
+        system.runtime().current_configuration().as_deref(),
+        Some("endptLQG")
+    );
+
     let refused = user
         .send(&"NoSuch".to_owned(), Duration::from_secs(5))
         .unwrap();

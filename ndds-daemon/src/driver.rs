@@ -233,11 +233,17 @@ impl Driver {
         let Some(entry) = self.clients.get(&client) else {
             return;
         };
-        if entry.link.outbox.try_send(message).is_err() {
-            self.counters.slow_clients.fetch_add(1, Ordering::Relaxed);
-            tracing::warn!(client, "client is not reading its socket; disconnecting it");
-            entry.link.cancel.cancel();
-            self.on_closed(client, "not reading");
+        match entry.link.outbox.try_send(message) {
+            Ok(()) => {}
+            // The connection already ended (a client that just exited); its `Closed` input is
+            // on its way and cleans up. Nothing to report.
+            Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => {}
+            Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => {
+                self.counters.slow_clients.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(client, "client is not reading its socket; disconnecting it");
+                entry.link.cancel.cancel();
+                self.on_closed(client, "not reading");
+            }
         }
     }
 
