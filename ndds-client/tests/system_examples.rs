@@ -182,6 +182,15 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
         value(&system, "tip_error", 1)
     );
 
+    // The subscribed CSMat took the plant's field names and units.
+    let tip = system.runtime().mat("tip").read().clone();
+    let fields: Vec<(&str, &str)> = tip
+        .row_fields()
+        .iter()
+        .map(|f| (f.name.as_str(), f.unit.as_str()))
+        .collect();
+    assert_eq!(fields, [("x", "m"), ("y", "m")]);
+
     // Another program asks for JointPD through the system's port.
     let user = ndds_client::ports::PortUser::<String, Result<String, String>>::declare(
         &participant,

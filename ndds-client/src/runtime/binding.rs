@@ -86,6 +86,13 @@ impl SampleModule for Subscriber {
             if out.shape() != (rows, cols) {
                 out.resize(rows, cols);
                 out.set_fields_from(&self.staging);
+            } else if out.row_fields().is_empty()
+                && out.col_fields().is_empty()
+                && !(self.staging.row_fields().is_empty() && self.staging.col_fields().is_empty())
+            {
+                // Created with its declared shape only: take the sender's field names and
+                // units (once; they are kept from then on).
+                out.set_fields_from(&self.staging);
             }
             out.copy_from(&self.staging)?;
         }
