@@ -1,8 +1,8 @@
 //! `docs/runtime.md` against the code: its code excerpts are verbatim parts of the files they
-//! name, and its tables of entry routines, verification problems, built-in components and
+//! name, and its tables of entry routines, verification problems and
 //! statistics fields list exactly what the code has.
 
-use ndds_client::runtime::{HabitatStats, Runtime};
+use ndds_client::runtime::HabitatStats;
 use ndds_docs::excerpts::{self, source};
 use ndds_docs::markdown::Doc;
 use ndds_docs::report::Problems;
@@ -83,29 +83,6 @@ fn verification_problems_are_the_enums() {
     });
     first_column(&doc, &mut problems, &["problem", "meaning"], &variants);
     problems.finish("docs/runtime.md verification problems");
-}
-
-#[test]
-fn built_in_components_are_the_registry() {
-    let doc = doc();
-    let mut problems = Problems::new();
-    let mut registered: Vec<String> = Runtime::new("docs")
-        .component_types()
-        .into_iter()
-        .map(|(name, _)| name)
-        .collect();
-    let table = doc.table(&["type", "reads", "writes"]).expect("the table");
-    let mut listed: Vec<String> = table.rows.iter().map(|r| r.plain(0)).collect();
-    registered.sort();
-    listed.sort();
-    if listed != registered {
-        problems.at(
-            &doc,
-            table.line,
-            format!("the table lists {listed:?}; the registry has {registered:?}"),
-        );
-    }
-    problems.finish("docs/runtime.md built-in components");
 }
 
 #[test]
