@@ -191,12 +191,7 @@ fn system_blocks_load_and_run() {
                         Ok(_) => problems.at(&doc, block.line, "ran no samples"),
                         Err(err) => problems.at(&doc, block.line, format!("does not run: {err}")),
                     }
-                    let errors: u64 = system
-                        .status()
-                        .habitats
-                        .iter()
-                        .map(|h| h.module_errors)
-                        .sum();
+                    let errors = system.status().module_errors();
                     if errors > 0 {
                         problems.at(&doc, block.line, format!("{errors} module errors"));
                     }

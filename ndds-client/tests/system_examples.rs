@@ -241,11 +241,6 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
         .unwrap();
     assert!(refused.is_err_and(|e| e.contains("NoSuch")));
     system.stop();
-    let errors: u64 = system
-        .status()
-        .habitats
-        .iter()
-        .map(|h| h.module_errors)
-        .sum();
+    let errors = system.status().module_errors();
     assert_eq!(errors, 0);
 }

@@ -131,7 +131,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     }
     system.stop();
     let status = system.status();
-    let errors: u64 = status.habitats.iter().map(|h| h.module_errors).sum();
+    let errors = status.module_errors();
     println!(
         "ndds run: stopped `{}` after {:.1} s (shutdown routines ran; {} module error{})",
         system.name(),

@@ -313,12 +313,21 @@ impl Drop for System {
     }
 }
 
+impl Status {
+    /// Module routine failures counted by all habitats since they started.
+    pub fn module_errors(&self) -> u64 {
+        self.habitats.iter().map(|h| h.module_errors).sum()
+    }
+}
+
 /// How a description is loaded.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct LoadOptions {
     /// Every habitat is clocked by [`System::simulate`] (or [`Habitat::step`](
     /// crate::runtime::Habitat::step)) instead of its timer or clock topic: simulated time,
     /// as fast as the machine allows (for tests, and for trying a system without its hardware).
+    /// Samples that cross the network still travel in real time, so a loop closed through
+    /// topics is not time-accurate in simulation; close such loops inside one file.
     pub simulated: bool,
 }
 

@@ -12,7 +12,7 @@ fn failed(text: &str) -> ModuleError {
 }
 
 /// `out = alpha·a·b + beta·out`, with the shapes checked first (nalgebra would panic).
-fn gemm(
+pub(crate) fn gemm(
     out: &mut DMatrix<f64>,
     alpha: f64,
     a: &DMatrix<f64>,

@@ -22,6 +22,7 @@ use nalgebra::linalg::{Schur, SymmetricEigen};
 use nalgebra::{DMatrix, DVector};
 
 use super::arm::{ArmModel, joint_pair};
+use super::control::gemm;
 use super::{LqgDesign, LqgWeights, Physical, copy_out, design_lqg, distinct, shape_error};
 use crate::runtime::mat::Mat;
 use crate::runtime::module::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
@@ -426,29 +427,6 @@ fn design(linear: &Linear, weights: &LqgWeights, dt: f64) -> Result<LqgDesign, M
         )));
     }
     Ok(d)
-}
-
-/// `out = alpha·a·b + beta·out`, with the shapes checked first (nalgebra would panic).
-fn gemm(
-    out: &mut DMatrix<f64>,
-    alpha: f64,
-    a: &DMatrix<f64>,
-    b: &DMatrix<f64>,
-    beta: f64,
-) -> RoutineResult {
-    if a.ncols() != b.nrows() || out.nrows() != a.nrows() || out.ncols() != b.ncols() {
-        return Err(failed(format!(
-            "lqg: matrix product of {}x{} and {}x{} into {}x{}",
-            a.nrows(),
-            a.ncols(),
-            b.nrows(),
-            b.ncols(),
-            out.nrows(),
-            out.ncols()
-        )));
-    }
-    out.gemm(alpha, a, b, beta);
-    Ok(())
 }
 
 /// Copies `mat` into `buffer` minus `offset` (same shapes, finite values), without allocating.
