@@ -244,3 +244,28 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
     let errors = system.status().module_errors();
     assert_eq!(errors, 0);
 }
+
+/// Simulated time is one clock across calls: many calls shorter than a period run the samples
+/// due, not one sample per call.
+#[test]
+fn simulated_time_goes_on_across_calls() {
+    let text = "[[habitat]]\nname = \"slow\"\nrate = 100\n\n[[habitat]]\nname = \"fast\"\n\
+                rate = 1000\n\n[[component]]\nname = \"t\"\ntype = \"ramp\"\nhabitat = \"slow\"\n\
+                slope = [1.0]\noutput = \"time\"\n";
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("clock.toml");
+    std::fs::write(&file, text).unwrap();
+    let system = System::load_with(&file, None, LoadOptions { simulated: true }).unwrap();
+    system.start().unwrap();
+    let mut samples = 0;
+    for _ in 0..250 {
+        samples += system.simulate(0.001).unwrap();
+    }
+    // 0.25 s: slow samples at 0, 10, ..., 240 ms (25), fast at 0, 1, ..., 249 ms (250).
+    assert_eq!(samples, 275);
+    let stats = system.status().habitats;
+    let samples_of = |name: &str| stats.iter().find(|h| h.habitat == name).unwrap().samples;
+    assert_eq!((samples_of("slow"), samples_of("fast")), (25, 250));
+    // The ramp's last sample ran at t = 0.24 s.
+    assert!((value(&system, "time", 0) - 0.24).abs() < 1e-9);
+}

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use ndds_client::runtime::CsMat;
-use ndds_client::system::{Status, System, SystemError};
+use ndds_client::system::{LoadOptions, Status, System, SystemError};
 use ndds_client::{EmbeddedPolicy, Participant};
 
 use crate::connect::DaemonArgs;
@@ -39,24 +39,38 @@ pub struct Args {
     /// Append each status report instead of redrawing it in place.
     #[arg(long)]
     plain: bool,
+    /// Run this many seconds of simulated time as fast as the machine allows (every habitat
+    /// clocked by the simulation), print the final status and the speed, and stop. Samples
+    /// crossing the network still travel in real time.
+    #[arg(long, value_parser = seconds::parse, conflicts_with_all = ["seconds", "check"])]
+    simulate: Option<Duration>,
 }
 
 /// Runs `ndds run`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
-    if args.check {
+    if args.check || args.simulate.is_some() {
+        let options = LoadOptions {
+            simulated: args.simulate.is_some(),
+        };
         // Network bindings are built against a daemon: connect only if the file has some.
-        let loaded = match System::load(&args.file, None) {
+        let mut participant = None;
+        let loaded = match System::load_with(&args.file, None, options) {
             Err(SystemError::Invalid(d))
                 if d.0.iter().any(|x| x.message.contains("need a connection")) =>
             {
-                let participant = connect(daemon, args.no_embedded, &args.file)?;
-                System::load(&args.file, Some(&participant))
+                let p = participant.insert(connect(daemon, args.no_embedded, &args.file)?);
+                System::load_with(&args.file, Some(p), options)
             }
             other => other,
         };
         let system = loaded.map_err(|e| describe_error(&args.file, e))?;
-        print_plan(&system);
-        return Ok(());
+        return match args.simulate {
+            Some(seconds) => simulate(&system, seconds),
+            None => {
+                print_plan(&system);
+                Ok(())
+            }
+        };
     }
     let participant = connect(daemon, args.no_embedded, &args.file)?;
     let system =
@@ -138,6 +152,35 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         begun.elapsed().as_secs_f64(),
         errors,
         if errors == 1 { "" } else { "s" }
+    );
+    Ok(())
+}
+
+/// `--simulate`: simulated time in steps of 10 ms, letting state machines act between steps.
+fn simulate(system: &System, seconds: Duration) -> anyhow::Result<()> {
+    const STEP: f64 = 0.01;
+    system.start().context("starting the system")?;
+    let total = seconds.as_secs_f64().min(1e7);
+    let begun = Instant::now();
+    let mut watch = Watch::default();
+    let _ = watch.changes(system, Duration::ZERO);
+    let (mut t, mut samples) = (0.0, 0u64);
+    while t < total {
+        let step = STEP.min(total - t);
+        samples += system.simulate(step).context("simulating")?;
+        t += step;
+        std::thread::yield_now();
+        print!("{}", watch.changes(system, Duration::from_secs_f64(t)));
+    }
+    let wall = begun.elapsed().as_secs_f64();
+    print!("{}", render(&system.status(), Duration::from_secs_f64(t)));
+    system.stop();
+    println!(
+        "ndds run: simulated {t:.1} s in {wall:.2} s ({:.0}x real time, {samples} samples, \
+         {:.0} samples/s; {} module errors)",
+        t / wall.max(1e-9),
+        samples as f64 / wall.max(1e-9),
+        system.status().module_errors()
     );
     Ok(())
 }

@@ -312,6 +312,7 @@ pub(crate) fn build_into(
         ports: d.ports,
         servers: std::sync::Mutex::new(Vec::new()),
         started: std::sync::Mutex::new(false),
+        simulated: std::sync::Mutex::new((0.0, Vec::new())),
         runtime: rt,
     })
 }

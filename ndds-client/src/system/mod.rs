@@ -99,6 +99,8 @@ pub struct System {
     ports: Vec<decl::PortDecl>,
     servers: Mutex<Vec<build::PortServer>>,
     started: Mutex<bool>,
+    /// [`simulate`](Self::simulate)'s clock: simulated seconds, samples per habitat.
+    simulated: Mutex<(f64, Vec<u64>)>,
 }
 
 impl System {
@@ -228,7 +230,8 @@ impl System {
 
     /// Runs a system loaded with [`LoadOptions::simulated`] for `seconds` of simulated time:
     /// each habitat samples at its own rate, in time order (habitats due at the same time in
-    /// the order they were declared), as fast as the machine allows. Returns the samples run.
+    /// name order), as fast as the machine allows; simulated time goes on
+    /// from one call to the next. Returns the samples run.
     pub fn simulate(&self, seconds: f64) -> Result<u64, SystemError> {
         let habitats: Vec<_> = self
             .runtime
@@ -236,26 +239,28 @@ impl System {
             .into_iter()
             .filter(|h| h.is_created())
             .collect();
-        let mut due: Vec<(f64, u64)> = vec![(0.0, 0); habitats.len()];
+        // Simulated time goes on from call to call: samples run so far, per habitat.
+        let mut clock = lock(&self.simulated);
+        clock.1.resize(habitats.len(), 0);
+        let end = clock.0 + seconds.max(0.0);
+        let due = |i: usize, count: u64| count as f64 * habitats[i].period().as_secs_f64();
         let mut samples = 0;
         loop {
-            let next = due
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.0.total_cmp(&b.1.0).then(a.0.cmp(&b.0)))
-                .map(|(i, _)| i);
-            let Some(i) = next else { break };
-            if due[i].0 >= seconds {
+            let next = (0..habitats.len())
+                .map(|i| (due(i, clock.1[i]), i))
+                .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let Some((at, i)) = next else { break };
+            // A nanosecond's grace: sums of short steps must not run a sample early.
+            if at + 1e-9 >= end {
                 break;
             }
             habitats[i]
                 .step()
                 .map_err(|e| SystemError::Runtime(e.into()))?;
             samples += 1;
-            due[i].1 += 1;
-            // From the sample count, so rounding never accumulates.
-            due[i].0 = due[i].1 as f64 * habitats[i].period().as_secs_f64();
+            clock.1[i] += 1;
         }
+        clock.0 = end;
         Ok(samples)
     }
 
