@@ -452,3 +452,18 @@ fn network_sections_need_a_participant() {
                 topic = \"t/u\"\nhabitat = \"h\"\nshape = [1, 1]\n";
     expect_one(text, "[[subscribe]]", &["need a connection to a daemon"]);
 }
+
+#[test]
+fn an_oversized_subscription_shape_is_refused_at_load() {
+    let text = "[[habitat]]\nname = \"h\"\nrate = 10\n\n[[subscribe]]\nmat = \"image\"\n\
+                topic = \"cam/image\"\nhabitat = \"h\"\nshape = [65536, 65536]\n";
+    let found = problems("broken.toml", text);
+    let (line, column) = at(text, "[65536", 0);
+    assert!(
+        found
+            .iter()
+            .any(|d| (d.location.line, d.location.column) == (line, column)
+                && d.to_string().contains("at most 4194304 elements")),
+        "{found:#?}"
+    );
+}

@@ -106,6 +106,9 @@ fn keys_of(section: &str) -> &'static [&'static str] {
         .map_or(&[], |(_, k)| k)
 }
 
+/// Most elements of a subscribed CSMat (32 MiB of `f64`).
+pub const MAX_SUBSCRIBED_ELEMENTS: usize = 1 << 22;
+
 /// A name with where it was written.
 #[derive(Clone, Debug)]
 pub(crate) struct Named {
@@ -977,15 +980,18 @@ fn shape(r: &Reader<'_>, p: &mut Diagnostics) -> Option<(usize, usize)> {
             if rows.fract() == 0.0
                 && cols.fract() == 0.0
                 && (1.0..=65536.0).contains(rows)
-                && (1.0..=65536.0).contains(cols) =>
+                && (1.0..=65536.0).contains(cols)
+                && rows * cols <= MAX_SUBSCRIBED_ELEMENTS as f64 =>
         {
             Some((*rows as usize, *cols as usize))
         }
         _ => {
             p.expected(
                 &raw.at,
-                "`shape` is not two whole numbers",
-                "[ROWS, COLS], each 1 to 65536",
+                "`shape` is not two whole numbers of a usable size",
+                format!(
+                    "[ROWS, COLS], each 1 to 65536, at most {MAX_SUBSCRIBED_ELEMENTS} elements"
+                ),
             );
             None
         }

@@ -25,6 +25,9 @@ use crate::runtime::module::{
 };
 use crate::runtime::registry::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
 
+/// Most values (samples × columns) one recorder holds: 1 GiB of `f64`.
+const MAX_VALUES: usize = 1 << 27;
+
 /// Largest `capacity` the `recorder` component accepts.
 const MAX_CAPACITY: f64 = 1e8;
 
@@ -240,6 +243,12 @@ impl Recorder {
         let Some(size) = capacity.checked_mul(width) else {
             return Err(self.failed("capacity × columns overflows"));
         };
+        if size > MAX_VALUES {
+            return Err(self.failed(format_args!(
+                "{capacity} samples of {width} values exceed the recorder's limit of \
+                 {MAX_VALUES} values (1 GiB); lower `capacity`"
+            )));
+        }
         if ring.data.len() != size {
             ring.data = Vec::new();
             ring.data.try_reserve_exact(size).map_err(|err| {
@@ -503,6 +512,25 @@ mod tests {
         steps(&rt, 2)?;
         h.stop();
         assert_eq!(h.stats().module_errors, 1, "the failed write is reported");
+        Ok(())
+    }
+
+    /// A ring larger than 1 GiB is refused when it would be allocated, not attempted.
+    #[test]
+    fn a_huge_recording_is_refused_not_allocated() -> TestResult {
+        let rt = Runtime::new("t");
+        rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
+        rt.create_mat(CsMat::zeros("wide", 8, 1))?;
+        let params = Params::new()
+            .with("inputs", vec!["wide".to_owned()])
+            .with("capacity", 1e8);
+        let recorder = rt.install_component("h", "rec", "recorder", &params);
+        assert!(recorder.is_ok(), "{recorder:?}");
+        let h = rt.habitat("h");
+        h.start()?;
+        steps(&rt, 3)?;
+        let stats = h.stats();
+        assert!(stats.module_errors >= 1, "{stats:?}");
         Ok(())
     }
 }
