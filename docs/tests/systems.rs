@@ -244,3 +244,36 @@ fn tempdir(name: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// The guide's "make a mistake" example prints exactly what the loader says.
+#[test]
+fn the_guides_error_example_is_the_loaders() {
+    let doc = Doc::load("user-guide.md");
+    let blocks = doc.blocks();
+    let first = blocks
+        .iter()
+        .find(|b| b.info == "toml system")
+        .expect("the guide's first system");
+    let text: String = first.lines.iter().map(|(_, l)| format!("{l}\n")).collect();
+    let broken = text.replacen("input = \"wave\"", "input = \"wav\"", 1);
+    assert_ne!(broken, text, "the first system reads `wave`");
+    let shown = blocks
+        .iter()
+        .filter(|b| b.info == "text")
+        .flat_map(|b| b.lines.iter())
+        .find(|(_, l)| l.starts_with("first.toml:"))
+        .expect("the guide shows the error");
+    match System::from_str("first.toml", &broken, None) {
+        Err(ndds_client::system::SystemError::Invalid(d)) => {
+            assert_eq!(d.0.len(), 1, "{d}");
+            assert_eq!(
+                d.0[0].to_string(),
+                shown.1,
+                "docs/user-guide.md:{} shows another message than the loader's",
+                shown.0
+            );
+        }
+        Ok(_) => panic!("the broken first system loaded"),
+        Err(other) => panic!("{other}"),
+    }
+}

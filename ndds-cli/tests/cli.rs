@@ -825,6 +825,58 @@ fn pub_of_a_csmat_is_echoed_as_a_labelled_table() {
     );
 }
 
+/// A CSMat can be written as rows, a list (a column) or a number, and a partial object gets
+/// an empty name and no fields.
+#[test]
+fn pub_of_a_csmat_accepts_the_short_forms() {
+    let world = World::start();
+    let participant = world.participant("csmat-short-test");
+    let consumer = participant
+        .consumer::<CsMat>("arm/short", ConsumerQos::default())
+        .unwrap();
+    assert!(world.graph_until(&participant, |g| g.endpoints.len() == 1));
+    let cases = [
+        ("[[1, 2], [3, 4]]", (2, 2), vec![1.0, 2.0, 3.0, 4.0]),
+        ("[0.5, 1.5]", (2, 1), vec![0.5, 1.5]),
+        ("2.0", (1, 1), vec![2.0]),
+        (
+            r#"{"rows": 1, "cols": 2, "data": [7, 8]}"#,
+            (1, 2),
+            vec![7.0, 8.0],
+        ),
+    ];
+    for (text, (rows, cols), data) in cases {
+        let run = world.ndds(&[
+            "pub",
+            "arm/short",
+            text,
+            "--type",
+            "csmat",
+            "--count",
+            "1",
+            "--wait",
+            "10",
+        ]);
+        assert!(run.success(), "{text}: {run}");
+        let sample = consumer.recv_timeout(SETTLE).expect("the sample arrives");
+        let expected = CsMat::from_row_slice("", rows, cols, &data).unwrap();
+        assert_eq!(sample.value, expected, "{text}");
+    }
+    let run = world.ndds(&[
+        "pub",
+        "arm/short",
+        "[[1, 2], [3]]",
+        "--type",
+        "csmat",
+        "--wait",
+        "10",
+    ]);
+    assert!(
+        run.err().contains("every row of a CSMat needs 2 values"),
+        "{run}"
+    );
+}
+
 #[test]
 fn pub_refuses_an_inconsistent_csmat() {
     let world = World::start();

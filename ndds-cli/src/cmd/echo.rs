@@ -1,6 +1,7 @@
 //! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
 //! CSMat samples print as labelled tables unless `--json` is given.
 
+use std::io::Write as _;
 use std::time::{Duration, SystemTime};
 
 use ndds_client::runtime::CsMat;
@@ -27,7 +28,7 @@ pub struct Args {
     /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
     fingerprint: Option<String>,
-    /// Seconds to wait for the topic to appear (`inf`: no limit) [default: 0, fail at once].
+    /// Seconds to wait for the topic to appear (`inf`: no limit; 0: fail at once).
     #[arg(long, value_parser = seconds::parse, default_value = "0")]
     wait: Duration,
 }
@@ -61,7 +62,16 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             }
         };
         match text {
-            Ok(text) => println!("{text}"),
+            Ok(text) => {
+                // A closed pipe (`ndds echo TOPIC | head`) ends the command quietly.
+                let mut out = std::io::stdout().lock();
+                if let Err(err) = writeln!(out, "{text}").and_then(|()| out.flush()) {
+                    if err.kind() == std::io::ErrorKind::BrokenPipe {
+                        return Ok(());
+                    }
+                    return Err(err.into());
+                }
+            }
             Err(err) => eprintln!(
                 "ndds: sample {} from {} skipped: {err}",
                 sample.info.seq, sample.info.writer

@@ -147,10 +147,65 @@ fn encode(desc: &TypeDescription, value: &serde_json::Value) -> anyhow::Result<V
             desc.name
         )
     })?;
+    let expanded;
+    let value = if builtin::is_csmat(desc) {
+        expanded = csmat_shorthand(value)?;
+        &expanded
+    } else {
+        value
+    };
     let payload = dynamic::encode_json(layout, value)
         .with_context(|| format!("the value does not fit type {}", desc.name))?;
     if builtin::is_csmat(desc) {
         builtin::check_csmat(&payload)?;
     }
     Ok(payload)
+}
+
+/// A CSMat may be given as a number (1 × 1), a list (a column) or a list of rows, or as the
+/// full object (`name`, `rows`, `cols`, `data` row-major, and optionally `row_fields`,
+/// `col_fields`).
+fn csmat_shorthand(value: &serde_json::Value) -> anyhow::Result<serde_json::Value> {
+    use serde_json::{Value, json};
+    let number = |v: &Value| {
+        v.as_f64()
+            .with_context(|| format!("{v} is not a number (a CSMat holds numbers)"))
+    };
+    let (rows, cols, data) = match value {
+        Value::Object(map) => {
+            let mut map = map.clone();
+            map.entry("name").or_insert_with(|| json!(""));
+            map.entry("row_fields").or_insert_with(|| json!([]));
+            map.entry("col_fields").or_insert_with(|| json!([]));
+            return Ok(Value::Object(map));
+        }
+        Value::Number(_) => (1, 1, vec![number(value)?]),
+        Value::Array(items) if items.iter().all(Value::is_array) && !items.is_empty() => {
+            let cols = items[0].as_array().map_or(0, Vec::len);
+            let mut data = Vec::new();
+            for row in items {
+                let row = row.as_array().map_or(&[][..], Vec::as_slice);
+                anyhow::ensure!(
+                    row.len() == cols,
+                    "every row of a CSMat needs {cols} values, like the first"
+                );
+                for v in row {
+                    data.push(number(v)?);
+                }
+            }
+            (items.len(), cols, data)
+        }
+        Value::Array(items) => {
+            let data = items
+                .iter()
+                .map(number)
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            (data.len(), 1, data)
+        }
+        other => anyhow::bail!("{other} is not a CSMat: give a number, a list, rows or an object"),
+    };
+    Ok(json!({
+        "name": "", "rows": rows, "cols": cols, "data": data,
+        "row_fields": [], "col_fields": []
+    }))
 }

@@ -195,20 +195,6 @@ pub(crate) fn build_into(
             refuse(&mut p, &conf.name.at, &err);
         }
     }
-    for s in &d.subscribes {
-        let module = format!("subscribe:{}", s.topic);
-        places.modules.insert(module.clone(), s.at.clone());
-        places
-            .uses
-            .insert((module, s.mat.name.clone()), s.mat.at.clone());
-        places
-            .mats
-            .entry(s.mat.name.clone())
-            .or_insert_with(|| s.mat.at.clone());
-        if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
-            refuse(&mut p, &s.at, &err);
-        }
-    }
     for c in &d.components {
         places
             .modules
@@ -226,6 +212,22 @@ pub(crate) fn build_into(
             let message = err.to_string();
             let at = param_named(&message, &c.param_at, &c.name.at);
             refuse(&mut p, at, &err);
+        }
+    }
+    // Subscriptions after the components: a subscribed CSMat that a component created (a
+    // parameter such as `filter.tau`) keeps the component's value until a sample arrives.
+    for s in &d.subscribes {
+        let module = format!("subscribe:{}", s.topic);
+        places.modules.insert(module.clone(), s.at.clone());
+        places
+            .uses
+            .insert((module, s.mat.name.clone()), s.mat.at.clone());
+        places
+            .mats
+            .entry(s.mat.name.clone())
+            .or_insert_with(|| s.mat.at.clone());
+        if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
+            refuse(&mut p, &s.at, &err);
         }
     }
     for r in &d.rates {
