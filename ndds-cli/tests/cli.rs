@@ -877,6 +877,45 @@ fn pub_of_a_csmat_accepts_the_short_forms() {
     );
 }
 
+/// `ndds echo TOPIC | head -1`: the closed pipe ends echo quietly, not with a panic.
+#[test]
+fn echo_into_a_closed_pipe_ends_quietly() {
+    use std::io::BufRead as _;
+    let world = World::start();
+    let participant = world.participant("pipe-test");
+    let producer = participant
+        .producer::<u64>("pipe/numbers", ProducerQos::default())
+        .unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ndds"))
+        .arg("--socket")
+        .arg(world.socket())
+        .args(["echo", "pipe/numbers", "--wait", "10"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, SETTLE));
+    producer.write(&1).unwrap();
+    let mut stdout = std::io::BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    assert!(line.contains('1'), "{line}");
+    drop(stdout);
+    let deadline = std::time::Instant::now() + RUN_LIMIT;
+    let status = loop {
+        let _ = producer.write(&2);
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(std::time::Instant::now() < deadline, "echo kept running");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{status}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
 #[test]
 fn pub_refuses_an_inconsistent_csmat() {
     let world = World::start();
