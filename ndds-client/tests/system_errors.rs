@@ -467,3 +467,113 @@ fn an_oversized_subscription_shape_is_refused_at_load() {
         "{found:#?}"
     );
 }
+
+#[test]
+fn a_components_refusal_points_at_the_parameter_it_names() {
+    let text = format!(
+        "{HABITAT}
+[[component]]
+name = \"c\"
+type = \"step\"
+habitat = \"h\"
+final = [1.0, 2.0, 3.0]
+initial = [0.0, 0.0]
+output = \"y\"
+"
+    );
+    expect_one(&text, "[0.0, 0.0]", &["parameter `initial`"]);
+}
+
+#[test]
+fn parameter_csmats_groups_in_order_and_names() {
+    // `<component>.<parameter>` CSMats may be displayed, read and set; the first group
+    // declared in a category is the active one.
+    let text = format!(
+        "{HABITAT}
+[system]
+display = [\"g.k\"]
+
+[[component]]
+name = \"g\"
+type = \"gain\"
+habitat = \"h\"
+group = \"ctl/Zeta\"
+input = \"u\"
+output = \"y\"
+
+[[component]]
+name = \"g2\"
+type = \"gain\"
+habitat = \"h\"
+group = \"ctl/Alpha\"
+input = \"u\"
+output = \"y\"
+"
+    );
+    let system = System::from_str("ok.toml", &text, None).expect("loads");
+    assert_eq!(system.runtime().active_groups()["ctl"], "Zeta");
+    assert_eq!(system.status().display[0].1.get(0, 0).unwrap(), 1.0);
+
+    let text = "[system]\nname = \"bad/name\"\n";
+    expect_one(text, "\"bad/name\"", &["bad system name `bad/name`"]);
+
+    let text = format!(
+        "{HABITAT}
+[[trigger]]
+habitat = \"h\"
+input = \"u\"
+above = 2.0
+below = 1.0
+machine = \"m\"
+stimulus = \"S\"
+"
+    );
+    let found = problems("broken.toml", &text);
+    assert!(
+        found
+            .iter()
+            .any(|d| d.to_string().contains("could never fire")),
+        "{found:#?}"
+    );
+}
+
+#[test]
+fn special_files_are_not_read_and_many_problems_are_capped() {
+    let text = "include = \"/dev/zero\"\n";
+    let found = problems("broken.toml", text);
+    assert_eq!(found.len(), 1, "{found:#?}");
+    assert!(
+        found[0].to_string().contains("not a regular file"),
+        "{}",
+        found[0]
+    );
+
+    let mut text = String::from(HABITAT);
+    for i in 0..150 {
+        text.push_str(&format!(
+            "\n[[component]]\nname = \"g{i}\"\ntype = \"gain\"\nhabitat = \"h\"\n\
+             input = \"missing{i}\"\noutput = \"y{i}\"\n"
+        ));
+    }
+    let found = problems("broken.toml", &text);
+    assert_eq!(found.len(), 101, "100 problems and a count of the rest");
+    assert_eq!(found[100].message, "... and 50 more problems");
+    // Lists of known names are capped too.
+    assert!(found[0].to_string().contains("more)"), "{}", found[0]);
+}
+
+#[test]
+fn outputs_of_types_without_a_spec_count_as_provided() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("custom.toml");
+    std::fs::write(
+        &file,
+        "[[habitat]]\nname = \"h\"\nrate = 100\nclock = \"manual\"\n\n\
+         [[component]]\nname = \"c\"\ntype = \"counted\"\nhabitat = \"h\"\noutput = \"x\"\n\n\
+         [[component]]\nname = \"g\"\ntype = \"gain\"\nhabitat = \"h\"\ninput = \"x\"\n\
+         output = \"y\"\n",
+    )
+    .unwrap();
+    let system = System::load_into(counting_runtime(&Counter::default()), &file);
+    assert!(system.is_ok(), "{:?}", system.err().map(|e| e.to_string()));
+}

@@ -19,6 +19,23 @@ use ndds_client::{EmbeddedPolicy, Participant};
 use crate::connect::DaemonArgs;
 use crate::seconds;
 
+/// `println!` that ignores a closed stdout (`ndds run ... | head`): the system keeps running
+/// and stops as it would have.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
+/// `print!` likewise.
+macro_rules! say_raw {
+    ($($arg:tt)*) => {{
+        let mut out = std::io::stdout();
+        let _ = write!(out, $($arg)*);
+        let _ = out.flush();
+    }};
+}
+
 /// Options of `ndds run`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -48,6 +65,13 @@ pub struct Args {
 
 /// Runs `ndds run`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    // First Ctrl-C (or SIGTERM): stop cleanly; a second one exits at once.
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&stop))
+            .context("cannot catch signals")?;
+        signal_hook::flag::register(signal, Arc::clone(&stop)).context("cannot catch signals")?;
+    }
     if args.check || args.simulate.is_some() {
         let options = LoadOptions {
             simulated: args.simulate.is_some(),
@@ -65,7 +89,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         };
         let system = loaded.map_err(|e| describe_error(&args.file, e))?;
         return match args.simulate {
-            Some(seconds) => simulate(&system, seconds),
+            Some(seconds) => simulate(&system, seconds, &stop),
             None => {
                 print_plan(&system);
                 Ok(())
@@ -76,16 +100,8 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let system =
         System::load(&args.file, Some(&participant)).map_err(|e| describe_error(&args.file, e))?;
 
-    // First Ctrl-C (or SIGTERM): stop cleanly; a second one exits at once.
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&stop))
-            .context("cannot catch signals")?;
-        signal_hook::flag::register(signal, Arc::clone(&stop)).context("cannot catch signals")?;
-    }
-
     system.start().context("starting the system")?;
-    println!(
+    say!(
         "ndds run: system `{}` running ({} habitat{}, {}); Ctrl-C stops it",
         system.name(),
         system.runtime().habitats().len(),
@@ -107,7 +123,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let _ = watch.changes(&system, Duration::ZERO);
     loop {
         if stop.load(Ordering::Acquire) {
-            println!("ndds run: interrupted");
+            say!("ndds run: interrupted");
             break;
         }
         if args.seconds.is_some_and(|s| begun.elapsed() >= s) {
@@ -146,7 +162,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     system.stop();
     let status = system.status();
     let errors = status.module_errors();
-    println!(
+    say!(
         "ndds run: stopped `{}` after {:.1} s (shutdown routines ran; {} module error{})",
         system.name(),
         begun.elapsed().as_secs_f64(),
@@ -157,7 +173,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
 }
 
 /// `--simulate`: simulated time in steps of 10 ms, letting state machines act between steps.
-fn simulate(system: &System, seconds: Duration) -> anyhow::Result<()> {
+fn simulate(system: &System, seconds: Duration, stop: &AtomicBool) -> anyhow::Result<()> {
     const STEP: f64 = 0.01;
     system.start().context("starting the system")?;
     let total = seconds.as_secs_f64().min(1e7);
@@ -166,16 +182,20 @@ fn simulate(system: &System, seconds: Duration) -> anyhow::Result<()> {
     let _ = watch.changes(system, Duration::ZERO);
     let (mut t, mut samples) = (0.0, 0u64);
     while t < total {
+        if stop.load(Ordering::Acquire) {
+            say!("ndds run: interrupted");
+            break;
+        }
         let step = STEP.min(total - t);
         samples += system.simulate(step).context("simulating")?;
         t += step;
         std::thread::yield_now();
-        print!("{}", watch.changes(system, Duration::from_secs_f64(t)));
+        say_raw!("{}", watch.changes(system, Duration::from_secs_f64(t)));
     }
     let wall = begun.elapsed().as_secs_f64();
-    print!("{}", render(&system.status(), Duration::from_secs_f64(t)));
+    say_raw!("{}", render(&system.status(), Duration::from_secs_f64(t)));
     system.stop();
-    println!(
+    say!(
         "ndds run: simulated {t:.1} s in {wall:.2} s ({:.0}x real time, {samples} samples, \
          {:.0} samples/s; {} module errors)",
         t / wall.max(1e-9),
@@ -224,15 +244,15 @@ fn describe_error(file: &std::path::Path, err: SystemError) -> anyhow::Error {
 
 fn print_plan(system: &System) {
     let rt = system.runtime();
-    println!("system `{}`: verified, nothing started", system.name());
+    say!("system `{}`: verified, nothing started", system.name());
     if let Some(d) = system.description() {
-        println!("  {d}");
+        say!("  {d}");
     }
     for file in system.files() {
-        println!("  file {}", file.display());
+        say!("  file {}", file.display());
     }
     for h in rt.habitats() {
-        println!(
+        say!(
             "  habitat {} at {:.6} Hz: {}",
             h.name(),
             1.0 / h.period().as_secs_f64(),
@@ -242,14 +262,14 @@ fn print_plan(system: &System) {
     let groups = rt.active_groups();
     if !groups.is_empty() {
         let active: Vec<String> = groups.iter().map(|(c, g)| format!("{c}/{g}")).collect();
-        println!(
+        say!(
             "  configuration {} (active groups {})",
             rt.current_configuration().unwrap_or_else(|| "-".into()),
             active.join(", ")
         );
     }
     for m in system.machine_names() {
-        println!("  state machine {m}");
+        say!("  state machine {m}");
     }
 }
 

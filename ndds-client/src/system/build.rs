@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use super::decl::{self, PortDecl, Serves, TriggerDecl};
 use super::source::{Diagnostics, Location, RawValue, SourceFile};
-use super::{LoadOptions, MachineSlot, System, SystemError};
+use super::{LoadOptions, MachineEntry, MachineSlot, System, SystemError};
 use crate::Participant;
 use crate::fsm::{ActionSet, FsmError, Program, StateMachine, Stimulus};
 use crate::ports::{PortError, PortOwner};
@@ -81,16 +81,21 @@ impl Places {
     }
 }
 
-/// The location of the parameter an error message names (`` `name` ``), else `fallback`.
+/// The location of the parameter a component's refusal names (its message says
+/// "parameter `NAME`: ..."), else `fallback`.
 fn param_named<'a>(
     message: &str,
     params: &'a BTreeMap<String, Location>,
     fallback: &'a Location,
 ) -> &'a Location {
-    params
-        .iter()
-        .find(|(name, _)| message.contains(&format!("`{name}`")))
-        .map_or(fallback, |(_, at)| at)
+    message
+        .split("parameter `")
+        .skip(1)
+        .filter_map(|rest| rest.split('`').next())
+        // `plant.stiffness` is a key of the table `plant`.
+        .filter_map(|name| params.get(name.split('.').next().unwrap_or(name)))
+        .next()
+        .unwrap_or(fallback)
 }
 
 pub(crate) fn build(
@@ -167,14 +172,16 @@ pub(crate) fn build_into(
     }
     // Groups before modules: a module installed into an inactive group never conflicts with
     // the active one writing the same CSMat.
-    let mut groups: BTreeMap<(String, String), (Vec<&str>, Location)> = BTreeMap::new();
+    // In the order declared: a category's first group is active unless a configuration says
+    // otherwise.
+    let mut groups: Vec<GroupDecl<'_>> = Vec::new();
     for c in &d.components {
         if let Some((category, group, at)) = &c.group {
-            groups
-                .entry((category.clone(), group.clone()))
-                .or_insert_with(|| (Vec::new(), at.clone()))
-                .0
-                .push(&c.name.name);
+            let key = (category.clone(), group.clone());
+            match groups.iter_mut().find(|(k, _)| *k == key) {
+                Some((_, (modules, _))) => modules.push(&c.name.name),
+                None => groups.push((key, (vec![&c.name.name], at.clone()))),
+            }
         }
     }
     for ((category, group), (modules, at)) in &groups {
@@ -244,7 +251,7 @@ pub(crate) fn build_into(
             refuse(&mut p, &r.name.at, &err);
         }
     }
-    let mut machines: BTreeMap<String, (MachineSlot, PendingMachine)> = BTreeMap::new();
+    let mut machines: BTreeMap<String, MachineEntry> = BTreeMap::new();
     for m in &d.machines {
         let slot: MachineSlot = Arc::new(OnceLock::new());
         let pending = PendingMachine {
@@ -263,7 +270,14 @@ pub(crate) fn build_into(
                 ),
             );
         }
-        machines.insert(m.program.main.clone(), (slot, pending));
+        machines.insert(
+            m.program.main.clone(),
+            MachineEntry {
+                slot,
+                running: std::sync::Mutex::new(None),
+                pending,
+            },
+        );
     }
     for (i, t) in d.triggers.iter().enumerate() {
         let module = format!("trigger{i}:{}", t.stimulus.name);
@@ -271,10 +285,10 @@ pub(crate) fn build_into(
         places
             .uses
             .insert((module.clone(), t.input.name.clone()), t.input.at.clone());
-        let Some((slot, _)) = machines.get(&t.machine.name) else {
+        let Some(entry) = machines.get(&t.machine.name) else {
             continue; // reported by the cross-check
         };
-        let slot = Arc::clone(slot);
+        let slot = Arc::clone(&entry.slot);
         if let Err(err) = rt.install(&t.habitat.name, &module, |b| Ok(Trigger::new(b, t, slot))) {
             refuse(&mut p, &t.at, &err);
         }
@@ -319,6 +333,9 @@ pub(crate) fn build_into(
     })
 }
 
+/// `(category, group)`, its modules, where it was first named.
+type GroupDecl<'a> = ((String, String), (Vec<&'a str>, Location));
+
 /// The problems, in file order.
 fn invalid(mut p: Diagnostics) -> SystemError {
     p.0.sort_by(|a, b| {
@@ -327,6 +344,7 @@ fn invalid(mut p: Diagnostics) -> SystemError {
         };
         key(a).cmp(&key(b))
     });
+    p.truncate();
     SystemError::Invalid(p)
 }
 
@@ -411,12 +429,12 @@ impl SampleModule for Trigger {
         if !rising {
             return Ok(());
         }
-        match self.machine.get() {
+        match self.machine.get().and_then(std::sync::Weak::upgrade) {
             Some(machine) => machine
                 .send(self.stimulus.clone())
                 .map_err(|e| ModuleError::Failed(e.to_string())),
             None => Err(ModuleError::Failed(format!(
-                "stimulus `{}` before its state machine started",
+                "stimulus `{}`: its state machine is not running",
                 self.stimulus.name
             ))),
         }
@@ -457,7 +475,7 @@ impl PortServer {
         let stop = Arc::new(AtomicBool::new(false));
         let rt = system.runtime().clone();
         let machine = match &port.serves {
-            Serves::Stimuli(m) => system.machines.get(m).map(|(slot, _)| Arc::clone(slot)),
+            Serves::Stimuli(m) => system.machines.get(m).map(|entry| Arc::clone(&entry.slot)),
             Serves::Configuration => None,
         };
         let serves = port.serves.clone();
@@ -481,7 +499,11 @@ impl PortServer {
                             .switch(request.trim())
                             .map(|()| format!("switched to `{}`", request.trim()))
                             .map_err(|e| e.to_string()),
-                        Serves::Stimuli(m) => match machine.as_ref().and_then(|s| s.get()) {
+                        Serves::Stimuli(m) => match machine
+                            .as_ref()
+                            .and_then(|s| s.get())
+                            .and_then(std::sync::Weak::upgrade)
+                        {
                             Some(sm) => sm
                                 .send(Stimulus::parse(&request))
                                 .map(|()| format!("sent `{}` to `{m}`", request.trim()))

@@ -564,18 +564,34 @@ fn typed(raw: &Raw, key: &str, kind: ParamKind, p: &mut Diagnostics) -> Option<P
     }
 }
 
-/// `"a", "b" and "c"` for messages.
+/// Names a message lists at most.
+const LISTED: usize = 12;
+/// Above this many known names, no "did you mean" (each would cost a comparison with all).
+const SUGGESTED_FROM: usize = 256;
+
+/// `"a", "b" or "c"` for messages (at most [`LISTED`] names, then how many more).
 pub(crate) fn list<S: AsRef<str>>(items: &[S]) -> String {
-    let quoted: Vec<String> = items.iter().map(|s| format!("`{}`", s.as_ref())).collect();
-    match quoted.len() {
+    let quoted: Vec<String> = items
+        .iter()
+        .take(LISTED)
+        .map(|s| format!("`{}`", s.as_ref()))
+        .collect();
+    let text = match quoted.len() {
         0 => "nothing".to_owned(),
         1 => quoted[0].clone(),
         n => format!("{} or {}", quoted[..n - 1].join(", "), quoted[n - 1]),
+    };
+    match items.len().saturating_sub(LISTED) {
+        0 => text,
+        more => format!("{text} ({more} more)"),
     }
 }
 
 /// ` (did you mean `x`?)` when a known name is close to `name`.
 pub(crate) fn suggest<S: AsRef<str>>(name: &str, known: &[S]) -> String {
+    if known.len() > SUGGESTED_FROM || name.len() > 256 {
+        return String::new();
+    }
     known
         .iter()
         .map(|k| (strsim::levenshtein(name, k.as_ref()), k.as_ref()))
@@ -678,7 +694,20 @@ fn system(d: &mut Description, raw: &Raw, p: &mut Diagnostics) {
     r.known_keys(keys_of("system"), p);
     // A later file (the including one) overrides what an earlier one set.
     if let Some(name) = r.text("name", p) {
-        d.name = Some(name);
+        if name.name.contains('/')
+            || name
+                .name
+                .chars()
+                .any(|c| c.is_whitespace() || c.is_control())
+        {
+            p.expected(
+                &name.at,
+                format!("bad system name `{}`", name.name),
+                "a name without `/`, spaces or control characters (it names topics cs/NAME/...)",
+            );
+        } else {
+            d.name = Some(name);
+        }
     }
     if let Some(conf) = r.text("configuration", p) {
         d.configuration = Some(conf);
@@ -772,6 +801,12 @@ fn mat(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
     let (Some(name), Some(value)) = (name, value) else {
         return;
     };
+    if value.is_empty() {
+        if let Some(raw) = r.raw("value") {
+            p.expected(&raw.at, "`value` is empty", "at least one number");
+        }
+        return;
+    }
     let mut mat = CsMat::from_matrix(&name.name, value);
     for (axis, names_key, units_key) in [
         ("row", "rows", "row_units"),
@@ -846,7 +881,10 @@ fn component(d: &mut Description, r: &Reader<'_>, spec_of: &SpecLookup<'_>, p: &
                     "a registered type{}: {}",
                     suggest(&type_name.name, &known),
                     known.join(", ")
-                ),
+                )
+                .chars()
+                .take(2048)
+                .collect::<String>(),
             );
             // Its string parameters may be outputs: count them as provided, so one mistake
             // gives one message.
@@ -882,7 +920,13 @@ fn component(d: &mut Description, r: &Reader<'_>, spec_of: &SpecLookup<'_>, p: &
         }
         param_at.insert(key.clone(), raw.at.clone());
         let value = match spec {
-            None => generic(raw, key, p),
+            None => {
+                // Undocumented type: any string may name a CSMat it writes.
+                if let RawValue::Text(s) = &raw.value {
+                    mats.push((s.clone(), raw.at.clone(), ParamKind::Output));
+                }
+                generic(raw, key, p)
+            }
             Some(spec) => match spec.param(key) {
                 None => {
                     let known: Vec<&str> = spec.params.iter().map(|s| s.name).collect();
@@ -1077,11 +1121,18 @@ fn machine(d: &mut Description, r: &Reader<'_>, file: &std::path::Path, p: &mut 
         .parent()
         .map_or_else(|| PathBuf::from(&name.name), |dir| dir.join(&name.name));
     let text = match std::fs::metadata(&path) {
+        Ok(m) if !m.is_file() => {
+            p.push(
+                &name.at,
+                format!("`{}` is not a regular file", path.display()),
+            );
+            return;
+        }
         Ok(m) if m.len() > super::source::MAX_FILE_BYTES => {
             p.push(&name.at, format!("`{}` is too large", path.display()));
             return;
         }
-        Ok(_) => std::fs::read_to_string(&path),
+        Ok(_) => super::source::read_bounded(&path),
         Err(e) => Err(e),
     };
     match text {
@@ -1109,6 +1160,18 @@ fn trigger(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
     let below = r.number("below", p);
     if above.is_none() && below.is_none() && r.raw("above").is_none() && r.raw("below").is_none() {
         r.missing("below", "a threshold (or `above`)", p);
+        return;
+    }
+    if let (Some(a), Some(b)) = (above, below)
+        && a >= b
+    {
+        if let Some(raw) = r.raw("below") {
+            p.expected(
+                &raw.at,
+                format!("`below = {b}` is not above `above = {a}`: the trigger could never fire"),
+                "above < below (a band), or only one of them",
+            );
+        }
         return;
     }
     if let (Some(habitat), Some(input), Some(machine), Some(stimulus)) =
@@ -1257,8 +1320,15 @@ fn cross_check(d: &Description, p: &mut Diagnostics) {
         );
     }
     let known: Vec<&str> = provided.iter().copied().collect();
+    let components: BTreeSet<&str> = d.components.iter().map(|c| c.name.name.as_str()).collect();
+    // `<component>.<parameter>`: a component's parameter CSMat (which ones exist is the
+    // component's to say; verify() reports a name that none creates).
+    let is_parameter = |name: &str| {
+        name.rsplit_once('.')
+            .is_some_and(|(component, _)| components.contains(component))
+    };
     let check_mat = |name: &str, at: &Location, p: &mut Diagnostics| {
-        if !provided.contains(name) {
+        if !provided.contains(name) && !is_parameter(name) {
             p.expected(
                 at,
                 format!(
@@ -1383,7 +1453,7 @@ fn cross_check(d: &Description, p: &mut Diagnostics) {
                 let mat = words.next().unwrap_or("");
                 let numbers_ok = words.clone().count() > 0
                     && words.all(|w| w.parse::<f64>().is_ok_and(f64::is_finite));
-                if !provided.contains(mat) || !numbers_ok {
+                if !(provided.contains(mat) || is_parameter(mat)) || !numbers_ok {
                     p.expected(
                         &m.at,
                         format!(

@@ -47,7 +47,7 @@ mod source;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 pub use build::PortReply;
 pub use decl::{SECTION_KEYS, SECTIONS, Serves};
@@ -83,8 +83,17 @@ pub enum SystemError {
     AlreadyStarted(String),
 }
 
-/// A state machine's slot: filled when the system starts.
-pub(crate) type MachineSlot = Arc<OnceLock<StateMachine>>;
+/// Where triggers and ports find a state machine once the system runs. A weak reference: only
+/// the [`System`] owns its machines, and stopping it joins their threads on the caller's
+/// thread (a trigger or a machine's own thread never ends up dropping a machine).
+pub(crate) type MachineSlot = Arc<OnceLock<Weak<StateMachine>>>;
+
+/// A state machine of the system: verified at load, running after `start`.
+pub(crate) struct MachineEntry {
+    pub(crate) slot: MachineSlot,
+    pub(crate) running: Mutex<Option<Arc<StateMachine>>>,
+    pub(crate) pending: build::PendingMachine,
+}
 
 /// A loaded system: its runtime (the linking database with everything the files declared),
 /// the state machines and ports it starts.
@@ -95,7 +104,7 @@ pub struct System {
     participant: Option<Participant>,
     description: Option<String>,
     display: Vec<String>,
-    machines: BTreeMap<String, (MachineSlot, build::PendingMachine)>,
+    machines: BTreeMap<String, MachineEntry>,
     ports: Vec<decl::PortDecl>,
     servers: Mutex<Vec<build::PortServer>>,
     started: Mutex<bool>,
@@ -182,9 +191,12 @@ impl System {
         self.machines.keys().cloned().collect()
     }
 
-    /// The running state machine `name` (after [`start`](Self::start)).
-    pub fn machine(&self, name: &str) -> Option<&StateMachine> {
-        self.machines.get(name).and_then(|(slot, _)| slot.get())
+    /// The running state machine `name` (between [`start`](Self::start) and
+    /// [`stop`](Self::stop)).
+    pub fn machine(&self, name: &str) -> Option<Arc<StateMachine>> {
+        self.machines
+            .get(name)
+            .and_then(|entry| lock(&entry.running).clone())
     }
 
     /// Starts the state machines (so the first trigger finds its machine), the habitats,
@@ -194,11 +206,15 @@ impl System {
         if *started {
             return Err(SystemError::AlreadyStarted(self.name.clone()));
         }
-        for (name, (slot, pending)) in &self.machines {
-            let machine = pending.start(&self.runtime, self.participant.as_ref());
-            match machine {
+        for (name, entry) in &self.machines {
+            match entry
+                .pending
+                .start(&self.runtime, self.participant.as_ref())
+            {
                 Ok(machine) => {
-                    let _ = slot.set(machine);
+                    let machine = Arc::new(machine);
+                    let _ = entry.slot.set(Arc::downgrade(&machine));
+                    *lock(&entry.running) = Some(machine);
                 }
                 Err(err) => {
                     tracing::error!(machine = %name, "state machine did not start: {err}");
@@ -246,7 +262,9 @@ impl System {
         let due = |i: usize, count: u64| count as f64 * habitats[i].period().as_secs_f64();
         let mut samples = 0;
         loop {
+            // A habitat a state machine stopped takes no more samples.
             let next = (0..habitats.len())
+                .filter(|&i| habitats[i].is_running())
                 .map(|i| (due(i, clock.1[i]), i))
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let Some((at, i)) = next else { break };
@@ -264,22 +282,27 @@ impl System {
         Ok(samples)
     }
 
-    /// Stops ports, state machines and habitats (their disable and shutdown routines run).
-    /// Stopping a stopped system does nothing.
+    /// Stops ports, habitats (their disable and shutdown routines run) and state machines.
+    /// Stopping a stopped system does nothing; a stopped system cannot be started again
+    /// (load it anew).
     pub fn stop(&self) {
         self.stop_inner();
     }
 
     fn stop_inner(&self) {
+        // The reverse of starting: ports, habitats (their disable and shutdown routines), then
+        // the state machines, joined here (no trigger can reach them any more).
         for server in lock(&self.servers).drain(..) {
             server.stop();
         }
-        for (slot, _) in self.machines.values() {
-            if let Some(machine) = slot.get() {
+        self.runtime.stop_all();
+        for entry in self.machines.values() {
+            let machine = lock(&entry.running).take();
+            if let Some(machine) = machine {
                 machine.stop();
+                drop(machine);
             }
         }
-        self.runtime.stop_all();
     }
 
     /// What the system is doing now: habitats with rate and jitter, the configuration, state
@@ -297,8 +320,8 @@ impl System {
                 .collect(),
             machines: self
                 .machines
-                .iter()
-                .filter_map(|(_, (slot, _))| slot.get().map(StateMachine::snapshot))
+                .values()
+                .filter_map(|entry| lock(&entry.running).as_ref().map(|m| m.snapshot()))
                 .collect(),
             display: self
                 .display

@@ -68,7 +68,21 @@ impl fmt::Display for Diagnostics {
     }
 }
 
+/// Problems reported at most; the rest are counted in a last one.
+pub const MAX_DIAGNOSTICS: usize = 100;
+
 impl Diagnostics {
+    /// Keeps the first [`MAX_DIAGNOSTICS`] problems (in file order) and says how many more
+    /// there were.
+    pub(crate) fn truncate(&mut self) {
+        if self.0.len() > MAX_DIAGNOSTICS {
+            let more = self.0.len() - MAX_DIAGNOSTICS;
+            self.0.truncate(MAX_DIAGNOSTICS);
+            let at = self.0[MAX_DIAGNOSTICS - 1].location.clone();
+            self.push(&at, format!("... and {more} more problems"));
+        }
+    }
+
     pub(crate) fn push(&mut self, at: &Location, message: impl Into<String>) {
         self.0.push(Diagnostic {
             location: at.clone(),
@@ -328,6 +342,10 @@ fn read_into(
         return;
     }
     let text = match std::fs::metadata(&canonical) {
+        Ok(meta) if !meta.is_file() => {
+            problems.push(at, format!("`{}` is not a regular file", path.display()));
+            return;
+        }
         Ok(meta) if meta.len() > MAX_FILE_BYTES => {
             problems.push(
                 at,
@@ -339,7 +357,7 @@ fn read_into(
             );
             return;
         }
-        Ok(_) => match std::fs::read_to_string(&canonical) {
+        Ok(_) => match read_bounded(&canonical) {
             Ok(text) => text,
             Err(err) => {
                 problems.push(at, format!("cannot read `{}`: {err}", path.display()));
@@ -359,10 +377,9 @@ fn read_into(
             return;
         }
     };
-    let dir = canonical
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default();
+    // Includes are named relative to this file as the user named it, so messages keep
+    // relative paths relative.
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     stack.push(canonical.clone());
     for (include, at) in includes(&file, problems) {
         read_into(&dir.join(include), &at, stack, files, problems);
@@ -371,6 +388,21 @@ fn read_into(
     let mut file = file;
     file.canonical = Some(canonical);
     files.push(file);
+}
+
+/// Reads a file of at most [`MAX_FILE_BYTES`] (it may have grown since its size was checked).
+pub(crate) fn read_bounded(path: &Path) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let mut text = String::new();
+    std::fs::File::open(path)?
+        .take(MAX_FILE_BYTES + 1)
+        .read_to_string(&mut text)?;
+    if text.len() as u64 > MAX_FILE_BYTES {
+        return Err(std::io::Error::other(format!(
+            "larger than {MAX_FILE_BYTES} bytes"
+        )));
+    }
+    Ok(text)
 }
 
 fn display_path(path: &Path) -> PathBuf {

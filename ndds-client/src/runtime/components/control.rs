@@ -338,6 +338,9 @@ fn riccati(
         let next = q + a.transpose() * &p * a - a.transpose() * &p * b * &gain;
         let change = (&next - &p).abs().max();
         p = next;
+        if !change.is_finite() {
+            return None; // diverged: no stabilising solution
+        }
         if change <= 1e-12 * (1.0 + p.abs().max()) {
             return Some(p);
         }

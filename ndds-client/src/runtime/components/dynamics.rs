@@ -62,6 +62,11 @@ pub struct TransferFunction {
     y: DMatrix<f64>,
 }
 
+/// Coefficients of `num` or `den` at most.
+const MAX_COEFFICIENTS: usize = 256;
+/// State values of one transfer function at most (128 MiB).
+const MAX_STATE: usize = 1 << 24;
+
 impl TransferFunction {
     /// Filters `input` through `num(z⁻¹) / den(z⁻¹)` into `output` (same shape). `den[0]`
     /// must not be 0.
@@ -75,6 +80,14 @@ impl TransferFunction {
         distinct(&[input, output])?;
         if num.is_empty() {
             return Err(problem("num", "expected at least one coefficient"));
+        }
+        for (name, c) in [("num", num), ("den", den)] {
+            if c.len() > MAX_COEFFICIENTS {
+                return Err(problem(
+                    name,
+                    format!("has {} coefficients; at most {MAX_COEFFICIENTS}", c.len()),
+                ));
+            }
         }
         all_finite("num", num)?;
         all_finite("den", den)?;
@@ -112,11 +125,20 @@ impl TransferFunction {
         self.num[0] != 0.0
     }
 
-    /// Zero state for `elements` elements (allocates only when the count changes).
-    fn size_state(&mut self, elements: usize) {
+    /// Zero state for `elements` elements (allocates only when the count changes; refuses
+    /// more than [`MAX_STATE`] values).
+    fn size_state(&mut self, elements: usize) -> RoutineResult {
         if self.state.ncols() != elements {
+            if self.order().saturating_mul(elements) > MAX_STATE {
+                return Err(ModuleError::Failed(format!(
+                    "transfer function of order {} on {elements} elements: more than \
+                     {MAX_STATE} state values",
+                    self.order()
+                )));
+            }
             self.state = DMatrix::zeros(self.order(), elements);
         }
+        Ok(())
     }
 
     /// Advances element `j` by one sample with input `u` and output `y`.
@@ -145,7 +167,7 @@ impl SampleModule for TransferFunction {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
         if self.feedthrough() {
             copy_in(&self.input, &mut self.value);
-            self.size_state(self.value.len());
+            self.size_state(self.value.len())?;
             for j in 0..self.value.len() {
                 let u = self.value[j];
                 let y = self.num[0] * u + self.first_state(j);
@@ -158,7 +180,7 @@ impl SampleModule for TransferFunction {
         if self.y.shape() != shape {
             self.y = DMatrix::zeros(shape.0, shape.1);
         }
-        self.size_state(self.y.len());
+        self.size_state(self.y.len())?;
         for j in 0..self.y.len() {
             self.y[j] = self.first_state(j);
         }

@@ -247,6 +247,9 @@ impl LqgModel {
     }
 }
 
+/// States (and commands, measurements) an `lqg` takes at most.
+pub const MAX_STATES: usize = 16;
+
 fn explicit(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &DMatrix<f64>) -> Result<Linear, ModuleError> {
     let n = a.nrows();
     let dims = |name: &str, m: &DMatrix<f64>, expected: String| {
@@ -258,6 +261,12 @@ fn explicit(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &DMatrix<f64>) -> Result<Line
     };
     if n == 0 || a.ncols() != n {
         return Err(dims("a", a, "a square matrix (n × n, n ≥ 1)".into()));
+    }
+    if n > MAX_STATES || b.ncols() > MAX_STATES || c.nrows() > MAX_STATES {
+        return Err(failed(format!(
+            "parameter `a`: at most {MAX_STATES} states, commands and measurements \
+             (the design iterates a Riccati equation at load time)"
+        )));
     }
     if b.nrows() != n || b.ncols() == 0 {
         return Err(dims("b", b, format!("{n} rows (n × m, `a` is {n} × {n})")));

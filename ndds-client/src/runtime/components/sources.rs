@@ -26,7 +26,7 @@ use crate::runtime::registry::{ComponentSpec, ParamKind as K, ParamSpec as P, Pa
 const TIME_TOLERANCE: f64 = 1e-6;
 
 /// Largest `rows` a source accepts.
-const MAX_ROWS: f64 = 1e6;
+const MAX_ROWS: f64 = 65536.0;
 
 /// Checks of parameter values shared by the component files (kept in a module so that the
 /// `components` glob re-exports do not spread these names).
