@@ -39,6 +39,7 @@ fn kind(kind: ParamKind) -> &'static str {
         ParamKind::Numbers => "numbers",
         ParamKind::Matrix => "matrix",
         ParamKind::Text => "string",
+        ParamKind::File => "file name",
         ParamKind::Bool => "bool",
         ParamKind::Table => "table",
     }

@@ -269,3 +269,24 @@ fn simulated_time_goes_on_across_calls() {
     // The ramp's last sample ran at t = 0.24 s.
     assert!((value(&system, "time", 0) - 0.24).abs() < 1e-9);
 }
+
+/// A recorder's `file` is relative to the description file, like includes.
+#[test]
+fn a_recording_is_written_next_to_its_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("log.toml");
+    std::fs::write(
+        &file,
+        "[[habitat]]\nname = \"h\"\nrate = 100\n\n[[component]]\nname = \"t\"\ntype = \"ramp\"\n\
+         habitat = \"h\"\nslope = [1.0]\noutput = \"time\"\n\n[[component]]\nname = \"rec\"\n\
+         type = \"recorder\"\nhabitat = \"h\"\ninputs = [\"time\"]\nfile = \"run.csv\"\n",
+    )
+    .unwrap();
+    let system = System::load_with(&file, None, LoadOptions { simulated: true }).unwrap();
+    system.start().unwrap();
+    system.simulate(0.05).unwrap();
+    system.stop();
+    let csv = std::fs::read_to_string(dir.path().join("run.csv")).expect("the recording");
+    assert_eq!(csv.lines().count(), 6, "a header and 5 samples:\n{csv}");
+    assert_eq!(system.status().module_errors(), 0);
+}

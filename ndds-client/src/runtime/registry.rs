@@ -39,6 +39,8 @@ pub enum ParamKind {
     Matrix,
     /// A string that is not a CSMat name.
     Text,
+    /// A file name; in a description file, relative to that file.
+    File,
     /// A flag.
     Bool,
     /// A table of sub-parameters.
@@ -59,6 +61,7 @@ impl ParamKind {
             ParamKind::Numbers => "a list of numbers",
             ParamKind::Matrix => "a matrix (array of rows)",
             ParamKind::Text => "a string",
+            ParamKind::File => "a file name (relative to the description file)",
             ParamKind::Bool => "true or false",
             ParamKind::Table => "a table",
             ParamKind::Input => "the name of a CSMat it reads",

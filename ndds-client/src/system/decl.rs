@@ -537,6 +537,14 @@ fn typed(raw: &Raw, key: &str, kind: ParamKind, p: &mut Diagnostics) -> Option<P
             }
             _ => wrong(p),
         },
+        ParamKind::File => match &raw.value {
+            RawValue::Text(s) if !s.trim().is_empty() => {
+                // Relative to the file it is written in, like includes.
+                let dir = raw.at.file.parent().unwrap_or(std::path::Path::new(""));
+                Some(ParamValue::Text(dir.join(s).to_string_lossy().into_owned()))
+            }
+            _ => wrong(p),
+        },
         ParamKind::Text | ParamKind::Input | ParamKind::Output => match &raw.value {
             RawValue::Text(s) if !s.trim().is_empty() => Some(ParamValue::Text(s.clone())),
             _ => wrong(p),

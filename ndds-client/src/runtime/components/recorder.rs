@@ -341,7 +341,7 @@ pub const RECORDER: ComponentSpec = ComponentSpec {
         P::optional("capacity", K::Number, "10000", "samples kept (the newest)"),
         P::optional(
             "file",
-            K::Text,
+            K::File,
             "none",
             "CSV file written when sampling ends (header: time, <mat>[<row>,<col>], …)",
         ),
