@@ -206,6 +206,8 @@ impl System {
         if *started {
             return Err(SystemError::AlreadyStarted(self.name.clone()));
         }
+        // Once only, even if starting fails half way (load the system anew to retry).
+        *started = true;
         for (name, entry) in &self.machines {
             match entry
                 .pending
@@ -240,7 +242,6 @@ impl System {
                 }
             }
         }
-        *started = true;
         Ok(())
     }
 
@@ -283,8 +284,8 @@ impl System {
     }
 
     /// Stops ports, habitats (their disable and shutdown routines run) and state machines.
-    /// Stopping a stopped system does nothing; a stopped system cannot be started again
-    /// (load it anew).
+    /// Stopping a stopped system does nothing; a stopped system, or one whose `start` failed,
+    /// cannot be started again (load it anew).
     pub fn stop(&self) {
         self.stop_inner();
     }
