@@ -153,6 +153,9 @@ tau = \"fast\"
     let text = "[[habitat]]\nname = \"h\"\nrate = -5\n";
     expect_one(text, "-5", &["`rate` is -5 Hz", "expected a rate from"]);
 
+    let text = "[[habitat]]\nname = \"h\"\nrate = 99999999999999999999\n";
+    expect_one(text, "9999", &["`rate` is 100000000000000000000 Hz"]);
+
     let text = "[[habitat]]\nname = \"h\"\nrate = 10\nclock = \"sundial\"\n";
     expect_one(text, "\"sundial\"", &["unknown clock `sundial`"]);
 

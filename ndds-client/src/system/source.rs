@@ -205,10 +205,14 @@ impl Lines {
 fn convert(lines: &Lines, value: &DeValue<'_>, at: Location) -> Raw {
     let value = match value {
         DeValue::String(s) => RawValue::Text(s.to_string()),
-        DeValue::Integer(i) => match i64::from_str_radix(&i.as_str().replace('_', ""), i.radix()) {
-            Ok(n) => RawValue::Integer(n),
-            Err(_) => RawValue::Float(f64::NAN),
-        },
+        DeValue::Integer(i) => {
+            let digits = i.as_str().replace('_', "");
+            match i64::from_str_radix(&digits, i.radix()) {
+                Ok(n) => RawValue::Integer(n),
+                // Beyond i64: kept as the (large) number it is, so range checks can say so.
+                Err(_) => RawValue::Float(digits.parse().unwrap_or(f64::INFINITY)),
+            }
+        }
         DeValue::Float(x) => {
             RawValue::Float(x.as_str().replace('_', "").parse().unwrap_or(f64::NAN))
         }
