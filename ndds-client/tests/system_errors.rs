@@ -150,7 +150,10 @@ tau = \"fast\"
         &["parameter `tau` is a string", "expected a number"],
     );
 
-    let text = "[[habitat]]\nname = \"h\"\nrate = -5\n";
+    // One mistake, one message: the component in the broken habitat is not reported too.
+    let text = "[[habitat]]\nname = \"h\"\nrate = -5\n\n[[mat]]\nname = \"u\"\nvalue = 1\n\n\
+                [[component]]\nname = \"g\"\ntype = \"gain\"\nhabitat = \"h\"\n\
+                input = \"u\"\noutput = \"y\"\n";
     expect_one(text, "-5", &["`rate` is -5 Hz", "expected a rate from"]);
 
     let text = "[[habitat]]\nname = \"h\"\nrate = 99999999999999999999\n";

@@ -218,6 +218,9 @@ pub(crate) struct Description {
     pub ports: Vec<PortDecl>,
     /// Where the top file starts.
     pub start: Option<Location>,
+    /// Habitats declared with a problem (reported): references to them are not reported
+    /// again as unknown.
+    pub broken_habitats: Vec<String>,
 }
 
 /// Reads values out of one table, reporting what is wrong with each.
@@ -782,6 +785,11 @@ fn habitat(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
             "0.01 to 3600 seconds",
         );
     }
+    if let Some(name) = &name
+        && (rate.is_none() || clock.is_none())
+    {
+        d.broken_habitats.push(name.name.clone());
+    }
     if let (Some(name), Some(rate), Some(clock)) = (name, rate, clock) {
         let mut options = HabitatOptions::rate(rate).clock(clock);
         options.realtime_priority = priority.map(|x| x as i32);
@@ -1285,7 +1293,7 @@ fn cross_check(d: &Description, p: &mut Diagnostics) {
 
     let habitats: Vec<&str> = d.habitats.iter().map(|h| h.name.name.as_str()).collect();
     let check_habitat = |h: &Named, p: &mut Diagnostics| {
-        if !habitats.contains(&h.name.as_str()) {
+        if !habitats.contains(&h.name.as_str()) && !d.broken_habitats.contains(&h.name) {
             p.expected(
                 &h.at,
                 format!("unknown habitat `{}`", h.name),
