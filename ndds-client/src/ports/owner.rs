@@ -487,7 +487,7 @@ const REPLY_STREAMS: usize = 1024;
 const ACTIVE_LIMIT: usize = 1024;
 
 /// How long an owner waits for a new user's reply topic to match before replying anyway.
-const REPLY_MATCH: Duration = Duration::from_secs(2);
+pub(crate) const REPLY_MATCH: Duration = Duration::from_secs(2);
 
 impl<R> std::fmt::Debug for ReplyHandle<R> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -325,6 +325,14 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "encoding a broadcast reply",
             reason: e.to_string(),
         })?;
+        // The broadcast came, so its owner exists; its reply stream may not have matched this
+        // user yet (across hosts discovery is not symmetric in time): a reliable reply written
+        // before the match would reach nobody. Wait briefly, as first replies do.
+        if self.broadcast_replies.matched().is_empty() {
+            let _ = self
+                .broadcast_replies
+                .wait_for_consumers(1, super::owner::REPLY_MATCH.min(timeout));
+        }
         self.broadcast_replies
             .write(&super::sendall::BroadcastReply {
                 owner: broadcast.owner,
