@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use ndds_client::runtime::CsMat;
-use ndds_client::system::{LoadOptions, Status, System, SystemError};
+use ndds_client::system::{LoadOptions, NEEDS_PARTICIPANT, Status, System, SystemError};
 use ndds_client::{EmbeddedPolicy, Participant};
 
 use crate::connect::DaemonArgs;
@@ -79,9 +79,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         // Network bindings are built against a daemon: connect only if the file has some.
         let mut participant = None;
         let loaded = match System::load_with(&args.file, None, options) {
-            Err(SystemError::Invalid(d))
-                if d.0.iter().any(|x| x.message.contains("need a connection")) =>
-            {
+            Err(SystemError::Invalid(d)) if d.0.iter().any(|x| x.message == NEEDS_PARTICIPANT) => {
                 let p = participant.insert(connect(daemon, args.no_embedded, &args.file)?);
                 System::load_with(&args.file, Some(p), options)
             }

@@ -139,11 +139,7 @@ pub(crate) fn build_into(
             .chain(d.publishes.iter().map(|s| &s.at))
             .chain(d.ports.iter().map(|s| &s.name.at))
         {
-            p.push(
-                at,
-                "network bindings and ports need a connection to a daemon (load the system with \
-                 a participant)",
-            );
+            p.push(at, super::NEEDS_PARTICIPANT);
         }
     }
     if !p.is_empty() {
@@ -257,9 +253,8 @@ pub(crate) fn build_into(
         let pending = PendingMachine {
             program: m.program.clone(),
         };
-        let problems = crate::fsm::verify(&m.program, &|action| {
-            pending.actions(&rt, &BTreeMap::new()).codes(action)
-        });
+        let actions = pending.actions(&rt);
+        let problems = crate::fsm::verify(&m.program, &|action| actions.codes(action));
         for problem in problems {
             p.push(
                 &m.at,
@@ -339,10 +334,8 @@ type GroupDecl<'a> = ((String, String), (Vec<&'a str>, Location));
 /// The problems, in file order.
 fn invalid(mut p: Diagnostics) -> SystemError {
     p.0.sort_by(|a, b| {
-        let key = |d: &super::source::Diagnostic| {
-            (d.location.file.clone(), d.location.line, d.location.column)
-        };
-        key(a).cmp(&key(b))
+        let (a, b) = (&a.location, &b.location);
+        (a.file.as_path(), a.line, a.column).cmp(&(b.file.as_path(), b.line, b.column))
     });
     p.truncate();
     SystemError::Invalid(p)
@@ -356,7 +349,7 @@ pub(crate) struct PendingMachine {
 impl PendingMachine {
     /// The actions a description's state machines have: the runtime's (`switch`, `start`,
     /// `stop`, `reset`) and `set CSMAT V1 V2 ...` (row-major values; 0 done, 1 refused).
-    fn actions(&self, rt: &Runtime, _: &BTreeMap<String, ()>) -> ActionSet {
+    fn actions(&self, rt: &Runtime) -> ActionSet {
         let mut set = ActionSet::runtime(rt);
         let rt = rt.clone();
         set.add("set", &[0, 1], move |arg| {
@@ -386,7 +379,7 @@ impl PendingMachine {
         rt: &Runtime,
         participant: Option<&Participant>,
     ) -> Result<StateMachine, FsmError> {
-        let actions = self.actions(rt, &BTreeMap::new());
+        let actions = self.actions(rt);
         match participant {
             Some(p) => StateMachine::start_on(self.program.clone(), actions, p),
             None => StateMachine::start(self.program.clone(), actions),

@@ -281,10 +281,7 @@ impl<'a> Reader<'a> {
                 p.expected(&raw.at, format!("`{key}` is empty"), "a non-empty string");
                 None
             }
-            other => {
-                p.expected(&raw.at, format!("`{key}` is {}", other.kind()), "a string");
-                None
-            }
+            _ => wrong_kind(raw, key, "a string", p),
         }
     }
 
@@ -313,14 +310,7 @@ impl<'a> Reader<'a> {
                 );
                 None
             }
-            ref other => {
-                p.expected(
-                    &raw.at,
-                    format!("`{key}` is {}", other.kind()),
-                    "an integer",
-                );
-                None
-            }
+            _ => wrong_kind(raw, key, "an integer", p),
         }
     }
 
@@ -328,14 +318,7 @@ impl<'a> Reader<'a> {
         let raw = self.raw(key)?;
         match raw.value {
             RawValue::Bool(b) => Some(b),
-            ref other => {
-                p.expected(
-                    &raw.at,
-                    format!("`{key}` is {}", other.kind()),
-                    "true or false",
-                );
-                None
-            }
+            _ => wrong_kind(raw, key, "true or false", p),
         }
     }
 
@@ -363,6 +346,16 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// Reports that `key` holds the wrong kind of value.
+fn wrong_kind<T>(raw: &Raw, key: &str, expected: &str, p: &mut Diagnostics) -> Option<T> {
+    p.expected(
+        &raw.at,
+        format!("`{key}` is {}", raw.value.kind()),
+        expected,
+    );
+    None
+}
+
 fn number(raw: &Raw, key: &str, p: &mut Diagnostics) -> Option<f64> {
     match raw.value {
         RawValue::Integer(n) => Some(n as f64),
@@ -371,10 +364,7 @@ fn number(raw: &Raw, key: &str, p: &mut Diagnostics) -> Option<f64> {
             p.expected(&raw.at, format!("`{key}` is {x}"), "a finite number");
             None
         }
-        ref other => {
-            p.expected(&raw.at, format!("`{key}` is {}", other.kind()), "a number");
-            None
-        }
+        _ => wrong_kind(raw, key, "a number", p),
     }
 }
 
@@ -382,14 +372,7 @@ fn texts(raw: &Raw, key: &str, p: &mut Diagnostics) -> Vec<Named> {
     let items: Vec<&Raw> = match &raw.value {
         RawValue::Array(items) => items.iter().collect(),
         RawValue::Text(_) => vec![raw],
-        other => {
-            p.expected(
-                &raw.at,
-                format!("`{key}` is {}", other.kind()),
-                "a list of strings",
-            );
-            return Vec::new();
-        }
+        _ => return wrong_kind(raw, key, "a list of strings", p).unwrap_or_default(),
     };
     let mut out = Vec::new();
     for item in items {
@@ -423,14 +406,7 @@ fn numbers(raw: &Raw, key: &str, p: &mut Diagnostics) -> Option<Vec<f64>> {
             }
             ok.then_some(out)
         }
-        other => {
-            p.expected(
-                &raw.at,
-                format!("`{key}` is {}", other.kind()),
-                "a number or a list of numbers",
-            );
-            None
-        }
+        _ => wrong_kind(raw, key, "a number or a list of numbers", p),
     }
 }
 

@@ -57,6 +57,11 @@ use crate::Participant;
 use crate::fsm::{FsmError, MachineState, StateMachine};
 use crate::runtime::{HabitatStats, Runtime, RuntimeError};
 
+/// The problem reported at each network binding and port of a description loaded without a
+/// participant (so a tool can tell "needs a daemon" from other problems).
+pub const NEEDS_PARTICIPANT: &str =
+    "network bindings and ports need a connection to a daemon (load the system with a participant)";
+
 /// Why a system could not be loaded or started.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

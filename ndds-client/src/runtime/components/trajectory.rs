@@ -333,14 +333,23 @@ fn velocity(p: &Params) -> Result<Option<&str>, ModuleError> {
     }
 }
 
+/// `start`, `goal` and `at`, shared by both profiles.
+fn path_params(p: &Params) -> Result<(Vec<f64>, Vec<f64>, f64), ModuleError> {
+    Ok((
+        p.numbers("start")?,
+        p.numbers("goal")?,
+        p.number_or("at", 0.0)?,
+    ))
+}
+
 /// Registers this file's component types.
 pub(crate) fn register(registry: &mut Registry) {
     registry.add(&TRAPEZOIDAL, |b, p| {
-        let (start, goal) = (p.numbers("start")?, p.numbers("goal")?);
+        let (start, goal, at) = path_params(p)?;
         let path = PointToPoint {
             start: &start,
             goal: &goal,
-            at: p.number_or("at", 0.0)?,
+            at,
         };
         Trapezoidal::new(
             b,
@@ -352,11 +361,11 @@ pub(crate) fn register(registry: &mut Registry) {
         )
     });
     registry.add(&QUINTIC, |b, p| {
-        let (start, goal) = (p.numbers("start")?, p.numbers("goal")?);
+        let (start, goal, at) = path_params(p)?;
         let path = PointToPoint {
             start: &start,
             goal: &goal,
-            at: p.number_or("at", 0.0)?,
+            at,
         };
         Quintic::new(
             b,
