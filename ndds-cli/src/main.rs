@@ -7,6 +7,7 @@
 mod builtin;
 mod cmd;
 mod connect;
+mod out;
 mod render;
 mod seconds;
 
@@ -17,6 +18,8 @@ fn main() -> std::process::ExitCode {
     init_logging();
     match cmd::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        // `ndds topics | head -1`: the reader has all it wanted.
+        Err(err) if out::is_closed(&err) => std::process::ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("ndds: {err:#}");
             std::process::ExitCode::FAILURE

@@ -1,7 +1,6 @@
 //! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
 //! CSMat samples print as labelled tables unless `--json` is given.
 
-use std::io::Write as _;
 use std::time::{Duration, SystemTime};
 
 use ndds_client::runtime::CsMat;
@@ -11,8 +10,8 @@ use serde_json::{Value, json};
 
 use crate::builtin;
 use crate::connect::{DaemonArgs, connect};
-use crate::render;
 use crate::seconds;
+use crate::{outln, render};
 
 /// Options of `ndds echo`.
 #[derive(Debug, clap::Args)]
@@ -62,16 +61,8 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             }
         };
         match text {
-            Ok(text) => {
-                // A closed pipe (`ndds echo TOPIC | head`) ends the command quietly.
-                let mut out = std::io::stdout().lock();
-                if let Err(err) = writeln!(out, "{text}").and_then(|()| out.flush()) {
-                    if err.kind() == std::io::ErrorKind::BrokenPipe {
-                        return Ok(());
-                    }
-                    return Err(err.into());
-                }
-            }
+            // A closed pipe (`ndds echo TOPIC | head`) ends the command quietly (see `out`).
+            Ok(text) => outln!("{text}")?,
             Err(err) => eprintln!(
                 "ndds: sample {} from {} skipped: {err}",
                 sample.info.seq, sample.info.writer
