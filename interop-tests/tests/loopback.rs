@@ -188,7 +188,7 @@ fn a_second_daemon_on_the_same_socket_is_refused() {
     let out = interop_tests::process::run(&interop_tests::binary("ndds-daemon"), &args, WAIT);
     assert_ne!(out.code, Some(0));
     assert!(
-        out.stderr.contains("already serving"),
+        out.stderr.contains("already serves"),
         "stderr: {}",
         out.stderr
     );

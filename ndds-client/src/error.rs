@@ -48,6 +48,9 @@ pub enum ConnectError {
     /// A helper thread could not be started.
     #[error("cannot start a participant thread: {0}")]
     Thread(std::io::Error),
+    /// The process is exiting: its embedded daemons were stopped and no new one starts.
+    #[error("the process is exiting: no embedded daemon can start")]
+    Exiting,
 }
 
 /// Declaring a producer or consumer failed.

@@ -5,12 +5,20 @@
 //! answers on the socket again, the participant opens a new session as the same participant,
 //! declares all its endpoints again, and after [`RECONNECT_GRACE`] drops the matches the new
 //! daemon did not report (it had that long to rediscover the domain).
+//!
+//! When no daemon comes back (the process that embedded it exited), a participant whose
+//! policy allows embedding starts an embedded daemon itself and declares again there, so the
+//! domain keeps a daemon (and `ndds topics` keeps working) while any such participant lives.
 
 use std::os::unix::net::UnixStream;
 use std::time::{Duration, Instant};
 
 use ndds_core::ipc::DaemonMessage;
 
+use ndds_daemon::DaemonConfig;
+
+use crate::embedded::{self, Ensured};
+use crate::error::ConnectError;
 use crate::router::Router;
 use crate::session::{self, Session};
 
@@ -19,6 +27,9 @@ pub const RECONNECT_GRACE: Duration = Duration::from_secs(3);
 /// First and longest pause between reconnection attempts.
 const RETRY_FIRST: Duration = Duration::from_millis(50);
 const RETRY_MAX: Duration = Duration::from_millis(500);
+/// How long a lost daemon may take to come back (a restart) before a participant that may
+/// embed takes its role over; each participant waits between one and two times this.
+const TAKEOVER_AFTER: Duration = Duration::from_millis(500);
 
 /// Runs the session thread until the participant ends.
 pub(crate) fn run(mut reader: UnixStream, session: &Session, router: &Router) {
@@ -91,9 +102,16 @@ fn read_until_lost(
     }
 }
 
-/// Tries to reach a daemon again until one answers or the participant ends.
+/// Tries to reach a daemon again until one answers or the participant ends. A participant
+/// that may embed takes the role over once no daemon answered for [`TAKEOVER_AFTER`] (the
+/// daemon's process exited): it starts an embedded daemon on the socket, unless another
+/// survivor claimed the path first, in which case it connects to that one.
 fn reconnect(session: &Session) -> Option<UnixStream> {
     let mut pause = RETRY_FIRST;
+    let lost_at = Instant::now();
+    // Spread over a window, so survivors rarely race (when they do, the socket's claim
+    // decides: the loser connects to the winner).
+    let takeover_at = lost_at + TAKEOVER_AFTER + TAKEOVER_AFTER.mul_f64(fastrand::f64());
     while !session.is_ending() {
         match session.reconnect() {
             Ok((reader, welcome)) => {
@@ -103,10 +121,37 @@ fn reconnect(session: &Session) -> Option<UnixStream> {
                 );
                 return Some(reader);
             }
+            Err(ConnectError::NoDaemon { .. }) if Instant::now() >= takeover_at => {
+                if let Some(config) = session.takeover() {
+                    take_over(session, &config);
+                    continue;
+                }
+            }
             Err(err) => tracing::debug!(%err, "daemon not back yet"),
         }
         std::thread::sleep(pause);
         pause = (pause * 2).min(RETRY_MAX);
     }
     None
+}
+
+/// Starts an embedded daemon in place of the one that went away (see [`reconnect`]).
+fn take_over(session: &Session, config: &DaemonConfig) {
+    match embedded::ensure(config) {
+        Ok(Ensured::Ours) => tracing::info!(
+            socket = %session.path().display(),
+            interface = %config.interface,
+            "the daemon's process is gone: this process now runs the domain's daemon"
+        ),
+        Ok(Ensured::Theirs) => {
+            tracing::debug!("another process took the daemon's role over first");
+            // It may still be starting: give it a moment before the next attempt.
+            std::thread::sleep(RETRY_FIRST);
+        }
+        Err(ConnectError::Exiting) => std::thread::sleep(RETRY_MAX),
+        Err(err) => {
+            tracing::warn!(%err, "cannot take the daemon's role over; waiting for a daemon");
+            std::thread::sleep(RETRY_MAX);
+        }
+    }
 }

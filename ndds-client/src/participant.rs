@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use ndds_core::domain;
 use ndds_core::ipc::{ClientMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome};
@@ -21,14 +22,14 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::consumer::{Consumer, ConsumerState, RawConsumer};
-use crate::embedded;
+use crate::embedded::{self, Ensured};
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::link;
 use crate::plane::{DataPlane, Limits, ParticipantStats};
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerQos, ProducerQos};
 use crate::router::{Endpoint, Router};
-use crate::session::{self, Session};
+use crate::session::{self, Session, Takeover};
 use crate::slot::ConsumerSlot;
 use crate::sync::lock;
 
@@ -166,6 +167,7 @@ impl ParticipantBuilder {
                 .map_err(|err: String| ConnectError::Setting(format!("NDDS_EMBEDDED: {err}")))?,
             (None, None) => EmbeddedPolicy::Auto,
         };
+        let embedded_explicit = self.embedded_config.is_some();
         let embedded_config = self.embedded_config.unwrap_or_else(|| {
             let mut config = DaemonConfig::new(domain, Ipv4Addr::LOCALHOST);
             config.socket = socket.clone();
@@ -187,6 +189,7 @@ impl ParticipantBuilder {
             socket,
             embedded,
             embedded_config,
+            embedded_explicit,
             name: self.name.unwrap_or_else(process_name),
             role: self.role.unwrap_or(Role::Client),
             max_sample,
@@ -199,9 +202,21 @@ struct Settings {
     socket: PathBuf,
     embedded: EmbeddedPolicy,
     embedded_config: DaemonConfig,
+    /// Whether `embedded_config` was the application's choice (not the defaults).
+    embedded_explicit: bool,
     name: String,
     role: Role,
     max_sample: usize,
+}
+
+impl Settings {
+    /// The daemon to start when the session's daemon went away for good (see `link`).
+    fn takeover(&self) -> Option<Takeover> {
+        (self.embedded != EmbeddedPolicy::Never).then(|| Takeover {
+            config: self.embedded_config.clone(),
+            explicit: self.embedded_explicit,
+        })
+    }
 }
 
 fn process_name() -> String {
@@ -210,6 +225,9 @@ fn process_name() -> String {
         .and_then(|path| path.file_name().map(|n| n.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "ndds-client".to_owned())
 }
+
+/// How long a daemon another process is starting on the socket may take to accept sessions.
+const CLAIMED_GRACE: Duration = Duration::from_secs(2);
 
 /// An opened session.
 type Reached = (std::os::unix::net::UnixStream, Welcome);
@@ -341,10 +359,16 @@ impl Participant {
             Err(source) => return Err(ConnectError::DataSocket { interface, source }),
         };
         let reader = stream.try_clone().map_err(ConnectError::Thread)?;
+        let session = Arc::new(Session::new(
+            settings.socket.clone(),
+            hello,
+            (stream, &welcome),
+            settings.takeover(),
+        ));
         let inner = Arc::new(Inner {
             participant,
             welcome,
-            session: Arc::new(Session::new(settings.socket.clone(), hello, stream)),
+            session,
             data: Arc::new(data),
             router: Arc::new(Router::default()),
             next_entity: AtomicU32::new(1),
@@ -365,15 +389,27 @@ impl Participant {
                 Err(err) => return Err(err),
             }
         }
-        let ours = embedded::ensure(&settings.embedded_config)?;
-        if !ours && settings.embedded == EmbeddedPolicy::Always {
-            return Err(ConnectError::Embedded(EmbedError::Daemon(
-                DaemonError::AlreadyRunning {
+        match embedded::ensure(&settings.embedded_config)? {
+            Ensured::Ours => session::handshake(&settings.socket, hello),
+            Ensured::Theirs if settings.embedded == EmbeddedPolicy::Always => Err(
+                ConnectError::Embedded(EmbedError::Daemon(DaemonError::AlreadyRunning {
                     path: settings.socket.clone(),
-                },
-            )));
+                    pid: None,
+                })),
+            ),
+            // Another process claimed the path a moment ago: its daemon may still be binding.
+            Ensured::Theirs => {
+                let deadline = Instant::now() + CLAIMED_GRACE;
+                loop {
+                    match session::handshake(&settings.socket, hello.clone()) {
+                        Err(ConnectError::NoDaemon { .. }) if Instant::now() < deadline => {
+                            std::thread::sleep(Duration::from_millis(20));
+                        }
+                        answer => return answer,
+                    }
+                }
+            }
         }
-        session::handshake(&settings.socket, hello)
     }
 
     /// This participant's id (the sender id of its data datagrams).

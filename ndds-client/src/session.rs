@@ -16,6 +16,8 @@ use ndds_core::ipc::{
     Welcome,
 };
 
+use ndds_daemon::DaemonConfig;
+
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::sync::lock;
 
@@ -61,7 +63,7 @@ pub(crate) fn read_frame(stream: &mut impl Read) -> io::Result<Option<DaemonMess
 pub(crate) fn handshake(path: &Path, hello: Hello) -> Result<(UnixStream, Welcome), ConnectError> {
     let mut stream = UnixStream::connect(path).map_err(|err| ConnectError::NoDaemon {
         path: path.to_owned(),
-        reason: err.to_string(),
+        reason: no_daemon_reason(&err),
     })?;
     let failed = |reason: String| ConnectError::Handshake {
         path: path.to_owned(),
@@ -86,6 +88,18 @@ pub(crate) fn handshake(path: &Path, hello: Hello) -> Result<(UnixStream, Welcom
     }
 }
 
+/// Why nobody answered on the socket, in words: a socket file nobody listens on is a stale
+/// one, left by a daemon (or a program that embedded one) that did not exit cleanly.
+fn no_daemon_reason(err: &io::Error) -> String {
+    match err.kind() {
+        io::ErrorKind::ConnectionRefused => "a stale socket file: the process that ran the \
+             daemon there exited without removing it"
+            .to_owned(),
+        io::ErrorKind::NotFound => "no socket file".to_owned(),
+        _ => err.to_string(),
+    }
+}
+
 /// The writing half of a session plus the requests waiting for answers.
 #[derive(Debug)]
 pub(crate) struct Session {
@@ -98,10 +112,33 @@ pub(crate) struct Session {
     open: AtomicBool,
     /// Set once the participant is being dropped: no more reconnecting.
     ending: AtomicBool,
+    /// The embedded daemon to start when the daemon went away and none answers any more
+    /// (`None`: the policy forbids embedding).
+    takeover: Option<Takeover>,
+    /// Pid of the process whose daemon the session is (or was last) open with.
+    daemon_pid: AtomicU32,
+    /// Interface address of that daemon.
+    daemon_interface: AtomicU32,
+}
+
+/// The embedded daemon a participant may start when its daemon went away.
+#[derive(Clone, Debug)]
+pub(crate) struct Takeover {
+    /// Its configuration.
+    pub(crate) config: DaemonConfig,
+    /// True when the configuration was the application's own choice; otherwise the daemon
+    /// takes the interface of the daemon it replaces (where this participant's data socket is).
+    pub(crate) explicit: bool,
 }
 
 impl Session {
-    pub(crate) fn new(path: PathBuf, hello: Hello, stream: UnixStream) -> Self {
+    /// A session on `stream`, opened with `welcome`; `takeover` as in [`Session::takeover`].
+    pub(crate) fn new(
+        path: PathBuf,
+        hello: Hello,
+        (stream, welcome): (UnixStream, &Welcome),
+        takeover: Option<Takeover>,
+    ) -> Self {
         let _ = stream.set_write_timeout(Some(ANSWER_TIMEOUT));
         Session {
             path,
@@ -112,7 +149,26 @@ impl Session {
             next_request: AtomicU32::new(1),
             open: AtomicBool::new(true),
             ending: AtomicBool::new(false),
+            takeover,
+            daemon_pid: AtomicU32::new(welcome.pid),
+            daemon_interface: AtomicU32::new(u32::from_be_bytes(welcome.interface)),
         }
+    }
+
+    /// The embedded daemon this participant may start to take the role over from a daemon
+    /// that went away: `None` when the policy forbids embedding, or when the daemon lost was
+    /// this process's own (stopped on purpose, or at exit: not to be restarted here).
+    pub(crate) fn takeover(&self) -> Option<DaemonConfig> {
+        if self.daemon_pid.load(Ordering::Relaxed) == std::process::id() {
+            return None;
+        }
+        let takeover = self.takeover.as_ref()?;
+        let mut config = takeover.config.clone();
+        if !takeover.explicit {
+            let interface = self.daemon_interface.load(Ordering::Relaxed);
+            config.interface = std::net::Ipv4Addr::from(interface);
+        }
+        Some(config)
     }
 
     /// The daemon's socket path.
@@ -227,6 +283,9 @@ impl Session {
     pub(crate) fn reconnect(&self) -> Result<(UnixStream, Welcome), ConnectError> {
         let (stream, welcome) = handshake(&self.path, self.hello.clone())?;
         let reader = stream.try_clone().map_err(ConnectError::Thread)?;
+        self.daemon_pid.store(welcome.pid, Ordering::Relaxed);
+        let interface = u32::from_be_bytes(welcome.interface);
+        self.daemon_interface.store(interface, Ordering::Relaxed);
         let _ = stream.set_write_timeout(Some(ANSWER_TIMEOUT));
         *lock(&self.writer) = stream;
         if self.is_ending() {

@@ -27,8 +27,23 @@ pub struct Args {
     pub settings: ConfigFile,
 }
 
-/// Parses the command line, runs the daemon until SIGINT or SIGTERM, and returns.
-pub fn main() -> anyhow::Result<()> {
+/// Parses the command line, runs the daemon until SIGINT or SIGTERM, and returns how the
+/// process should exit. An error is printed once, as one line on stderr (`ndds-daemon: ...`,
+/// with its causes), never as a `Debug` dump or a backtrace, whatever `RUST_BACKTRACE` says.
+pub fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            use std::io::Write as _;
+            // A closed stderr must not turn the report into a panic.
+            let _ = writeln!(std::io::stderr(), "ndds-daemon: {err:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// [`main`] without the reporting.
+pub fn run() -> anyhow::Result<()> {
     let args = Args::parse();
     init_logging();
     let file = match &args.config {
@@ -36,11 +51,6 @@ pub fn main() -> anyhow::Result<()> {
         None => ConfigFile::default(),
     };
     let config = args.settings.or(file).resolve()?;
-    if config.interface.is_loopback() {
-        tracing::info!(
-            "discovery is limited to this host (loopback); use --interface to reach other hosts"
-        );
-    }
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -51,6 +61,11 @@ pub fn main() -> anyhow::Result<()> {
         let shutdown = CancellationToken::new();
         stop_on_signal(shutdown.clone())?;
         let daemon = Daemon::bind(config).await?;
+        if daemon.config().interface.is_loopback() {
+            tracing::info!(
+                "discovery is limited to this host (loopback); use --interface to reach other hosts"
+            );
+        }
         daemon.run(shutdown).await?;
         Ok(())
     })

@@ -3,10 +3,10 @@
 //! [`Daemon::bind`] claims every resource (UDP sockets, Unix socket) and fails with a clear
 //! [`DaemonError`] if one is unavailable; [`Daemon::run`] then serves until its shutdown token
 //! is cancelled, says `Bye` to the domain, waits for its tasks and removes its socket file.
+//! The socket path is claimed first ([`crate::claim`]), so at most one daemon serves a path.
 
 use std::net::{SocketAddr, SocketAddrV4};
-use std::os::unix::fs::{FileTypeExt, MetadataExt};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -18,6 +18,7 @@ use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
+use crate::claim::SocketClaim;
 use crate::config::DaemonConfig;
 use crate::connection;
 use crate::driver::{Counters, Driver, Input};
@@ -32,11 +33,16 @@ const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
 /// Why a daemon could not start or stopped with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
-    /// Another daemon answers on the socket path.
-    #[error("a daemon is already serving {path} (stop it, or pick another --socket / --domain)")]
+    /// Another daemon serves (or is starting on) the socket path.
+    #[error(
+        "a daemon already serves {path}{}; stop it or choose another --socket / --domain",
+        pid.map_or(String::new(), |pid| format!(" (pid {pid})"))
+    )]
     AlreadyRunning {
         /// The socket path.
         path: PathBuf,
+        /// The process that runs it, when known.
+        pid: Option<u32>,
     },
     /// Something other than a socket exists at the socket path; it is left alone.
     #[error("{path} exists and is not a socket: choose another --socket path")]
@@ -71,13 +77,15 @@ pub struct Daemon {
     sockets: DiscoverySockets,
     peers: Vec<Peer>,
     listener: UnixListener,
-    socket_inode: Option<u64>,
+    claim: SocketClaim,
 }
 
 impl Daemon {
     /// Resolves the peers, binds the discovery sockets and the Unix socket. Must be called
     /// inside a tokio runtime.
     pub async fn bind(config: DaemonConfig) -> Result<Self, DaemonError> {
+        // The socket first: a second daemon is refused before it opens (or logs about) ports.
+        let (claim, listener) = SocketClaim::take(&config.socket)?;
         let peers = peers::resolve(&config.peers, config.domain).await?;
         if config.interface.is_loopback() {
             for peer in peers.iter().filter(|p| p.locator.addr[0] != 127) {
@@ -111,15 +119,13 @@ impl Daemon {
         discovery.version = env!("CARGO_PKG_VERSION").to_owned();
         discovery.peers = peers.iter().map(|peer| peer.locator).collect();
         let engine = Engine::new(discovery, Instant::now())?;
-        let listener = listen(&config.socket)?;
-        let socket_inode = std::fs::metadata(&config.socket).ok().map(|m| m.ino());
         Ok(Daemon {
             config,
             engine,
             sockets,
             peers,
             listener,
-            socket_inode,
+            claim,
         })
     }
 
@@ -146,7 +152,7 @@ impl Daemon {
             sockets,
             peers,
             listener,
-            socket_inode,
+            claim,
         } = self;
         tracing::info!(
             domain = config.domain,
@@ -215,7 +221,8 @@ impl Daemon {
         {
             tracing::warn!("some connection tasks did not stop in time");
         }
-        remove_socket(&config.socket, socket_inode);
+        // Removes the socket file, then releases the path's lock.
+        drop(claim);
         tracing::info!("ndds-daemon stopped");
         Ok(())
     }
@@ -292,42 +299,5 @@ async fn accept(
                 tokio::time::sleep(Duration::from_millis(50)).await;
             }
         }
-    }
-}
-
-/// Claims the socket path: refuses if a daemon answers there, removes a stale file otherwise.
-fn listen(path: &Path) -> Result<UnixListener, DaemonError> {
-    let listen_err = |source| DaemonError::Listen {
-        path: path.to_owned(),
-        source,
-    };
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(listen_err)?;
-    }
-    if std::os::unix::net::UnixStream::connect(path).is_ok() {
-        return Err(DaemonError::AlreadyRunning {
-            path: path.to_owned(),
-        });
-    }
-    match std::fs::symlink_metadata(path) {
-        Ok(meta) if meta.file_type().is_socket() => {
-            tracing::info!(path = %path.display(), "removing stale daemon socket");
-            std::fs::remove_file(path).map_err(listen_err)?;
-        }
-        Ok(_) => {
-            return Err(DaemonError::NotASocket {
-                path: path.to_owned(),
-            });
-        }
-        Err(_) => {}
-    }
-    UnixListener::bind(path).map_err(listen_err)
-}
-
-/// Removes the socket file if it is still the one this daemon created.
-fn remove_socket(path: &Path, inode: Option<u64>) {
-    let current = std::fs::metadata(path).ok().map(|m| m.ino());
-    if current.is_some() && current == inode {
-        let _ = std::fs::remove_file(path);
     }
 }

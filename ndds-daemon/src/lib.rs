@@ -15,10 +15,11 @@
 //! ## Layout
 //! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution;
 //!   [`peers`]: static unicast peers, parsed and resolved.
-//! - [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
+//! - [`claim`]: one daemon per socket path; [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
 //! - [`cli`]: the binary's command line, usable from other binaries too.
 #![warn(missing_docs)]
 
+pub mod claim;
 pub mod cli;
 pub mod config;
 pub mod connection;

@@ -1,5 +1,5 @@
 //! `ndds-daemon`: see [`ndds_daemon::cli`].
 
-fn main() -> anyhow::Result<()> {
+fn main() -> std::process::ExitCode {
     ndds_daemon::cli::main()
 }

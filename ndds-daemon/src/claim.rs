@@ -1,0 +1,171 @@
+//! Claiming the Unix socket path: at most one daemon per path, decided by a lock.
+//!
+//! Two processes may start a daemon on one path at the same moment (two survivors of a process
+//! that embedded the daemon, each taking its role over). Probing a socket file and removing it
+//! when nobody answers is not atomic: the loser of such a race would unlink the winner's fresh
+//! socket and bind its own, leaving two daemons. So a daemon first takes an exclusive, non-
+//! blocking `flock` on `<socket>.lock` and holds it for its whole life:
+//!
+//! | lock | daemon answering on the socket | outcome |
+//! |---|---|---|
+//! | held by another process | (any) | [`DaemonError::AlreadyRunning`], with the pid written in the lock file |
+//! | taken | yes (a daemon that does not lock) | [`DaemonError::AlreadyRunning`] |
+//! | taken | no, a socket file is there | stale (its daemon died): removed, then bound |
+//! | taken | no file | bound |
+//!
+//! The kernel releases the lock when its process dies, however it dies, so a crashed daemon
+//! never blocks its successor. The lock file itself stays: removing it would reopen the race
+//! (a third process could lock a new file while the second still holds the old one).
+//!
+//! The claim is made before any UDP socket is opened, so a second daemon is refused before it
+//! touches (or logs about) the discovery ports.
+
+use std::fs::File;
+use std::io::{Read as _, Seek as _, Write as _};
+use std::os::fd::AsRawFd as _;
+use std::os::unix::fs::{FileTypeExt as _, MetadataExt as _};
+use std::path::{Path, PathBuf};
+
+use tokio::net::UnixListener;
+
+use crate::daemon::DaemonError;
+
+/// The socket path, owned by this daemon until dropped; dropping it removes the socket file
+/// (if it is still the one bound here) and releases the lock.
+#[derive(Debug)]
+pub struct SocketClaim {
+    path: PathBuf,
+    inode: Option<u64>,
+    /// Holds the `flock` while open.
+    _lock: File,
+}
+
+impl SocketClaim {
+    /// Claims `path` and binds a listener on it. Must be called inside a tokio runtime.
+    pub fn take(path: &Path) -> Result<(SocketClaim, UnixListener), DaemonError> {
+        let listen_err = |source| DaemonError::Listen {
+            path: path.to_owned(),
+            source,
+        };
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(listen_err)?;
+        }
+        let lock = lock(path)?;
+        if std::os::unix::net::UnixStream::connect(path).is_ok() {
+            return Err(DaemonError::AlreadyRunning {
+                path: path.to_owned(),
+                pid: None,
+            });
+        }
+        match std::fs::symlink_metadata(path) {
+            Ok(meta) if meta.file_type().is_socket() => {
+                tracing::info!(path = %path.display(), "removing stale daemon socket");
+                std::fs::remove_file(path).map_err(listen_err)?;
+            }
+            Ok(_) => {
+                return Err(DaemonError::NotASocket {
+                    path: path.to_owned(),
+                });
+            }
+            Err(_) => {}
+        }
+        let listener = UnixListener::bind(path).map_err(listen_err)?;
+        let inode = std::fs::metadata(path).ok().map(|m| m.ino());
+        let claim = SocketClaim {
+            path: path.to_owned(),
+            inode,
+            _lock: lock,
+        };
+        Ok((claim, listener))
+    }
+
+    /// The claimed path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for SocketClaim {
+    fn drop(&mut self) {
+        // Only our own file: a successor may already have bound a new one at the path.
+        let current = std::fs::metadata(&self.path).ok().map(|m| m.ino());
+        if current.is_some() && current == self.inode {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+/// The lock file of a socket path.
+pub fn lock_path(socket: &Path) -> PathBuf {
+    let mut name = socket.as_os_str().to_owned();
+    name.push(".lock");
+    PathBuf::from(name)
+}
+
+/// Takes the exclusive lock of `socket`'s lock file and writes this process's pid in it;
+/// refuses with the holder's pid if another process holds it.
+fn lock(socket: &Path) -> Result<File, DaemonError> {
+    let path = lock_path(socket);
+    let failed = |source| DaemonError::Listen {
+        path: path.clone(),
+        source,
+    };
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(failed)?;
+    // SAFETY: flock on a file descriptor this function owns; no memory is shared.
+    let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+    if locked != 0 {
+        let err = std::io::Error::last_os_error();
+        if err.kind() != std::io::ErrorKind::WouldBlock {
+            return Err(failed(err));
+        }
+        let mut text = String::new();
+        let _ = file.read_to_string(&mut text);
+        return Err(DaemonError::AlreadyRunning {
+            path: socket.to_owned(),
+            pid: text.trim().parse().ok(),
+        });
+    }
+    let written = file
+        .set_len(0)
+        .and_then(|()| file.rewind())
+        .and_then(|()| writeln!(file, "{}", std::process::id()));
+    written.map_err(failed)?;
+    Ok(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn a_held_claim_refuses_a_second_one_with_the_holder_pid() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.sock");
+        let (first, _listener) = SocketClaim::take(&path).unwrap();
+        match SocketClaim::take(&path) {
+            Err(DaemonError::AlreadyRunning { pid, .. }) => {
+                assert_eq!(pid, Some(std::process::id()));
+            }
+            other => panic!("expected AlreadyRunning, got {other:?}"),
+        }
+        drop(first);
+        assert!(!path.exists(), "the socket goes with the claim");
+        let (_again, _listener) = SocketClaim::take(&path).expect("free again");
+    }
+
+    #[tokio::test]
+    async fn a_stale_socket_file_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.sock");
+        drop(std::os::unix::net::UnixListener::bind(&path).unwrap());
+        assert!(path.exists());
+        let (_claim, _listener) = SocketClaim::take(&path).expect("stale file replaced");
+        assert!(std::os::unix::net::UnixStream::connect(&path).is_ok());
+    }
+}
