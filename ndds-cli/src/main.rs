@@ -10,6 +10,7 @@ mod connect;
 mod out;
 mod render;
 mod seconds;
+mod status_term;
 
 use clap::Parser;
 
@@ -28,13 +29,14 @@ fn main() -> std::process::ExitCode {
 }
 
 /// Library warnings (incompatible types, undecodable samples, a lost daemon) go to stderr;
-/// `RUST_LOG` chooses another level.
+/// `RUST_LOG` chooses another level. They pass through the status screen, so `ndds run`'s
+/// live status is erased and redrawn below each of them instead of hiding it.
 fn init_logging() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(status_term::LogWriter::default)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         // A closed stderr (a parent that went away) must not turn a log line into a panic.
         .log_internal_errors(false)

@@ -1,6 +1,11 @@
 //! Errors of the SDK, one enum per operation.
 
+use std::fmt;
 use std::path::PathBuf;
+use std::time::Duration;
+
+use ndds_core::types::TypeDescription;
+use ndds_core::wire::Guid;
 
 /// [`crate::Participant::connect`] failed.
 #[derive(Debug, thiserror::Error)]
@@ -113,6 +118,12 @@ pub enum RecvError {
     /// `recv_timeout`: nothing arrived in time.
     #[error("timed out waiting for a sample")]
     Timeout,
+    /// `recv_timeout` / `recv_raw_timeout`: nothing arrived in time, and producers of the topic
+    /// exist that this consumer is not matched with (another type, or best effort for a
+    /// reliable consumer), the likely reason. (The event forms deliver the same facts as
+    /// [`crate::Notification::Incompatible`] events and time out with [`RecvError::Timeout`].)
+    #[error("{0}")]
+    TimeoutUnmatched(Box<Unmatched>),
     /// The consumer's queue lost its sender. A consumer keeps its own queue open, so this
     /// is not produced while the consumer exists; it is the answer of a queue torn down
     /// around a waiting reader. (A lost daemon does not close consumers: samples keep flowing
@@ -126,6 +137,110 @@ pub enum RecvError {
     /// A callback thread could not be started.
     #[error("cannot start the callback thread: {0}")]
     Thread(String),
+}
+
+impl RecvError {
+    /// True for both timeouts ([`RecvError::Timeout`], [`RecvError::TimeoutUnmatched`]).
+    pub fn is_timeout(&self) -> bool {
+        matches!(self, RecvError::Timeout | RecvError::TimeoutUnmatched(_))
+    }
+}
+
+/// A consumer timed out while producers of its topic were not matched with it: see
+/// [`RecvError::TimeoutUnmatched`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Unmatched {
+    /// The consumer's topic.
+    pub topic: String,
+    /// How long it waited.
+    pub waited: Duration,
+    /// The producers not matched, and why.
+    pub producers: Vec<UnmatchedProducer>,
+}
+
+/// A producer a consumer is not matched with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnmatchedProducer {
+    /// The producer.
+    pub writer: Guid,
+    /// Its process id.
+    pub pid: u32,
+    /// Its process name.
+    pub process: String,
+    /// Why they do not match.
+    pub mismatch: Mismatch,
+}
+
+/// Why a producer and a consumer of one topic do not match.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Mismatch {
+    /// Their types differ (name or shape: the struct's name is part of its type).
+    Type {
+        /// The consumer's type.
+        consumer: TypeDescription,
+        /// The producer's type.
+        producer: TypeDescription,
+    },
+    /// The consumer requests reliability; the producer is best-effort.
+    Reliability,
+}
+
+impl fmt::Display for Unmatched {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let count = self.producers.len();
+        write!(
+            f,
+            "timed out after {} waiting for a sample on `{}`: {count} producer{} not matched: ",
+            Seconds(self.waited),
+            self.topic,
+            if count == 1 { "" } else { "s" }
+        )?;
+        for (i, producer) in self.producers.iter().enumerate() {
+            if i > 0 {
+                f.write_str("; ")?;
+            }
+            write!(f, "{producer}")?;
+        }
+        Ok(())
+    }
+}
+
+impl fmt::Display for UnmatchedProducer {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (process, pid) = (&self.process, self.pid);
+        match &self.mismatch {
+            Mismatch::Type { consumer, producer } => write!(
+                f,
+                "type {} vs {} (this consumer's, then the producer's, in {process} pid {pid})",
+                consumer.shape(),
+                producer.shape()
+            ),
+            Mismatch::Reliability => write!(
+                f,
+                "the producer is best-effort, this consumer requests reliable (producer in \
+                 {process} pid {pid})"
+            ),
+        }
+    }
+}
+
+/// A duration as messages write it: `1 s`, `1.5 s`, `200 ms`.
+struct Seconds(Duration);
+
+impl fmt::Display for Seconds {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let duration = self.0;
+        if duration >= Duration::from_secs(1) {
+            let secs = duration.as_secs_f64();
+            if duration.subsec_millis() == 0 {
+                write!(f, "{} s", duration.as_secs())
+            } else {
+                write!(f, "{secs:.1} s")
+            }
+        } else {
+            write!(f, "{} ms", duration.as_millis())
+        }
+    }
 }
 
 /// A query to the daemon failed.

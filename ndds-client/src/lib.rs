@@ -58,7 +58,10 @@ pub use consumer::{
     SampleStream,
 };
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
-pub use error::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
+pub use error::{
+    ConnectError, DeclareError, Mismatch, QueryError, RecvError, Unmatched, UnmatchedProducer,
+    WriteError,
+};
 pub use link::RECONNECT_GRACE;
 pub use ndds_core::discovery::Incompatibility;
 pub use ndds_core::ipc::Graph;

@@ -68,9 +68,9 @@ impl Peers {
         tracing::warn!(
             topic = self.topic,
             reason,
-            local_type = self.type_desc.name,
+            local_type = self.type_desc.shape(),
             local_fingerprint = fingerprint_hex(self.fingerprint),
-            remote_type = remote.type_desc.name,
+            remote_type = remote.type_desc.shape(),
             remote_fingerprint = fingerprint_hex(remote.fingerprint),
             remote_pid = remote.pid,
             remote_process = remote.process,

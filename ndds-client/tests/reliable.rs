@@ -205,11 +205,18 @@ fn a_reliable_consumer_does_not_match_a_best_effort_producer() {
     assert!(common::eventually(WAIT, || producer.incompatible().len() == 1));
     assert!(producer.matched().is_empty() && consumer.matched().is_empty());
     producer.write(&1).unwrap();
-    assert_eq!(
-        consumer
-            .recv_timeout(Duration::from_millis(200))
-            .unwrap_err(),
-        RecvError::Timeout
+    let err = consumer
+        .recv_timeout(Duration::from_millis(200))
+        .unwrap_err();
+    assert!(
+        matches!(&err, RecvError::TimeoutUnmatched(unmatched)
+            if unmatched.producers[0].mismatch == ndds_client::Mismatch::Reliability),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string()
+            .contains("the producer is best-effort, this consumer requests reliable"),
+        "{err}"
     );
     // A best-effort consumer of a reliable producer matches: it takes what arrives.
     let reliable_producer = p

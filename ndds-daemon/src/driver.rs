@@ -197,7 +197,7 @@ impl Driver {
                     topic = remote.topic,
                     local = %local,
                     remote = %remote.guid,
-                    remote_type = remote.type_desc.name,
+                    remote_type = remote.type_desc.short_name(),
                     "incompatible types on one topic"
                 );
                 (

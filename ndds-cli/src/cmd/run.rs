@@ -12,12 +12,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use ndds_client::runtime::CsMat;
+use ndds_client::runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace};
 use ndds_client::system::{LoadOptions, NEEDS_PARTICIPANT, Status, System, SystemError};
 use ndds_client::{EmbeddedPolicy, Participant};
 
 use crate::connect::DaemonArgs;
 use crate::seconds;
+use crate::status_term::screen;
 
 /// `println!` that ignores a closed stdout (`ndds run ... | head`): the system keeps running
 /// and stops as it would have.
@@ -114,48 +115,47 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         }
     );
     let begun = Instant::now();
-    let redraw = !args.plain && std::io::stdout().is_terminal();
-    let mut drawn = 0usize;
+    let live = !args.plain && std::io::stdout().is_terminal();
+    if live {
+        screen().go_live(std::io::stderr().is_terminal());
+    }
     let mut next = begun + args.interval;
     let mut watch = Watch::default();
     let _ = watch.changes(&system, Duration::ZERO);
-    loop {
+    // The last report, for the rates achieved since.
+    let mut last = (Instant::now(), system.status());
+    let stopped_by_signal = loop {
         if stop.load(Ordering::Acquire) {
-            say!("ndds run: interrupted");
-            break;
+            break true;
         }
         if args.seconds.is_some_and(|s| begun.elapsed() >= s) {
-            break;
+            break false;
         }
         // Configuration switches and state changes, as they happen, above the status.
         let events = watch.changes(&system, begun.elapsed());
         if !events.is_empty() {
-            let mut out = std::io::stdout().lock();
-            if redraw && drawn > 0 {
-                let _ = write!(out, "\x1b[{drawn}A\x1b[J");
-                drawn = 0;
-                next = Instant::now();
-            }
-            let _ = out.write_all(events.as_bytes());
-            let _ = out.flush();
+            screen().print(&events);
         }
         let now = Instant::now();
         if now >= next {
-            let text = render(&system.status(), begun.elapsed());
-            let mut out = std::io::stdout().lock();
-            if redraw && drawn > 0 {
-                // Up over the last report and clear to the end of the screen.
-                let _ = write!(out, "\x1b[{drawn}A\x1b[J");
-            }
-            let _ = out.write_all(text.as_bytes());
-            let _ = out.flush();
-            drawn = text.lines().count();
+            let status = system.status();
+            let at = Instant::now();
+            let paces = paces(&last.1, &status, at - last.0);
+            // Formatted before the screen is locked: a logging habitat never waits for it.
+            let text = render(&status, &paces, begun.elapsed());
+            screen().draw(&text);
+            last = (at, status);
             next += args.interval;
             if next < now {
                 next = now + args.interval;
             }
         }
         std::thread::sleep(Duration::from_millis(20));
+    };
+    // The last report stays on screen; what follows goes below it.
+    screen().release();
+    if stopped_by_signal {
+        say!("ndds run: interrupted");
     }
     system.stop();
     let status = system.status();
@@ -191,7 +191,9 @@ fn simulate(system: &System, seconds: Duration, stop: &AtomicBool) -> anyhow::Re
         say_raw!("{}", watch.changes(system, Duration::from_secs_f64(t)));
     }
     let wall = begun.elapsed().as_secs_f64();
-    say_raw!("{}", render(&system.status(), Duration::from_secs_f64(t)));
+    let status = system.status();
+    let paces = vec![None; status.habitats.len()];
+    say_raw!("{}", render(&status, &paces, Duration::from_secs_f64(t)));
     system.stop();
     say!(
         "ndds run: simulated {t:.1} s in {wall:.2} s ({:.0}x real time, {samples} samples, \
@@ -306,8 +308,23 @@ impl Watch {
     }
 }
 
-/// The status block: one line per habitat, the configuration, machines and displayed CSMats.
-pub fn render(status: &Status, elapsed: Duration) -> String {
+/// Each habitat's pace from `earlier` to `later` (in `later`'s order; `None` where there is
+/// nothing to judge).
+fn paces(earlier: &Status, later: &Status, elapsed: Duration) -> Vec<Option<Pace>> {
+    later
+        .habitats
+        .iter()
+        .map(|h| {
+            let before = earlier.habitats.iter().find(|e| e.habitat == h.habitat)?;
+            Pace::between(before, h, elapsed)
+        })
+        .collect()
+}
+
+/// The status block: one line per habitat (nominal and achieved rate, marked when behind),
+/// the configuration, machines, subscribed inputs that are not fed, and displayed CSMats.
+/// `paces[i]` is habitat `i`'s since the last report.
+pub fn render(status: &Status, paces: &[Option<Pace>], elapsed: Duration) -> String {
     let mut out = format!(
         "{}  t={:.1}s  configuration {}\n",
         status.system,
@@ -315,20 +332,26 @@ pub fn render(status: &Status, elapsed: Duration) -> String {
         status.configuration.as_deref().unwrap_or("-")
     );
     out.push_str(&format!(
-        "  {:<12} {:>9} {:>9} {:>11} {:>9} {:>8} {:>6}\n",
-        "habitat", "rate Hz", "samples", "jitter p99", "exec p50", "overruns", "errors"
+        "  {:<12} {:>9} {:>9} {:>9} {:>11} {:>9} {:>8} {:>6}\n",
+        "habitat", "rate Hz", "achieved", "samples", "jitter p99", "exec p50", "overruns", "errors"
     ));
-    for h in &status.habitats {
+    for (i, h) in status.habitats.iter().enumerate() {
+        let pace = paces.get(i).copied().flatten();
         out.push_str(&format!(
-            "  {:<12} {:>9.1} {:>9} {:>8.1} us {:>6.1} us {:>8} {:>6}{}\n",
+            "  {:<12} {:>9.1} {:>9} {:>9} {:>8.1} us {:>6.1} us {:>8} {:>6}{}\n",
             h.habitat,
             h.rate_hz,
+            pace.map_or_else(|| "-".to_owned(), |p| format!("{:.1}", p.achieved_hz)),
             h.samples,
             h.period_jitter.p99_us,
             h.exec.p50_us,
             h.overruns,
             h.module_errors,
-            if h.running { "" } else { "  (stopped)" }
+            if h.running {
+                pace.map(behind).unwrap_or_default()
+            } else {
+                "  (stopped)".to_owned()
+            }
         ));
     }
     for m in &status.machines {
@@ -344,10 +367,53 @@ pub fn render(status: &Status, elapsed: Duration) -> String {
             }
         ));
     }
+    for input in status.inputs.iter().filter(|i| i.is_problem()) {
+        out.push_str(&format!("  {}\n", input_problem(input)));
+    }
     for (name, value) in &status.display {
         out.push_str(&format!("  {name} = {}\n", show(value)));
     }
     out
+}
+
+/// The marker after a habitat that falls behind (empty when it keeps up).
+fn behind(pace: Pace) -> String {
+    if !pace.is_behind() {
+        return String::new();
+    }
+    let mut why = Vec::new();
+    if pace.ratio() < BEHIND_BELOW {
+        why.push(format!("{:.0} % of nominal", pace.ratio() * 100.0));
+    }
+    if pace.new_overruns > 0 {
+        why.push(format!("+{} overruns", pace.new_overruns));
+    }
+    format!("  BEHIND ({})", why.join(", "))
+}
+
+/// `input arm/angles -> angles: never received (waited 3.0 s)` or `... stale 2.3 s`.
+fn input_problem(input: &InputStatus) -> String {
+    let what = match (input.freshness, input.age) {
+        (Freshness::Stale, Some(age)) => format!(
+            "stale {:.1} s (last of {} samples)",
+            age.as_secs_f64(),
+            input.received
+        ),
+        _ => format!(
+            "never received (waited {:.1} s)",
+            input.sampled.as_secs_f64()
+        ),
+    };
+    let refused = if input.refused > 0 {
+        format!(
+            "; {} sample{} refused (undecodable or of another shape)",
+            input.refused,
+            if input.refused == 1 { "" } else { "s" }
+        )
+    } else {
+        String::new()
+    };
+    format!("input {} -> {}: {what}{refused}", input.topic, input.mat)
 }
 
 fn show(m: &CsMat) -> String {

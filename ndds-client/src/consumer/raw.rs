@@ -6,9 +6,9 @@ use std::time::{Duration, Instant};
 
 use ndds_core::arbitration::Notification;
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::EndpointInfo;
+use ndds_core::wire::{EndpointInfo, EndpointQos};
 
-use crate::error::RecvError;
+use crate::error::{Mismatch, RecvError, Unmatched, UnmatchedProducer};
 use crate::participant::EndpointHandle;
 use crate::peers::Peers;
 use crate::qos::ConsumerMode;
@@ -136,9 +136,48 @@ impl RawConsumer {
         self.next_sample(Wait::Try)
     }
 
-    /// Blocks until a sample arrives or `timeout` passes.
+    /// Blocks until a sample arrives or `timeout` passes. At the timeout, the error names the
+    /// producers of the topic this consumer is not matched with, if any
+    /// ([`RecvError::TimeoutUnmatched`]).
     pub fn recv_raw_timeout(&self, timeout: Duration) -> Result<RawSample, RecvError> {
         self.next_sample(Wait::at_most(timeout))
+            .map_err(|err| self.explain_timeout(err, timeout))
+    }
+
+    /// Turns a timeout into [`RecvError::TimeoutUnmatched`] when producers of the topic are
+    /// not matched with this consumer; any other error is returned as it is.
+    pub(crate) fn explain_timeout(&self, err: RecvError, waited: Duration) -> RecvError {
+        if err != RecvError::Timeout {
+            return err;
+        }
+        let peers = &self.state.peers;
+        let producers: Vec<UnmatchedProducer> = peers
+            .incompatible_list()
+            .into_iter()
+            .filter(|remote| matches!(remote.qos, EndpointQos::Producer(_)))
+            .map(|remote| UnmatchedProducer {
+                writer: remote.guid,
+                pid: remote.pid,
+                // Same type: the daemon found the reliability wanting (as the router decides).
+                mismatch: if remote.fingerprint == peers.fingerprint {
+                    Mismatch::Reliability
+                } else {
+                    Mismatch::Type {
+                        consumer: peers.type_desc.clone(),
+                        producer: remote.type_desc,
+                    }
+                },
+                process: remote.process,
+            })
+            .collect();
+        if producers.is_empty() {
+            return RecvError::Timeout;
+        }
+        RecvError::TimeoutUnmatched(Box::new(Unmatched {
+            topic: peers.topic.clone(),
+            waited,
+            producers,
+        }))
     }
 
     /// Blocks until a sample or a notification arrives, or `timeout` passes.

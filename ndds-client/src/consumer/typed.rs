@@ -55,9 +55,13 @@ impl<T: DeserializeOwned> Consumer<T> {
         self.next_sample(Wait::Try)
     }
 
-    /// Blocks until a sample arrives or `timeout` passes.
+    /// Blocks until a sample arrives or `timeout` passes. At the timeout, the error names the
+    /// producers of the topic this consumer is not matched with and why, if there are any
+    /// ([`RecvError::TimeoutUnmatched`]: another type, or best effort for a reliable consumer),
+    /// else it is [`RecvError::Timeout`].
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Sample<T>, RecvError> {
         self.next_sample(Wait::at_most(timeout))
+            .map_err(|err| self.raw.explain_timeout(err, timeout))
     }
 
     /// Blocks until a sample or a notification arrives.

@@ -1,6 +1,14 @@
-//! Modules that move CSMats between habitats and over the network.
+//! Modules that move CSMats between habitats and over the network, and what a subscription
+//! tells the status about its input ([`InputStatus`]).
+//!
+//! A [`Subscriber`] records each sample it takes into a [`Reception`] of atomics that the
+//! status reads without any lock the habitat holds. Times are the habitat's own sample time
+//! (the sum of its periods, [`SampleContext::time`]), so a simulated system or a habitat that
+//! falls behind judges an input by the samples it actually ran.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use super::csmat::CsMat;
 use super::mat::Mat;
@@ -43,60 +51,217 @@ impl SampleModule for Publisher {
     }
 }
 
+/// How long an input may go without a sample before it is stale: three periods of its
+/// habitat or half a second, whichever is longer (a fast habitat is not alarmed by the
+/// network's ordinary delays; a slow one gets a few samples' grace).
+pub fn stale_after(period: Duration) -> Duration {
+    period.saturating_mul(3).max(Duration::from_millis(500))
+}
+
+/// Whether a subscribed input is being fed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Freshness {
+    /// No sample taken since its habitat began sampling.
+    Never,
+    /// The last sample is at most [`stale_after`] old.
+    Fresh,
+    /// The last sample is older than [`stale_after`]: the CSMat holds an old value.
+    Stale,
+}
+
+impl Freshness {
+    /// The rule: `age` is the habitat time since the last sample taken (`None`: never).
+    pub fn of(age: Option<Duration>, period: Duration) -> Self {
+        match age {
+            None => Self::Never,
+            Some(age) if age > stale_after(period) => Self::Stale,
+            Some(_) => Self::Fresh,
+        }
+    }
+}
+
+/// What the status knows about one subscribed CSMat (one `[[subscribe]]`, one
+/// [`Runtime::subscribe`](super::Runtime::subscribe)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InputStatus {
+    /// The topic subscribed.
+    pub topic: String,
+    /// The CSMat it writes.
+    pub mat: String,
+    /// The habitat whose samples take it in.
+    pub habitat: String,
+    /// Samples taken into the CSMat since the habitat began sampling.
+    pub received: u64,
+    /// Samples refused since then (undecodable, or of another shape than the CSMat's).
+    pub refused: u64,
+    /// Habitat time since the last sample taken (`None`: never taken).
+    pub age: Option<Duration>,
+    /// Habitat time sampled so far (how long it has waited, when nothing came).
+    pub sampled: Duration,
+    /// The verdict of [`Freshness::of`].
+    pub freshness: Freshness,
+}
+
+impl InputStatus {
+    /// Never received, or stale: the habitat computes with a value nobody sent recently.
+    pub fn is_problem(&self) -> bool {
+        self.freshness != Freshness::Fresh
+    }
+}
+
+/// Written by the habitat thread (relaxed stores, no lock), read by the status.
+#[derive(Debug)]
+pub(crate) struct Reception {
+    pub(crate) topic: String,
+    pub(crate) mat: String,
+    received: AtomicU64,
+    refused: AtomicU64,
+    /// Habitat time (ns) of the last sample taken; [`NEVER`] before the first.
+    last_ns: AtomicU64,
+    /// Habitat time (ns) of the latest sample the subscriber ran in.
+    ran_ns: AtomicU64,
+    period_ns: AtomicU64,
+}
+
+const NEVER: u64 = u64::MAX;
+
+fn as_ns(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX - 1)
+}
+
+impl Reception {
+    fn new(topic: &str, mat: &str) -> Self {
+        Self {
+            topic: topic.to_owned(),
+            mat: mat.to_owned(),
+            received: AtomicU64::new(0),
+            refused: AtomicU64::new(0),
+            last_ns: AtomicU64::new(NEVER),
+            ran_ns: AtomicU64::new(0),
+            period_ns: AtomicU64::new(0),
+        }
+    }
+
+    /// Sampling begins: nothing taken yet.
+    fn restart(&self, ctx: &SampleContext) {
+        self.received.store(0, Ordering::Relaxed);
+        self.refused.store(0, Ordering::Relaxed);
+        self.last_ns.store(NEVER, Ordering::Relaxed);
+        self.ran_ns.store(0, Ordering::Relaxed);
+        self.period_ns.store(as_ns(ctx.period), Ordering::Relaxed);
+    }
+
+    fn ran(&self, ctx: &SampleContext) {
+        self.ran_ns.store(as_ns(ctx.time), Ordering::Relaxed);
+        self.period_ns.store(as_ns(ctx.period), Ordering::Relaxed);
+    }
+
+    fn took(&self, ctx: &SampleContext) {
+        self.last_ns.store(as_ns(ctx.time), Ordering::Relaxed);
+        self.received.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn refused(&self) {
+        self.refused.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Its status now, in `habitat`.
+    pub(crate) fn status(&self, habitat: &str) -> InputStatus {
+        let ran = self.ran_ns.load(Ordering::Relaxed);
+        let last = self.last_ns.load(Ordering::Relaxed);
+        let period = Duration::from_nanos(self.period_ns.load(Ordering::Relaxed));
+        let age = (last != NEVER).then(|| Duration::from_nanos(ran.saturating_sub(last)));
+        InputStatus {
+            topic: self.topic.clone(),
+            mat: self.mat.clone(),
+            habitat: habitat.to_owned(),
+            received: self.received.load(Ordering::Relaxed),
+            refused: self.refused.load(Ordering::Relaxed),
+            age,
+            sampled: Duration::from_nanos(ran),
+            freshness: Freshness::of(age, period),
+        }
+    }
+}
+
 /// Writes the newest sample of a topic into its output (installed by `Runtime::subscribe`).
 pub(crate) struct Subscriber {
     output: Mat,
     shape: Shape,
     consumer: RawConsumer,
     staging: CsMat,
+    reception: Arc<Reception>,
 }
 
 impl Subscriber {
     pub(crate) fn new(b: &mut Binder<'_>, mat: &str, shape: Shape, consumer: RawConsumer) -> Self {
+        let reception = Arc::new(Reception::new(consumer.topic(), mat));
         Self {
             output: b.output(mat, shape),
             shape,
             consumer,
             staging: CsMat::zeros(mat, 0, 0),
+            reception,
         }
+    }
+
+    /// What it records for the status (the runtime keeps a clone when installing it).
+    pub(crate) fn reception(&self) -> Arc<Reception> {
+        Arc::clone(&self.reception)
+    }
+
+    fn take(&mut self, sample: &crate::sample::RawSample) -> RoutineResult {
+        // Decoded into a staging matrix that keeps the sender's name and fields, so the
+        // steady state allocates nothing; then copied under the local name.
+        self.staging.decode_into(&sample.payload)?;
+        let (rows, cols) = self.staging.shape();
+        if let Shape::Exact(r, c) = self.shape
+            && (r, c) != (rows, cols)
+        {
+            return Err(ModuleError::Failed(format!(
+                "sample of `{}` from {} is {rows}x{cols}, the CSMat is declared {r}x{c}: ignored",
+                self.staging.name(),
+                sample.info.writer
+            )));
+        }
+        let mut out = self.output.write();
+        if out.shape() != (rows, cols) {
+            out.resize(rows, cols);
+            out.set_fields_from(&self.staging);
+        } else if out.row_fields().is_empty()
+            && out.col_fields().is_empty()
+            && !(self.staging.row_fields().is_empty() && self.staging.col_fields().is_empty())
+        {
+            // Created with its declared shape only: take the sender's field names and
+            // units (once; they are kept from then on).
+            out.set_fields_from(&self.staging);
+        }
+        out.copy_from(&self.staging)?;
+        Ok(())
     }
 }
 
 impl SampleModule for Subscriber {
-    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+    fn startup(&mut self, ctx: &SampleContext) -> RoutineResult {
+        self.reception.restart(ctx);
+        Ok(())
+    }
+
+    fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
+        self.reception.ran(ctx);
         let mut newest = None;
         while let Ok(sample) = self.consumer.try_recv_raw() {
             newest = Some(sample);
         }
-        if let Some(sample) = newest {
-            // Decoded into a staging matrix that keeps the sender's name and fields, so the
-            // steady state allocates nothing; then copied under the local name.
-            self.staging.decode_into(&sample.payload)?;
-            let (rows, cols) = self.staging.shape();
-            if let Shape::Exact(r, c) = self.shape
-                && (r, c) != (rows, cols)
-            {
-                return Err(ModuleError::Failed(format!(
-                    "sample of `{}` from {} is {rows}x{cols}, the CSMat is declared {r}x{c}: ignored",
-                    self.staging.name(),
-                    sample.info.writer
-                )));
-            }
-            let mut out = self.output.write();
-            if out.shape() != (rows, cols) {
-                out.resize(rows, cols);
-                out.set_fields_from(&self.staging);
-            } else if out.row_fields().is_empty()
-                && out.col_fields().is_empty()
-                && !(self.staging.row_fields().is_empty() && self.staging.col_fields().is_empty())
-            {
-                // Created with its declared shape only: take the sender's field names and
-                // units (once; they are kept from then on).
-                out.set_fields_from(&self.staging);
-            }
-            out.copy_from(&self.staging)?;
+        let Some(sample) = newest else {
+            return Ok(());
+        };
+        let taken = self.take(&sample);
+        match &taken {
+            Ok(()) => self.reception.took(ctx),
+            Err(_) => self.reception.refused(),
         }
-        Ok(())
+        taken
     }
 }
 
@@ -174,5 +339,56 @@ impl SampleModule for RateOut {
             copy_into(&mut self.output.write(), staging);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: Duration = Duration::from_millis(1);
+
+    #[test]
+    fn stale_after_three_periods_or_half_a_second() {
+        assert_eq!(stale_after(MS), Duration::from_millis(500));
+        assert_eq!(stale_after(Duration::from_secs(1)), Duration::from_secs(3));
+        assert_eq!(stale_after(MS * 200), Duration::from_millis(600));
+    }
+
+    #[test]
+    fn freshness_follows_the_rule() {
+        assert_eq!(Freshness::of(None, MS), Freshness::Never);
+        assert_eq!(Freshness::of(Some(MS * 500), MS), Freshness::Fresh);
+        assert_eq!(Freshness::of(Some(MS * 501), MS), Freshness::Stale);
+        let slow = Duration::from_secs(1);
+        assert_eq!(Freshness::of(Some(slow * 3), slow), Freshness::Fresh);
+        assert_eq!(Freshness::of(Some(slow * 4), slow), Freshness::Stale);
+    }
+
+    #[test]
+    fn a_reception_counts_in_habitat_time() {
+        let reception = Reception::new("arm/angles", "angles");
+        let at = |sample: u64| SampleContext {
+            period: MS * 10,
+            sample,
+            time: MS * 10 * u32::try_from(sample).unwrap(),
+        };
+        reception.restart(&at(0));
+        reception.ran(&at(0));
+        let status = reception.status("control");
+        assert_eq!((status.freshness, status.age), (Freshness::Never, None));
+        assert!(status.is_problem());
+        reception.ran(&at(3));
+        reception.took(&at(3));
+        reception.ran(&at(53));
+        let status = reception.status("control");
+        assert_eq!(status.age, Some(MS * 500));
+        assert_eq!((status.received, status.freshness), (1, Freshness::Fresh));
+        reception.ran(&at(54));
+        let status = reception.status("control");
+        assert_eq!(status.freshness, Freshness::Stale);
+        assert_eq!(status.sampled, MS * 540);
+        reception.restart(&at(0));
+        assert_eq!(reception.status("control").freshness, Freshness::Never);
     }
 }

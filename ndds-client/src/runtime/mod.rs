@@ -46,6 +46,7 @@ mod sort;
 mod stats;
 mod verify;
 
+pub use binding::{Freshness, InputStatus, stale_after};
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
 pub use error::RuntimeError;
@@ -59,7 +60,7 @@ pub use registry::{
 };
 pub use runtime::Runtime;
 pub use sort::{SortError, SortNode, sort};
-pub use stats::{HabitatStats, Percentiles};
+pub use stats::{BEHIND_BELOW, HabitatStats, Pace, Percentiles};
 pub use verify::{Problem, VerifyReport};
 
 pub(crate) use runtime::Inner;

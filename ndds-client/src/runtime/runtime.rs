@@ -2,10 +2,12 @@
 //! habitats), component registry and verification. The configuration manager is in
 //! `config.rs`, network bindings and services in `network.rs`, errors in `error.rs`.
 
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 
+use super::binding::{InputStatus, Reception, Subscriber};
 use super::components;
 use super::csmat::CsMat;
 use super::database::{Database, ModuleEntry, ObjectKind};
@@ -32,6 +34,9 @@ pub(crate) struct Inner {
     pub(crate) participant: Option<Participant>,
     registry: Mutex<Registry>,
     pub(crate) services: Mutex<Option<Services>>,
+    /// Subscribed CSMats by module (`subscribe:<topic>`): habitat and what it records. Never
+    /// locked by a habitat thread.
+    inputs: Mutex<BTreeMap<String, (String, Arc<Reception>)>>,
 }
 
 pub(crate) struct Services {
@@ -129,6 +134,7 @@ impl Runtime {
                 participant,
                 registry: Mutex::new(registry),
                 services: Mutex::new(None),
+                inputs: Mutex::new(BTreeMap::new()),
             }),
         }
     }
@@ -316,9 +322,19 @@ impl Runtime {
         M: SampleModule,
         F: FnOnce(&mut Binder<'_>) -> Result<M, ModuleError>,
     {
+        let mut reception = None;
         self.install_boxed(habitat, module, |b| {
-            build(b).map(|m| Box::new(m) as Box<dyn SampleModule>)
-        })
+            build(b).map(|m| {
+                // A subscription tells the status what it receives.
+                let any: &dyn std::any::Any = &m;
+                reception = any.downcast_ref::<Subscriber>().map(Subscriber::reception);
+                Box::new(m) as Box<dyn SampleModule>
+            })
+        })?;
+        if let Some(reception) = reception {
+            lock(&self.inner.inputs).insert(module.to_owned(), (habitat.to_owned(), reception));
+        }
+        Ok(())
     }
 
     /// Installs an instance of a registered component type.
@@ -477,6 +493,7 @@ impl Runtime {
                 kind: ObjectKind::Module,
                 name: module.to_owned(),
             })?;
+        lock(&self.inner.inputs).remove(module);
         let habitat = self.habitat_in(&mut db, &entry.habitat);
         let mut list = lock(&habitat.shared.list);
         if let Some(index) = list.position(module) {
@@ -522,6 +539,15 @@ impl Runtime {
         for habitat in self.habitats() {
             habitat.stop();
         }
+    }
+
+    /// Every subscribed CSMat: what it received and when, in its habitat's time (read from
+    /// atomics the habitat writes: no lock a habitat holds is taken).
+    pub fn inputs(&self) -> Vec<InputStatus> {
+        lock(&self.inner.inputs)
+            .values()
+            .map(|(habitat, reception)| reception.status(habitat))
+            .collect()
     }
 
     /// A habitat's statistics with the runtime's name and configuration filled in.

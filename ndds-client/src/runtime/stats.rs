@@ -8,6 +8,8 @@
 //! The habitat's thread records into histograms it owns (no lock, no allocation) and hands
 //! them over once per statistics interval with a `try_lock`, so a reader never delays a sample.
 
+use std::time::Duration;
+
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
 
@@ -53,6 +55,55 @@ pub struct HabitatStats {
     pub period_jitter: Percentiles,
     /// Execution time of a sample.
     pub exec: Percentiles,
+}
+
+/// Below this share of its nominal rate a habitat is behind.
+pub const BEHIND_BELOW: f64 = 0.95;
+
+/// What a habitat achieved between two snapshots of its statistics (two status reports).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pace {
+    /// Samples per second over the span.
+    pub achieved_hz: f64,
+    /// The nominal rate at the later snapshot.
+    pub nominal_hz: f64,
+    /// Overruns counted during the span.
+    pub new_overruns: u64,
+}
+
+impl Pace {
+    /// The pace from `earlier` to `later`, `elapsed` apart. `None` when there is nothing to
+    /// judge: no time passed, the habitat is not sampling, or it restarted in between (its
+    /// counters went back).
+    pub fn between(
+        earlier: &HabitatStats,
+        later: &HabitatStats,
+        elapsed: Duration,
+    ) -> Option<Self> {
+        let seconds = elapsed.as_secs_f64();
+        if seconds <= 0.0 || !later.running || later.samples < earlier.samples {
+            return None;
+        }
+        Some(Self {
+            achieved_hz: (later.samples - earlier.samples) as f64 / seconds,
+            nominal_hz: later.rate_hz,
+            new_overruns: later.overruns.saturating_sub(earlier.overruns),
+        })
+    }
+
+    /// Achieved over nominal (1.0: on time).
+    pub fn ratio(&self) -> f64 {
+        if self.nominal_hz > 0.0 {
+            self.achieved_hz / self.nominal_hz
+        } else {
+            1.0
+        }
+    }
+
+    /// Falling behind: below [`BEHIND_BELOW`] of the nominal rate, or overrunning.
+    pub fn is_behind(&self) -> bool {
+        self.ratio() < BEHIND_BELOW || self.new_overruns > 0
+    }
 }
 
 /// The three distributions, in nanoseconds.
@@ -110,5 +161,56 @@ pub(crate) fn percentiles(h: &Histogram<u64>) -> Percentiles {
         p50_us: us(h.value_at_quantile(0.5)),
         p99_us: us(h.value_at_quantile(0.99)),
         max_us: us(h.max()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stats(samples: u64, overruns: u64) -> HabitatStats {
+        HabitatStats {
+            running: true,
+            rate_hz: 100_000.0,
+            samples,
+            overruns,
+            ..HabitatStats::default()
+        }
+    }
+
+    #[test]
+    fn a_habitat_at_forty_percent_is_behind() {
+        let pace = Pace::between(&stats(0, 0), &stats(40_213, 0), Duration::from_secs(1)).unwrap();
+        assert!((pace.achieved_hz - 40_213.0).abs() < 1e-6);
+        assert!((pace.ratio() - 0.40213).abs() < 1e-9);
+        assert!(pace.is_behind());
+    }
+
+    #[test]
+    fn on_time_within_five_percent_without_overruns() {
+        let at = |samples| stats(samples, 7);
+        let pace = Pace::between(&at(100_000), &at(296_000), Duration::from_secs(2)).unwrap();
+        assert_eq!(pace.achieved_hz, 98_000.0);
+        assert_eq!(pace.new_overruns, 0);
+        assert!(!pace.is_behind(), "old overruns do not count: {pace:?}");
+    }
+
+    #[test]
+    fn rising_overruns_are_behind_even_at_full_rate() {
+        let pace = Pace::between(&stats(0, 3), &stats(100_000, 4), Duration::from_secs(1)).unwrap();
+        assert_eq!(pace.new_overruns, 1);
+        assert!(pace.is_behind());
+    }
+
+    #[test]
+    fn nothing_to_judge_without_time_sampling_or_after_a_restart() {
+        let one = Duration::from_secs(1);
+        assert!(Pace::between(&stats(0, 0), &stats(10, 0), Duration::ZERO).is_none());
+        assert!(Pace::between(&stats(500, 0), &stats(10, 0), one).is_none());
+        let stopped = HabitatStats {
+            running: false,
+            ..stats(10, 0)
+        };
+        assert!(Pace::between(&stats(0, 0), &stopped, one).is_none());
     }
 }

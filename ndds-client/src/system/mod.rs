@@ -312,7 +312,8 @@ impl System {
     }
 
     /// What the system is doing now: habitats with rate and jitter, the configuration, state
-    /// machines, and the displayed CSMats.
+    /// machines, subscribed inputs (received, never received or stale), and the displayed
+    /// CSMats.
     pub fn status(&self) -> Status {
         Status {
             system: self.name.clone(),
@@ -329,6 +330,7 @@ impl System {
                 .values()
                 .filter_map(|entry| lock(&entry.running).as_ref().map(|m| m.snapshot()))
                 .collect(),
+            inputs: self.runtime.inputs(),
             display: self
                 .display
                 .iter()
@@ -376,6 +378,8 @@ pub struct Status {
     pub habitats: Vec<HabitatStats>,
     /// Each state machine's state.
     pub machines: Vec<MachineState>,
+    /// Each subscribed CSMat: what it received and when.
+    pub inputs: Vec<crate::runtime::InputStatus>,
     /// The displayed CSMats' values.
     pub display: Vec<(String, crate::runtime::CsMat)>,
 }

@@ -12,6 +12,7 @@ use serde_reflection::{
 };
 
 use super::TypeDescription;
+use super::display::short_name;
 use super::layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
@@ -21,7 +22,7 @@ use super::layout::{
 pub enum DescribeError {
     /// serde-reflection could not trace the type (untagged enums, `flatten`, custom
     /// deserializers that reject default values, ...).
-    #[error("serde-reflection cannot trace {type_name}: {reason}")]
+    #[error("serde-reflection cannot trace {}: {reason}", short_name(type_name))]
     Trace {
         /// The Rust type.
         type_name: &'static str,
@@ -31,10 +32,11 @@ pub enum DescribeError {
     /// Enums reachable only through a sequence, option or map: serde-reflection explores such
     /// a position once, so it cannot see all their variants.
     #[error(
-        "enum(s) {enums} inside {type_name} sit behind a Vec, Option or map, where serde-reflection \
+        "enum(s) {enums} inside {short} sit behind a Vec, Option or map, where serde-reflection \
          cannot see all their variants; describe the type with \
-         `TypeDescription::describer().with::<TheEnum>().describe::<{type_name}>()` and declare it \
-         with `producer_with_type` / `consumer_with_type`"
+         `TypeDescription::describer().with::<TheEnum>().describe::<{short}>()` and declare it \
+         with `producer_with_type` / `consumer_with_type`",
+        short = short_name(type_name)
     )]
     IncompleteEnum {
         /// The Rust type.
@@ -43,7 +45,10 @@ pub enum DescribeError {
         enums: String,
     },
     /// The traced layout breaks a limit of the protocol (too deep, too many nodes, ...).
-    #[error("the layout of {type_name} is not representable: {source}")]
+    #[error(
+        "the layout of {} is not representable: {source}",
+        short_name(type_name)
+    )]
     Layout {
         /// The Rust type.
         type_name: &'static str,

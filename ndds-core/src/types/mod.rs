@@ -5,15 +5,18 @@
 //! from the type's serde implementation. Its [`fingerprint`](TypeDescription::fingerprint) is
 //! derived from the [canonical text](canonical) of the layout. Types that serde-reflection
 //! cannot trace are *opaque*: they still match by name, but tools show their bytes in hex.
+//! Messages show [short names and shapes](display) (`Pose{x: f64, y: f64}`), never full paths.
 
 pub mod canonical;
 pub mod describe;
+pub mod display;
 pub mod layout;
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use describe::{DescribeError, Describer};
+pub use display::short_name;
 pub use layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
@@ -34,7 +37,7 @@ impl TypeDescription {
         match describe::describe::<T>() {
             Ok(desc) => desc,
             Err(err) => {
-                tracing::warn!(error = %err, "type is opaque: it still matches by name, but tools cannot decode it");
+                tracing::warn!(error = %err, r#type = short_name(std::any::type_name::<T>()), "type is opaque: it still matches by name, but tools cannot decode it");
                 Self::opaque(std::any::type_name::<T>())
             }
         }
