@@ -8,6 +8,8 @@ use ndds_core::types::{TypeDescription, fingerprint_hex};
 use ndds_core::wire::{EndpointKind, EndpointQos, Reliability};
 use serde::Serialize;
 
+use crate::suggest;
+
 /// Endpoints of one topic.
 pub struct Topic<'a> {
     /// Producers.
@@ -55,14 +57,9 @@ pub fn topic_type(
 ) -> anyhow::Result<TypeDescription> {
     let all = topics(graph);
     let Some(topic) = all.get(name) else {
-        let known: Vec<&str> = all.keys().copied().collect();
         anyhow::bail!(
-            "topic {name:?} not found (known topics: {})",
-            if known.is_empty() {
-                "none".to_owned()
-            } else {
-                known.join(", ")
-            }
+            "topic {name:?} not found; {}",
+            unknown_topic_hint(name, &all)
         );
     };
     let candidates: Vec<&EndpointSummary> = topic
@@ -95,6 +92,45 @@ pub fn topic_type(
         }
     };
     Ok(chosen.info.type_desc.clone())
+}
+
+/// At most this many topic names are listed when none is close to an unknown one.
+const LISTED_TOPICS: usize = 12;
+
+/// What to say after "topic X not found": the close names (internal ones included, so
+/// `fsm/arm/stat` finds `fsm/arm/state`), else the user topics there are.
+fn unknown_topic_hint(name: &str, all: &BTreeMap<&str, Topic<'_>>) -> String {
+    if let Some(question) = suggest::did_you_mean(&suggest::suggest(name, all.keys())) {
+        return question;
+    }
+    let user: Vec<&str> = all.keys().copied().filter(|t| !is_internal(t)).collect();
+    let hidden = all.len() - user.len();
+    let mut text = match user.len() {
+        0 => "no user topics exist".to_owned(),
+        n if n <= LISTED_TOPICS => format!("known topics: {}", user.join(", ")),
+        n => format!(
+            "known topics: {} and {} more",
+            user[..LISTED_TOPICS].join(", "),
+            n - LISTED_TOPICS
+        ),
+    };
+    if hidden > 0 {
+        text.push_str(&format!(
+            " ({hidden} internal not listed; `ndds topics --all`)"
+        ));
+    }
+    text
+}
+
+/// Prefixes of the topics the runtime and the SDK use for themselves: ports' declarations
+/// and requests, state machines' events and states, ControlShell status.
+pub const INTERNAL_PREFIXES: [&str; 3] = ["port/", "fsm/", "cs/"];
+
+/// Whether `topic` is one of the runtime's own (see [`INTERNAL_PREFIXES`]).
+pub fn is_internal(topic: &str) -> bool {
+    INTERNAL_PREFIXES
+        .iter()
+        .any(|prefix| topic.starts_with(prefix))
 }
 
 /// `name (fingerprint), ...` of the types on a topic.
