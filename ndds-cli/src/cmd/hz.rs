@@ -9,7 +9,7 @@ use serde_json::json;
 
 use crate::cmd::echo::wait_for_type;
 use crate::connect::{DaemonArgs, connect};
-use crate::seconds;
+use crate::{outln, seconds};
 
 /// Options of `ndds hz`.
 #[derive(Debug, clap::Args)]
@@ -72,11 +72,11 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             wait = Duration::ZERO;
         }
         if seconds::passed(end) {
-            report(&window, misses, args.json);
+            report(&window, misses, args.json)?;
             return Ok(());
         }
         if Instant::now() >= next_report {
-            report(&window, misses, args.json);
+            report(&window, misses, args.json)?;
             next_report += args.every;
         }
     }
@@ -91,7 +91,7 @@ fn age_ms(sample: &RawSample) -> f64 {
         .map_or(0.0, |age| age.as_secs_f64() * 1000.0)
 }
 
-fn report(window: &Window, misses: u64, as_json: bool) {
+fn report(window: &Window, misses: u64, as_json: bool) -> anyhow::Result<()> {
     let stats = window.stats();
     if as_json {
         let value = match stats {
@@ -103,17 +103,24 @@ fn report(window: &Window, misses: u64, as_json: bool) {
             }),
             None => json!({"rate_hz": 0.0, "window": 0, "deadline_misses": misses}),
         };
-        println!("{value}");
-        return;
+        outln!("{value}")?;
+        return Ok(());
     }
     match stats {
-        Some(s) => println!(
+        Some(s) => outln!(
             "rate {:.2} Hz  min {:.3} ms  max {:.3} ms  std dev {:.3} ms  window {}  \
              age mean {:.3} ms max {:.3} ms  deadline misses {misses}",
-            s.rate, s.min_ms, s.max_ms, s.std_dev_ms, s.intervals, s.age_mean_ms, s.age_max_ms
-        ),
-        None => println!("no samples yet  deadline misses {misses}"),
+            s.rate,
+            s.min_ms,
+            s.max_ms,
+            s.std_dev_ms,
+            s.intervals,
+            s.age_mean_ms,
+            s.age_max_ms
+        )?,
+        None => outln!("no samples yet  deadline misses {misses}")?,
     }
+    Ok(())
 }
 
 /// Arrival times and ages of the last `capacity` samples.

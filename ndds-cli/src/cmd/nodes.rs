@@ -8,6 +8,7 @@ use ndds_core::types::fingerprint_hex;
 use serde::Serialize;
 
 use crate::connect::{DaemonArgs, connect};
+use crate::outln;
 
 /// Options of `ndds nodes`.
 #[derive(Debug, clap::Args)]
@@ -71,14 +72,14 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     let graph = connect(daemon)?.graph()?;
     let nodes = views(&graph);
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({ "nodes": nodes }))?
-        );
+        )?;
         return Ok(());
     }
     for node in &nodes {
-        println!(
+        outln!(
             "{} {} (node {}, daemon pid {}, v{}){}",
             if node.local { "*" } else { " " },
             node.host,
@@ -90,20 +91,20 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             } else {
                 format!(", seen {} ms ago", node.last_seen_ms)
             }
-        );
-        println!(
+        )?;
+        outln!(
             "    interface {}  unicast {}{}  lease {} ms  period {} ms",
             node.interface,
             node.unicast,
             multicast_text(node),
             node.lease_ms,
             node.announce_period_ms
-        );
+        )?;
         if let Some(peers) = &node.peers {
-            println!("    peers: {}", peers_text(peers));
+            outln!("    peers: {}", peers_text(peers))?;
         }
         if let (Some(seen), Some(copies)) = (node.multicast_seen_ms, node.unicast_copies) {
-            println!(
+            outln!(
                 "    discovery: {}, {}",
                 seen.map_or("never heard by multicast".to_owned(), |ms| format!(
                     "multicast heard {ms} ms ago"
@@ -113,13 +114,16 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
                 } else {
                     "no unicast copies"
                 }
-            );
+            )?;
         }
         for p in &node.processes {
-            println!(
+            outln!(
                 "    {} pid {} {} ({} endpoints)",
-                p.role, p.pid, p.name, p.endpoints
-            );
+                p.role,
+                p.pid,
+                p.name,
+                p.endpoints
+            )?;
         }
         let nonzero: Vec<String> = node
             .counters
@@ -128,7 +132,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             .map(|(name, value)| format!("{name} {value}"))
             .collect();
         if !nonzero.is_empty() {
-            println!("    counters: {}", nonzero.join(", "));
+            outln!("    counters: {}", nonzero.join(", "))?;
         }
     }
     Ok(())

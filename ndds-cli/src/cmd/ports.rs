@@ -9,7 +9,7 @@ use ndds_client::ports::{OwnerInfo, PortWire, UserInfo};
 use serde::Serialize;
 
 use crate::connect::{DaemonArgs, connect};
-use crate::seconds;
+use crate::{outln, seconds};
 
 /// Options of `ndds ports`.
 #[derive(Debug, clap::Args)]
@@ -91,35 +91,37 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     }
     let views: Vec<PortView> = views.into_values().collect();
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({ "ports": views }))?
-        );
+        )?;
         return Ok(());
     }
     if views.is_empty() {
-        println!("no ports");
+        outln!("no ports")?;
     }
     for view in &views {
-        print(view);
+        print(view)?;
     }
     Ok(())
 }
 
-fn print(view: &PortView) {
-    println!("{}", view.port);
+fn print(view: &PortView) -> anyhow::Result<()> {
+    outln!("{}", view.port)?;
     match view.owners.as_slice() {
-        [] => println!("  owner     (none heard)"),
-        [owner] => println!(
+        [] => outln!("  owner     (none heard)")?,
+        [owner] => outln!(
             "  owner     {} (pid {}), queue {}",
-            owner.task, owner.pid, owner.queue
-        ),
+            owner.task,
+            owner.pid,
+            owner.queue
+        )?,
         owners => {
             let all: Vec<String> = owners
                 .iter()
                 .map(|o| format!("{} (pid {})", o.task, o.pid))
                 .collect();
-            println!("  owner     CONFLICT: {}", all.join(" and "));
+            outln!("  owner     CONFLICT: {}", all.join(" and "))?;
         }
     }
     if let Some(r) = view.owners.first().map(|o| &o.restrictions) {
@@ -143,7 +145,7 @@ fn print(view: &PortView) {
             parts.push(format!("filter {filter:?}"));
         }
         if !parts.is_empty() {
-            println!("  restrict  {}", parts.join(", "));
+            outln!("  restrict  {}", parts.join(", "))?;
         }
     }
     let users: Vec<String> = view
@@ -151,12 +153,13 @@ fn print(view: &PortView) {
         .iter()
         .map(|u| format!("{} {:?}", u.task, u.usages))
         .collect();
-    println!(
+    outln!(
         "  users     {}",
         if users.is_empty() {
             "(none heard)".to_owned()
         } else {
             users.join(", ")
         }
-    );
+    )?;
+    Ok(())
 }

@@ -6,6 +6,8 @@ use std::time::{Duration, Instant};
 use hdrhistogram::Histogram;
 use serde_json::json;
 
+use crate::outln;
+
 /// Longest round trip the histogram holds exactly; longer ones are recorded as this.
 const HIGHEST_NS: u64 = 60_000_000_000;
 
@@ -150,7 +152,7 @@ pub struct Setup {
 }
 
 /// Prints the run's figures, as text or as one JSON object.
-pub fn report(setup: &Setup, summary: &Summary, as_json: bool) {
+pub fn report(setup: &Setup, summary: &Summary, as_json: bool) -> anyhow::Result<()> {
     if as_json {
         let value = json!({
             "mode": "ping",
@@ -169,10 +171,10 @@ pub fn report(setup: &Setup, summary: &Summary, as_json: bool) {
             "min_us": summary.min_us,
             "mean_us": summary.mean_us,
         });
-        println!("{value}");
-        return;
+        outln!("{value}")?;
+        return Ok(());
     }
-    println!(
+    outln!(
         "ping {} {} {} B: {} round trips in {:.2} s ({} warm-up excluded), {} lost",
         setup.transport,
         setup.reliability,
@@ -181,8 +183,8 @@ pub fn report(setup: &Setup, summary: &Summary, as_json: bool) {
         setup.elapsed.as_secs_f64(),
         setup.warmup,
         summary.lost
-    );
-    println!(
+    )?;
+    outln!(
         "round trip us: p50 {:.1}  p90 {:.1}  p99 {:.1}  p99.9 {:.1}  max {:.1}  mean {:.1}",
         summary.p50_us,
         summary.p90_us,
@@ -190,7 +192,8 @@ pub fn report(setup: &Setup, summary: &Summary, as_json: bool) {
         summary.p999_us,
         summary.max_us,
         summary.mean_us
-    );
+    )?;
+    Ok(())
 }
 
 #[cfg(test)]

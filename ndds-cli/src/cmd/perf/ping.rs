@@ -93,8 +93,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         warmup: args.run.warmup,
         elapsed: start.elapsed(),
     };
-    latency::report(&setup, &progress.trips.summary(), args.run.json);
-    Ok(())
+    latency::report(&setup, &progress.trips.summary(), args.run.json)
 }
 
 /// What the reply callback and the main thread share.

@@ -13,7 +13,7 @@ use serde_json::json;
 use super::sample::perf_type;
 use super::{Stream, connect, udp};
 use crate::connect::DaemonArgs;
-use crate::seconds;
+use crate::{outln, seconds};
 
 /// How often the main thread looks whether its ping is still there.
 const CHECK: Duration = Duration::from_millis(50);
@@ -44,16 +44,17 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         _ => (pong_ndds(daemon, args)?, "ndds"),
     };
     if args.json {
-        println!(
+        outln!(
             "{}",
             json!({"mode": "pong", "transport": transport, "echoed": echoed.echoed,
                    "errors": echoed.errors, "first_error": echoed.first_error})
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "pong {transport}: {} samples echoed, {} write errors",
-            echoed.echoed, echoed.errors
-        );
+            echoed.echoed,
+            echoed.errors
+        )?;
     }
     Ok(())
 }

@@ -9,6 +9,7 @@ use serde_json::json;
 
 use super::connect;
 use crate::connect::DaemonArgs;
+use crate::outln;
 
 /// Options of `ndds perf port`.
 #[derive(Debug, clap::Args)]
@@ -91,23 +92,23 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         "send/receive/reply"
     };
     if args.json {
-        println!(
+        outln!(
             "{}",
             json!({
                 "mode": mode, "count": args.count, "seconds": start.elapsed().as_secs_f64(),
                 "p50_us": us(0.5), "p90_us": us(0.9), "p99_us": us(0.99),
                 "max_us": rtt.max() as f64 / 1000.0,
             })
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "port {mode}: {} round trips, p50 {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
             args.count,
             us(0.5),
             us(0.9),
             us(0.99),
             rtt.max() as f64 / 1000.0
-        );
+        )?;
     }
     Ok(())
 }

@@ -85,8 +85,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         size: args.size,
         batching: args.batching_name(),
     };
-    throughput::report_pub(&setup, &out, args.json);
-    Ok(())
+    throughput::report_pub(&setup, &out, args.json)
 }
 
 fn publish_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Published> {

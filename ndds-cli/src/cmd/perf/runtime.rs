@@ -22,6 +22,8 @@ use ndds_client::runtime::{
 };
 use serde_json::json;
 
+use crate::outln;
+
 /// Options of `ndds perf runtime`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -98,13 +100,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some((nop, gain)) = &overhead {
             value["overhead"] = json!({ "nop": nop.json(), "gain": gain.json() });
         }
-        println!("{value}");
+        outln!("{value}")?;
     } else {
         if let Some((nop, gain)) = &overhead {
-            nop.print("modules that do nothing");
-            gain.print("1x1 gains (three CSMat locks: gain, input, output; two copies)");
+            nop.print("modules that do nothing")?;
+            gain.print("1x1 gains (three CSMat locks: gain, input, output; two copies)")?;
         }
-        print_jitter(args, &jitter);
+        print_jitter(args, &jitter)?;
     }
     Ok(())
 }
@@ -128,8 +130,8 @@ impl Overhead {
         })
     }
 
-    fn print(&self, what: &str) {
-        println!(
+    fn print(&self, what: &str) -> anyhow::Result<()> {
+        outln!(
             "overhead, {} {what}: {:.0} ns per sample ({:.1} ns per module); per sample p50 {} ns, p99 {} ns, max {} ns, over {} samples",
             self.modules,
             self.mean_ns,
@@ -138,7 +140,8 @@ impl Overhead {
             self.per_sample.value_at_quantile(0.99),
             self.per_sample.max(),
             self.samples
-        );
+        )?;
+        Ok(())
     }
 }
 
@@ -235,13 +238,13 @@ fn percentiles(p: &Percentiles) -> serde_json::Value {
     json!({ "count": p.count, "p50": p.p50_us, "p99": p.p99_us, "max": p.max_us })
 }
 
-fn print_jitter(args: &Args, stats: &HabitatStats) {
+fn print_jitter(args: &Args, stats: &HabitatStats) -> anyhow::Result<()> {
     let load = match (args.load, args.load_cpu) {
         (0, _) => "idle".to_owned(),
         (n, Some(cpu)) => format!("{n} busy thread(s) on CPU {cpu}"),
         (n, None) => format!("{n} busy thread(s)"),
     };
-    println!(
+    outln!(
         "timer habitat, {} gains at {} Hz for {} s ({load}{}{}): {} samples (expected {:.0}), {} overruns",
         args.modules,
         args.rate,
@@ -255,15 +258,19 @@ fn print_jitter(args: &Args, stats: &HabitatStats) {
         stats.samples,
         args.rate * args.seconds,
         stats.overruns
-    );
+    )?;
     for (name, p) in [
         ("start latency", &stats.latency),
         ("period jitter", &stats.period_jitter),
         ("execution    ", &stats.exec),
     ] {
-        println!(
+        outln!(
             "  {name}: p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} samples)",
-            p.p50_us, p.p99_us, p.max_us, p.count
-        );
+            p.p50_us,
+            p.p99_us,
+            p.max_us,
+            p.count
+        )?;
     }
+    Ok(())
 }

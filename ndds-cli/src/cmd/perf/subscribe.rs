@@ -60,8 +60,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         size: 0,
         batching: String::new(),
     };
-    throughput::report_sub(&setup, &measured, args.json);
-    Ok(())
+    throughput::report_sub(&setup, &measured, args.json)
 }
 
 /// The counts, and the sequence gaps of each writer (usually one).

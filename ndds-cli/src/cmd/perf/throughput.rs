@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::json;
 
-use crate::seconds;
+use crate::{outln, seconds};
 
 /// How often the receiving side looks at its counters.
 const TICK: Duration = Duration::from_millis(10);
@@ -215,7 +215,7 @@ fn per_s(count: u64, span: Duration) -> f64 {
 }
 
 /// Prints what a publisher did.
-pub fn report_pub(setup: &Setup, out: &Published, as_json: bool) {
+pub fn report_pub(setup: &Setup, out: &Published, as_json: bool) -> anyhow::Result<()> {
     let rate = per_s(out.written, out.elapsed);
     let mbps = mb_per_s(out.written * setup.size as u64, out.elapsed);
     if as_json {
@@ -232,10 +232,10 @@ pub fn report_pub(setup: &Setup, out: &Published, as_json: bool) {
             "samples_per_s": rate,
             "mb_per_s": mbps,
         });
-        println!("{value}");
-        return;
+        outln!("{value}")?;
+        return Ok(());
     }
-    println!(
+    outln!(
         "pub {} {} {} B (batching {}): {} samples in {:.2} s: {:.0} samples/s, {:.1} MB/s, \
          {} write errors",
         setup.transport,
@@ -247,14 +247,15 @@ pub fn report_pub(setup: &Setup, out: &Published, as_json: bool) {
         rate,
         mbps,
         out.errors
-    );
+    )?;
     if let Some(err) = &out.first_error {
-        println!("first write error: {err}");
+        outln!("first write error: {err}")?;
     }
+    Ok(())
 }
 
 /// Prints what a subscriber measured.
-pub fn report_sub(setup: &Setup, m: &Measured, as_json: bool) {
+pub fn report_sub(setup: &Setup, m: &Measured, as_json: bool) -> anyhow::Result<()> {
     let w = m.window;
     let rate = per_s(w.samples, m.span);
     let mbps = mb_per_s(w.bytes, m.span);
@@ -281,10 +282,10 @@ pub fn report_sub(setup: &Setup, m: &Measured, as_json: bool) {
             "total_samples": m.total.samples,
             "total_lost": m.total.lost,
         });
-        println!("{value}");
-        return;
+        outln!("{value}")?;
+        return Ok(());
     }
-    println!(
+    outln!(
         "sub {} {} {size} B: {} samples in a {:.2} s window: {:.0} samples/s, {:.1} MB/s, \
          {} lost ({loss:.2} %), {} late; {} samples in all",
         setup.transport,
@@ -296,7 +297,8 @@ pub fn report_sub(setup: &Setup, m: &Measured, as_json: bool) {
         w.lost,
         w.late,
         m.total.samples
-    );
+    )?;
+    Ok(())
 }
 
 #[cfg(test)]
