@@ -314,7 +314,9 @@ fn undeclared_and_oversized_stimuli_are_refused_and_counted() {
     let fsm = StateMachine::start(program, actions).unwrap();
     assert!(matches!(
         fsm.send(Stimulus::event("Tock")),
-        Err(FsmError::Undeclared { .. })
+        Err(FsmError::Refused(
+            ndds_client::fsm::Refusal::Undeclared { .. }
+        ))
     ));
     let long = "T".repeat(ndds_client::fsm::MAX_NAME_LEN + 1);
     assert!(matches!(

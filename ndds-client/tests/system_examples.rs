@@ -67,8 +67,15 @@ fn every_example_loads_verifies_and_runs_bounded_samples() {
     assert!(files.len() >= 5, "examples: {files:?}");
     let (_dir, participant) = participant();
     for file in &files {
-        let system = System::load_with(file, Some(&participant), LoadOptions { simulated: true })
-            .unwrap_or_else(|e| panic!("{}:\n{e}", file.display()));
+        let system = System::load_with(
+            file,
+            Some(&participant),
+            LoadOptions {
+                simulated: true,
+                ..LoadOptions::default()
+            },
+        )
+        .unwrap_or_else(|e| panic!("{}:\n{e}", file.display()));
         assert!(system.runtime().verify().is_ok());
         system.start().unwrap();
         let samples = system.simulate(1.0).unwrap();
@@ -92,7 +99,10 @@ fn multirate_servo_follows_the_plan_to_the_goal() {
     let system = System::load_with(
         examples().join("multirate.toml"),
         None,
-        LoadOptions { simulated: true },
+        LoadOptions {
+            simulated: true,
+            ..LoadOptions::default()
+        },
     )
     .unwrap();
     system.start().unwrap();
@@ -128,7 +138,10 @@ fn sequence_visits_a_then_b_then_home() {
     let system = System::load_with(
         examples().join("sequence.toml"),
         None,
-        LoadOptions { simulated: true },
+        LoadOptions {
+            simulated: true,
+            ..LoadOptions::default()
+        },
     )
     .unwrap();
     system.start().unwrap();
@@ -201,7 +214,10 @@ fn arm_quickstart_switches_to_lqg_and_reaches_the_endpoint_goal() {
     let reply = user
         .send(&"JointPD".to_owned(), Duration::from_secs(5))
         .unwrap();
-    assert_eq!(reply, Ok("switched to `JointPD`".to_owned()));
+    assert_eq!(
+        reply,
+        Ok("system `arm` switched to configuration `JointPD`".to_owned())
+    );
     assert_eq!(
         system.runtime().current_configuration().as_deref(),
         Some("JointPD")
@@ -255,7 +271,15 @@ fn simulated_time_goes_on_across_calls() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("clock.toml");
     std::fs::write(&file, text).unwrap();
-    let system = System::load_with(&file, None, LoadOptions { simulated: true }).unwrap();
+    let system = System::load_with(
+        &file,
+        None,
+        LoadOptions {
+            simulated: true,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
     system.start().unwrap();
     let mut samples = 0;
     for _ in 0..250 {
@@ -282,7 +306,15 @@ fn a_recording_is_written_next_to_its_description() {
          type = \"recorder\"\nhabitat = \"h\"\ninputs = [\"time\"]\nfile = \"run.csv\"\n",
     )
     .unwrap();
-    let system = System::load_with(&file, None, LoadOptions { simulated: true }).unwrap();
+    let system = System::load_with(
+        &file,
+        None,
+        LoadOptions {
+            simulated: true,
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
     system.start().unwrap();
     system.simulate(0.05).unwrap();
     system.stop();

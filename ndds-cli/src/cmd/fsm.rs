@@ -1,17 +1,19 @@
 //! `ndds fsm`: drive and watch the state machines of a live system (`ndds_client::fsm`).
 //!
-//! - `ndds fsm send MACHINE STIMULUS[=VALUE]...` queues stimuli on `fsm/MACHINE/events`
-//!   (reliably, waiting until the machine acknowledged them);
+//! - `ndds fsm send MACHINE STIMULUS[=VALUE]...` sends stimuli through the machine's command
+//!   port (`fsm.MACHINE`) and prints what they did, or fails with the machine's reason for
+//!   refusing them (none is queued then);
 //! - `ndds fsm show MACHINE` prints its state from `fsm/MACHINE/state`.
 
 use std::time::Duration;
 
 use anyhow::Context as _;
-use ndds_client::fsm::{MachineState, Stimulus};
-use ndds_client::{ConsumerQos, ProducerQos, Reliability};
+use ndds_client::fsm::{CommandReply, MachineState, Stimulus, command_port};
+use ndds_client::ports::{PortError, PortUser};
+use ndds_client::{ConsumerQos, Participant};
 
 use crate::connect::{DaemonArgs, connect};
-use crate::seconds;
+use crate::{outln, seconds, suggest};
 
 /// Options of `ndds fsm`.
 #[derive(Debug, clap::Args)]
@@ -22,14 +24,15 @@ pub struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum Mode {
-    /// Send stimuli to a machine, in order: `Acquire`, `Object=Visible`.
+    /// Send stimuli to a machine, in order: `Acquire`, `Object=Visible`; prints what they did,
+    /// or fails with the machine's reason when it refuses them (then none is taken).
     Send {
         /// The machine (its main machine's name).
         machine: String,
         /// Stimuli: `NAME` (transient or latched) or `NAME=VALUE` (condition).
         #[arg(required = true)]
         stimuli: Vec<String>,
-        /// Seconds to wait for the machine to appear and to acknowledge.
+        /// Seconds to wait for the machine to answer with the outcome.
         #[arg(long, value_parser = seconds::parse, default_value = "5")]
         wait: Duration,
     },
@@ -73,64 +76,122 @@ fn send(
         anyhow::bail!("empty stimulus name in {bad:?}");
     }
     let participant = connect(daemon)?;
-    let topic = format!("fsm/{machine}/events");
-    let qos = ProducerQos {
-        reliability: Reliability::Reliable { depth: 256 },
-        ..ProducerQos::default()
-    };
-    let producer = participant.producer::<Stimulus>(&topic, qos)?;
-    anyhow::ensure!(
-        producer.wait_for_consumers(1, wait),
-        "no state machine `{machine}` found (nothing consumes {topic:?}); `ndds topics` lists the fsm/*/events topics"
-    );
-    for stimulus in &parsed {
-        producer.write(stimulus)?;
+    let reply = command(&participant, machine, &parsed, wait)?;
+    match reply {
+        Ok(report) => {
+            for line in report.lines() {
+                outln!("{machine}: {line}")?;
+            }
+            Ok(())
+        }
+        Err(reason) => anyhow::bail!("{reason}"),
     }
-    anyhow::ensure!(
-        producer.wait_for_acknowledgments(wait),
-        "state machine `{machine}` did not acknowledge within {wait:?}"
-    );
-    eprintln!("ndds: sent {} stimulus(es) to {machine}", parsed.len());
-    Ok(())
+}
+
+/// Sends `stimuli` to `machine` through its command port and returns its answer: what they
+/// did once the machine handled them, or why it refused them all (none is queued then).
+pub fn command(
+    participant: &Participant,
+    machine: &str,
+    stimuli: &[Stimulus],
+    wait: Duration,
+) -> anyhow::Result<CommandReply> {
+    let port = command_port(machine);
+    let user = PortUser::<Vec<Stimulus>, CommandReply>::declare(participant, &port, "ndds")?;
+    match user.send(&stimuli.to_vec(), wait) {
+        Ok(reply) => Ok(reply),
+        Err(PortError::Timeout { owner: None, .. }) => {
+            let known = machines(participant);
+            let hint = suggest::did_you_mean(&suggest::suggest(machine, &known))
+                .map(|s| format!("; {s}"))
+                .unwrap_or_default();
+            let listed = if known.is_empty() {
+                "no state machine runs in this domain".to_owned()
+            } else {
+                format!("running: {}", known.join(", "))
+            };
+            anyhow::bail!("no state machine `{machine}` answered within {wait:?}{hint} ({listed})")
+        }
+        Err(PortError::Timeout { .. }) => anyhow::bail!(
+            "state machine `{machine}` took the stimuli but did not report their outcome within \
+             {wait:?} (an action may still be running; `ndds fsm show {machine}` shows its state)"
+        ),
+        Err(err) => Err(err.into()),
+    }
+}
+
+/// The state machines of the domain: their command ports, from the daemon's view.
+fn machines(participant: &Participant) -> Vec<String> {
+    let Ok(graph) = participant.graph() else {
+        return Vec::new();
+    };
+    let mut names: Vec<String> = graph
+        .endpoints
+        .iter()
+        .filter(|e| e.info.qos.kind() == ndds_core::wire::EndpointKind::Producer)
+        .filter_map(|e| e.info.topic.strip_prefix("port/fsm."))
+        .filter_map(|rest| rest.strip_suffix("/owner"))
+        .map(str::to_owned)
+        .collect();
+    names.sort();
+    names.dedup();
+    names
 }
 
 fn show(daemon: &DaemonArgs, machine: &str, json: bool, wait: Duration) -> anyhow::Result<()> {
     let participant = connect(daemon)?;
     let topic = format!("fsm/{machine}/state");
     let consumer = participant.consumer::<MachineState>(&topic, ConsumerQos::default())?;
-    let sample = consumer.recv_timeout(wait).with_context(|| {
-        format!("no state from machine `{machine}` on {topic:?} within {wait:?}")
-    })?;
+    let sample = match consumer.recv_timeout(wait) {
+        Ok(sample) => sample,
+        Err(err) => {
+            let known = machines(&participant);
+            let hint = suggest::did_you_mean(&suggest::suggest(machine, &known))
+                .map(|s| format!("; {s}"))
+                .unwrap_or_default();
+            return Err(err).with_context(|| {
+                format!("no state from machine `{machine}` on {topic:?} within {wait:?}{hint}")
+            });
+        }
+    };
     let state = sample.value;
     if json {
-        println!("{}", serde_json::to_string(&state)?);
+        outln!("{}", serde_json::to_string(&state)?)?;
         return Ok(());
     }
-    println!("machine     {}", state.machine);
-    println!("state       {}", state.state);
+    outln!("machine     {}", state.machine)?;
+    outln!("state       {}", state.state)?;
     if state.stack.len() > 1 {
-        println!("call stack  {}", state.stack.join(" > "));
+        outln!("call stack  {}", state.stack.join(" > "))?;
     }
     if let Some(t) = &state.last_transition {
         let code = t.code.map(|c| format!(" -> code {c}")).unwrap_or_default();
-        println!(
+        outln!(
             "last        {}:{} --[{}]--> {} (action {}{code})",
-            t.machine, t.from, t.condition, t.to, t.action
-        );
+            t.machine,
+            t.from,
+            t.condition,
+            t.to,
+            t.action
+        )?;
     }
     let conditions: Vec<String> = state
         .conditions
         .iter()
         .map(|(k, v)| format!("{k}={v}"))
         .collect();
-    println!("conditions  {}", conditions.join(" "));
-    println!("latched     {}", state.latched.join(" "));
-    println!(
-        "counts      {} transitions, {} faults",
-        state.transitions, state.faults
-    );
+    outln!("conditions  {}", conditions.join(" "))?;
+    outln!("latched     {}", state.latched.join(" "))?;
+    let accepts: Vec<String> = state.accepts.iter().map(ToString::to_string).collect();
+    outln!("accepts     {}", accepts.join(" "))?;
+    outln!(
+        "counts      {} transitions, {} faults, {} stimuli refused",
+        state.transitions,
+        state.faults,
+        state.dropped
+    )?;
     if !state.last_fault.is_empty() {
-        println!("last fault  {}", state.last_fault);
+        outln!("last fault  {}", state.last_fault)?;
     }
     Ok(())
 }

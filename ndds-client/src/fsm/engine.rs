@@ -230,6 +230,8 @@ pub struct MachineState {
     pub last_fault: String,
     /// Stimuli refused before reaching the machine (queue full, undeclared, oversized).
     pub dropped: u64,
+    /// The stimuli the machine accepts (filled in by [`StateMachine`](super::StateMachine)).
+    pub accepts: Vec<super::vocabulary::Accepted>,
 }
 
 impl Machine {
@@ -309,6 +311,7 @@ impl Machine {
                 .map(ToString::to_string)
                 .unwrap_or_default(),
             dropped: 0,
+            accepts: Vec::new(),
         }
     }
 

@@ -16,11 +16,16 @@ mod task;
 #[cfg(test)]
 mod tests;
 mod verify;
+mod vocabulary;
 
 pub use def::{ActionRef, DefError, MachineDef, Program, StimulusKind, TransitionDef};
 pub use engine::{
     Actions, Fault, Fired, MAX_CALL_DEPTH, MAX_STEPS, Machine, MachineState, Outcome, Stimulus,
 };
 pub use expr::{Expr, ParseError, Stimuli};
-pub use task::{ActionSet, FsmError, MAX_NAME_LEN, MAX_VALUE_LEN, QUEUE_LIMIT, StateMachine};
+pub use task::{
+    ActionSet, CommandReply, FsmError, MAX_NAME_LEN, MAX_VALUE_LEN, QUEUE_LIMIT, StateMachine,
+    command_port,
+};
 pub use verify::{FsmProblem, verify};
+pub use vocabulary::{Accepted, Refusal, Vocabulary};

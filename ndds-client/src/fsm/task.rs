@@ -15,6 +15,8 @@ use std::time::{Duration, Instant};
 use super::def::Program;
 use super::engine::{Actions, Machine, MachineState, Stimulus};
 use super::verify::{FsmProblem, verify};
+use super::vocabulary::{Refusal, Vocabulary};
+use crate::ports::{OwnerLocation, PortError, PortOwner};
 use crate::runtime::Runtime;
 use crate::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
 
@@ -164,13 +166,20 @@ pub enum FsmError {
     /// The machine was stopped.
     #[error("state machine `{0}` is stopped")]
     Stopped(String),
-    /// A stimulus the program does not declare.
-    #[error("state machine `{machine}`: undeclared stimulus `{stimulus}`")]
-    Undeclared {
+    /// A stimulus the program does not take: undeclared, a value where none belongs, a
+    /// condition without a value, or a near miss of a value its transitions test.
+    #[error(transparent)]
+    Refused(#[from] Refusal),
+    /// A machine of this name already runs in the domain (it owns the machine's command port).
+    #[error(
+        "state machine `{machine}` already runs in this domain: {owner}; stop it, or run this \
+         copy in another domain (--domain)"
+    )]
+    AlreadyRunning {
         /// The main machine.
         machine: String,
-        /// The stimulus.
-        stimulus: String,
+        /// Where the running one is.
+        owner: OwnerLocation,
     },
     /// A name over [`MAX_NAME_LEN`] or a value over [`MAX_VALUE_LEN`] bytes.
     #[error(
@@ -209,7 +218,7 @@ fn list(problems: &[FsmProblem]) -> String {
 
 struct Shared {
     name: String,
-    declared: BTreeMap<String, super::def::StimulusKind>,
+    vocabulary: Vocabulary,
     dropped: std::sync::atomic::AtomicU64,
     queue: Mutex<Queue>,
     ready: Condvar,
@@ -220,13 +229,42 @@ struct Shared {
 
 #[derive(Default)]
 struct Queue {
-    items: std::collections::VecDeque<Stimulus>,
+    items: std::collections::VecDeque<Queued>,
+}
+
+/// A stimulus waiting for the machine, and who waits for its outcome.
+struct Queued {
+    stimulus: Stimulus,
+    batch: Option<Arc<Batch>>,
+}
+
+/// A command's stimuli: the outcome of each, reported once the last has been handled.
+struct Batch {
+    lines: Mutex<Vec<String>>,
+    faults: Mutex<Vec<String>>,
+    remaining: std::sync::atomic::AtomicUsize,
+    report: Mutex<Option<Report>>,
+}
+
+/// Called once with the outcome of a whole command: what happened, or the faults.
+type Report = Box<dyn FnOnce(CommandReply) + Send>;
+
+/// The reply of a machine's command port: what the stimuli did, or why they were refused.
+pub type CommandReply = Result<String, String>;
+
+/// The port through which machine `machine` takes stimuli and answers with their outcome
+/// (`ndds fsm send` uses it): requests are the stimuli of one command (`Vec<Stimulus>`),
+/// accepted all together or refused all together; the reply ([`CommandReply`]) comes once
+/// the machine has handled the last of them.
+pub fn command_port(machine: &str) -> String {
+    format!("fsm.{machine}")
 }
 
 /// A running state machine. Dropping the last handle stops it.
 pub struct StateMachine {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
+    commands: Option<JoinHandle<()>>,
     _events: Option<CallbackConsumer>,
 }
 
@@ -259,11 +297,11 @@ impl StateMachine {
                 problems,
             });
         }
-        let declared = program.stimuli.clone();
+        let vocabulary = Vocabulary::of(&program);
         let machine = Machine::new(Arc::new(program));
         let shared = Arc::new(Shared {
             name: name.clone(),
-            declared,
+            vocabulary,
             dropped: std::sync::atomic::AtomicU64::new(0),
             queue: Mutex::new(Queue::default()),
             ready: Condvar::new(),
@@ -276,8 +314,8 @@ impl StateMachine {
             topic: topic.to_owned(),
             reason,
         };
-        let (events, publisher) = match participant {
-            None => (None, None),
+        let (events, publisher, commands) = match participant {
+            None => (None, None, None),
             Some(_)
                 if name.is_empty() || name.contains('/') || name.chars().any(char::is_control) =>
             {
@@ -288,6 +326,19 @@ impl StateMachine {
                 ));
             }
             Some(participant) => {
+                let port = command_port(&name);
+                if let Some(owner) = crate::ports::owners_elsewhere(participant, &port)
+                    .map_err(|e| topic_error(&port, e.to_string()))?
+                    .into_iter()
+                    .next()
+                {
+                    return Err(FsmError::AlreadyRunning {
+                        machine: name,
+                        owner,
+                    });
+                }
+                let commands = serve_commands(&shared, participant, &port)
+                    .map_err(|e| topic_error(&port, e.to_string()))?;
                 let topic = format!("fsm/{name}/events");
                 let qos = ConsumerQos {
                     reliability: Reliability::Reliable { depth: 256 },
@@ -300,7 +351,7 @@ impl StateMachine {
                     .map_err(|e| topic_error(&topic, e.to_string()))?
                     .on_sample(move |sample| {
                         if let Some(shared) = weak.upgrade()
-                            && let Err(err) = enqueue(&shared, sample.value)
+                            && let Err(err) = enqueue(&shared, vec![sample.value], None)
                         {
                             // Logged at 1, 2, 4, 8, ... drops: a flooding peer cannot flood the log.
                             let dropped = shared.dropped.load(Ordering::Relaxed);
@@ -314,7 +365,7 @@ impl StateMachine {
                 let producer = participant
                     .producer::<MachineState>(&topic, ProducerQos::default())
                     .map_err(|e| topic_error(&topic, e.to_string()))?;
-                (Some(events), Some(producer))
+                (Some(events), Some(producer), Some(commands))
             }
         };
         let worker = Arc::clone(&shared);
@@ -325,16 +376,24 @@ impl StateMachine {
         Ok(Self {
             shared,
             thread: Some(thread),
+            commands,
             _events: events,
         })
     }
 
     /// Queues a stimulus (from any thread); it is processed after those queued before it.
+    /// A stimulus the program does not take is refused ([`FsmError::Refused`]) and never
+    /// reaches the machine.
     pub fn send(&self, stimulus: Stimulus) -> Result<(), FsmError> {
         if self.shared.stop.load(Ordering::Acquire) {
             return Err(FsmError::Stopped(self.shared.name.clone()));
         }
-        enqueue(&self.shared, stimulus)
+        enqueue(&self.shared, vec![stimulus], None)
+    }
+
+    /// The stimuli the machine accepts (also published in its state).
+    pub fn accepted(&self) -> Vec<super::vocabulary::Accepted> {
+        self.shared.vocabulary.accepted()
     }
 
     /// The machine now (after the last processed stimulus).
@@ -346,6 +405,7 @@ impl StateMachine {
             .unwrap_or_else(|p| p.into_inner())
             .clone();
         state.dropped = self.shared.dropped.load(Ordering::Relaxed);
+        state.accepts = self.shared.vocabulary.accepted();
         state
     }
 
@@ -392,36 +452,177 @@ impl Drop for StateMachine {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+        if let Some(thread) = self.commands.take() {
+            let _ = thread.join();
+        }
     }
 }
 
-fn enqueue(shared: &Shared, stimulus: Stimulus) -> Result<(), FsmError> {
+/// How long the command port's server waits for a request before checking for a stop.
+const COMMAND_POLL: Duration = Duration::from_millis(100);
+
+/// Owns the machine's command port and queues each request's stimuli, replying once the
+/// machine has handled them (or at once, when they are refused).
+fn serve_commands(
+    shared: &Arc<Shared>,
+    participant: &Participant,
+    port: &str,
+) -> Result<JoinHandle<()>, PortError> {
+    let owner: PortOwner<Vec<Stimulus>, CommandReply> =
+        PortOwner::declare(participant, port, &shared.name)?;
+    let weak = Arc::downgrade(shared);
+    let name = port.to_owned();
+    std::thread::Builder::new()
+        .name(format!("fsm-{}-commands", shared.name))
+        .spawn(move || {
+            loop {
+                let Some(shared) = weak.upgrade() else { return };
+                if shared.stop.load(Ordering::Acquire) {
+                    return;
+                }
+                drop(shared);
+                let (stimuli, handle) = match owner.receive(COMMAND_POLL) {
+                    Ok(request) => request,
+                    Err(PortError::Timeout { .. }) => continue,
+                    Err(err) => {
+                        tracing::debug!(port = %name, error = %err, "command not received");
+                        std::thread::sleep(COMMAND_POLL);
+                        continue;
+                    }
+                };
+                let Some(shared) = weak.upgrade() else { return };
+                let port = name.clone();
+                let report: Report = Box::new(move |reply| {
+                    if let Err(err) = handle.reply(&reply) {
+                        tracing::debug!(port = %port, error = %err, "command outcome not sent");
+                    }
+                });
+                if let Err((err, report)) = enqueue_reporting(&shared, stimuli, report) {
+                    report(Err(err.to_string()));
+                }
+            }
+        })
+        .map_err(|e| PortError::Transport {
+            port: port.to_owned(),
+            reason: e.to_string(),
+        })
+}
+
+/// [`enqueue`] with a report of the outcome; a refusal hands the report back.
+fn enqueue_reporting(
+    shared: &Shared,
+    stimuli: Vec<Stimulus>,
+    report: Report,
+) -> Result<(), (FsmError, Report)> {
+    if shared.stop.load(Ordering::Acquire) {
+        return Err((FsmError::Stopped(shared.name.clone()), report));
+    }
+    if stimuli.is_empty() {
+        report(Ok("no stimuli sent".to_owned()));
+        return Ok(());
+    }
+    let batch = Arc::new(Batch {
+        lines: Mutex::new(Vec::new()),
+        faults: Mutex::new(Vec::new()),
+        remaining: std::sync::atomic::AtomicUsize::new(stimuli.len()),
+        report: Mutex::new(Some(report)),
+    });
+    enqueue(shared, stimuli, Some(&batch)).map_err(|err| {
+        // Nothing was queued: the report is still the batch's.
+        let report = batch
+            .report
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take()
+            .unwrap_or_else(|| Box::new(|_| {}));
+        (err, report)
+    })
+}
+
+/// Queues `stimuli` together, or none of them: each is checked against the program first.
+fn enqueue(
+    shared: &Shared,
+    stimuli: Vec<Stimulus>,
+    batch: Option<&Arc<Batch>>,
+) -> Result<(), FsmError> {
     let refuse = |error: FsmError| {
         shared.dropped.fetch_add(1, Ordering::Relaxed);
         Err(error)
     };
-    let value_len = stimulus.value.as_ref().map_or(0, String::len);
-    if stimulus.name.len() > MAX_NAME_LEN || value_len > MAX_VALUE_LEN {
-        return refuse(FsmError::Oversized {
-            machine: shared.name.clone(),
-            name_len: stimulus.name.len(),
-            value_len,
-        });
-    }
-    if !shared.declared.contains_key(&stimulus.name) {
-        return refuse(FsmError::Undeclared {
-            machine: shared.name.clone(),
-            stimulus: stimulus.name,
-        });
+    for stimulus in &stimuli {
+        let value_len = stimulus.value.as_ref().map_or(0, String::len);
+        if stimulus.name.len() > MAX_NAME_LEN || value_len > MAX_VALUE_LEN {
+            return refuse(FsmError::Oversized {
+                machine: shared.name.clone(),
+                name_len: stimulus.name.len(),
+                value_len,
+            });
+        }
+        if let Err(refusal) = shared.vocabulary.check(stimulus) {
+            return refuse(refusal.into());
+        }
     }
     let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());
-    if queue.items.len() >= QUEUE_LIMIT {
+    if queue.items.len() + stimuli.len() > QUEUE_LIMIT {
         drop(queue);
         return refuse(FsmError::QueueFull(shared.name.clone()));
     }
-    queue.items.push_back(stimulus);
+    for stimulus in stimuli {
+        queue.items.push_back(Queued {
+            stimulus,
+            batch: batch.cloned(),
+        });
+    }
     shared.ready.notify_one();
     Ok(())
+}
+
+/// Records what `stimulus` did in its batch, and reports the batch after its last stimulus.
+fn settle(batch: &Batch, stimulus: &Stimulus, outcome: &super::engine::Outcome, state: &str) {
+    let sent = match &stimulus.value {
+        Some(value) => format!("{}={value}", stimulus.name),
+        None => stimulus.name.clone(),
+    };
+    let line = if outcome.fired.is_empty() {
+        let fate = if outcome.vanished {
+            "no transition took it (transient: it is gone)"
+        } else {
+            "no transition fired"
+        };
+        format!("{sent}: {fate}; state {state}")
+    } else {
+        let steps: Vec<String> = outcome
+            .fired
+            .iter()
+            .map(|t| {
+                let code = t.code.map(|c| format!(", code {c}")).unwrap_or_default();
+                format!("{} -> {} ({}{code})", t.from, t.to, t.action)
+            })
+            .collect();
+        format!("{sent}: {}", steps.join(", then "))
+    };
+    lock_vec(&batch.lines).push(line);
+    lock_vec(&batch.faults).extend(outcome.faults.iter().map(|f| format!("{sent}: {f}")));
+    if batch.remaining.fetch_sub(1, Ordering::AcqRel) == 1 {
+        let report = batch
+            .report
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        if let Some(report) = report {
+            let faults = std::mem::take(&mut *lock_vec(&batch.faults));
+            let lines = std::mem::take(&mut *lock_vec(&batch.lines));
+            report(if faults.is_empty() {
+                Ok(lines.join("\n"))
+            } else {
+                Err(faults.join("\n"))
+            });
+        }
+    }
+}
+
+fn lock_vec(m: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 const REPUBLISH: Duration = Duration::from_secs(1);
@@ -435,6 +636,7 @@ fn run(
     let publish = |state: &MachineState| {
         let mut state = state.clone();
         state.dropped = shared.dropped.load(Ordering::Relaxed);
+        state.accepts = shared.vocabulary.accepted();
         if let Some(p) = publisher
             && let Err(err) = p.write(&state)
         {
@@ -456,13 +658,16 @@ fn run(
             queue.items.pop_front()
         };
         match next {
-            Some(stimulus) => {
+            Some(Queued { stimulus, batch }) => {
                 let outcome = machine.handle(&stimulus, actions);
                 for fired in &outcome.fired {
                     tracing::info!(machine = %shared.name, from = %fired.from, to = %fired.to,
                         condition = %fired.condition, action = %fired.action, "transition");
                 }
                 let state = machine.snapshot();
+                if let Some(batch) = &batch {
+                    settle(batch, &stimulus, &outcome, &state.state);
+                }
                 *shared.state.lock().unwrap_or_else(|p| p.into_inner()) = state.clone();
                 shared.changed.notify_all();
                 publish(&state);

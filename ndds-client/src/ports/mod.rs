@@ -18,6 +18,7 @@
 
 mod asynch;
 mod error;
+mod existing;
 mod owner;
 mod respond;
 mod sendall;
@@ -31,6 +32,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 pub use error::PortError;
+pub use existing::{OwnerLocation, owners_elsewhere};
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Broadcast, BroadcastReply, Replies};

@@ -108,4 +108,23 @@ pub enum RuntimeError {
     /// A habitat operation failed.
     #[error(transparent)]
     Habitat(#[from] HabitatError),
+    /// A runtime of this name already runs in the domain (it owns the name's command port).
+    #[error(
+        "system `{name}` already runs in this domain: {owner}; stop it, or run this copy in \
+         another domain (--domain), or under another name"
+    )]
+    AlreadyRunning {
+        /// The runtime's name.
+        name: String,
+        /// Where the running one is.
+        owner: crate::ports::OwnerLocation,
+    },
+    /// The command port could not be declared or served.
+    #[error("runtime `{runtime}`: command port: {reason}")]
+    CommandPort {
+        /// The runtime.
+        runtime: String,
+        /// Why.
+        reason: String,
+    },
 }

@@ -29,6 +29,7 @@
 
 mod binding;
 mod clock;
+mod command;
 pub mod components;
 mod config;
 pub mod csmat;
@@ -47,6 +48,7 @@ mod stats;
 mod verify;
 
 pub use binding::{Freshness, InputStatus, stale_after};
+pub use command::{RuntimeCommand, command_port};
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
 pub use error::RuntimeError;

@@ -1,5 +1,6 @@
 //! Network bindings of CSMats (publish, subscribe), rate transitions between habitats, and the
-//! runtime's services on the network: statistics topics and the configure command topic.
+//! runtime's services on the network: statistics topics, the configure command topic and the
+//! command port (`command.rs`).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -16,6 +17,13 @@ use crate::{ConsumerQos, Participant, Producer, ProducerQos, Reliability};
 
 impl Runtime {
     pub(crate) fn start_services(&self, participant: &Participant) -> Result<(), RuntimeError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        // First: a runtime whose name is taken in the domain goes no further.
+        let commands = super::command::serve(&self.inner, participant, &stop)?;
+        let stop_on_error = |err: RuntimeError| {
+            stop.store(true, Ordering::Release);
+            err
+        };
         let topic = format!("cs/{}/configure", self.inner.name);
         let qos = ConsumerQos {
             reliability: Reliability::Reliable { depth: 64 },
@@ -24,26 +32,29 @@ impl Runtime {
         };
         let consumer = participant
             .consumer::<String>(&topic, qos)
-            .map_err(|source| RuntimeError::Declare {
-                topic: topic.clone(),
-                source,
+            .map_err(|source| {
+                stop_on_error(RuntimeError::Declare {
+                    topic: topic.clone(),
+                    source,
+                })
             })?;
         let weak = Arc::downgrade(&self.inner);
-        let commands = consumer
+        let configure = consumer
             .on_sample(move |sample| {
                 if let Some(inner) = weak.upgrade() {
                     let rt = Runtime { inner };
-                    match rt.switch(sample.value.trim()) {
-                        Ok(()) => tracing::info!(runtime = %rt.name(), configuration = %sample.value, "configuration switched from the network"),
-                        Err(err) => tracing::warn!(runtime = %rt.name(), error = %err, "configuration command refused"),
+                    match rt.switch_explained(sample.value.trim()) {
+                        Ok(done) => tracing::info!(runtime = %rt.name(), "{done} (from the network)"),
+                        Err(refused) => tracing::warn!(runtime = %rt.name(), "configuration command refused: {refused}"),
                     }
                 }
             })
-            .map_err(|err| RuntimeError::Build {
-                module: topic,
-                source: ModuleError::Failed(err.to_string()),
+            .map_err(|err| {
+                stop_on_error(RuntimeError::Build {
+                    module: topic,
+                    source: ModuleError::Failed(err.to_string()),
+                })
             })?;
-        let stop = Arc::new(AtomicBool::new(false));
         let weak = Arc::downgrade(&self.inner);
         let stop_flag = Arc::clone(&stop);
         let stats = std::thread::Builder::new()
@@ -53,7 +64,8 @@ impl Runtime {
         *lock(&self.inner.services) = Some(Services {
             stop,
             stats,
-            _commands: commands,
+            commands: Some(commands),
+            _configure: configure,
         });
         Ok(())
     }

@@ -104,7 +104,11 @@ pub(crate) fn build(
     participant: Option<&Participant>,
     options: LoadOptions,
 ) -> Result<System, SystemError> {
-    let name = system_name(&files).unwrap_or_else(|| stem.to_owned());
+    let name = options
+        .name
+        .clone()
+        .or_else(|| system_name(&files))
+        .unwrap_or_else(|| stem.to_owned());
     let runtime = match participant {
         Some(p) => Runtime::with_participant(&name, p)?,
         None => Runtime::new(&name),
@@ -455,6 +459,21 @@ impl PortServer {
         participant: &Participant,
         port: &PortDecl,
     ) -> Result<Self, SystemError> {
+        let taken = crate::ports::owners_elsewhere(participant, &port.name.name).map_err(|e| {
+            SystemError::Port {
+                port: port.name.name.clone(),
+                message: e.to_string(),
+            }
+        })?;
+        if let Some(owner) = taken.first() {
+            return Err(SystemError::Port {
+                port: port.name.name.clone(),
+                message: format!(
+                    "already owned by {owner}; a port has one owner: stop that one or rename \
+                     this port"
+                ),
+            });
+        }
         let owner: PortOwner<String, PortReply> = PortOwner::declare_with(
             participant,
             &port.name.name,
@@ -477,21 +496,26 @@ impl PortServer {
         let thread = std::thread::Builder::new()
             .name(format!("port {name}"))
             .spawn(move || {
+                // A failure (a second owner appeared after the start) is logged when it
+                // begins and when it changes, not at every poll.
+                let mut failing: Option<String> = None;
                 while !flag.load(Ordering::Acquire) {
                     let (request, reply) = match owner.receive(PORT_POLL) {
                         Ok(r) => r,
                         Err(PortError::Timeout { .. }) => continue,
                         Err(err) => {
-                            tracing::warn!(port = %name, "{err}");
+                            let text = err.to_string();
+                            if failing.as_ref() != Some(&text) {
+                                tracing::error!(port = %name, "{text}; requests wait until it is resolved");
+                                failing = Some(text);
+                            }
                             std::thread::sleep(PORT_POLL);
                             continue;
                         }
                     };
+                    failing = None;
                     let answer = match &serves {
-                        Serves::Configuration => rt
-                            .switch(request.trim())
-                            .map(|()| format!("switched to `{}`", request.trim()))
-                            .map_err(|e| e.to_string()),
+                        Serves::Configuration => rt.switch_explained(request.trim()),
                         Serves::Stimuli(m) => match machine
                             .as_ref()
                             .and_then(|s| s.get())

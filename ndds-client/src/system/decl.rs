@@ -576,16 +576,23 @@ pub(crate) fn list<S: AsRef<str>>(items: &[S]) -> String {
 
 /// ` (did you mean `x`?)` when a known name is close to `name`.
 pub(crate) fn suggest<S: AsRef<str>>(name: &str, known: &[S]) -> String {
+    closest(name, known)
+        .map(|k| format!(" (did you mean `{k}`?)"))
+        .unwrap_or_default()
+}
+
+/// The known name closest to `name` when it is close enough to be a misspelling of it (an
+/// edit distance of at most 2, or a quarter of its length); never `name` itself.
+pub(crate) fn closest<'a, S: AsRef<str>>(name: &str, known: &'a [S]) -> Option<&'a str> {
     if known.len() > SUGGESTED_FROM || name.len() > 256 {
-        return String::new();
+        return None;
     }
     known
         .iter()
         .map(|k| (strsim::levenshtein(name, k.as_ref()), k.as_ref()))
         .filter(|(d, k)| *d <= 2.max(k.len() / 4) && *d > 0)
         .min()
-        .map(|(_, k)| format!(" (did you mean `{k}`?)"))
-        .unwrap_or_default()
+        .map(|(_, k)| k)
 }
 
 fn category_group(named: &Named, p: &mut Diagnostics) -> Option<(String, String, Location)> {
