@@ -78,6 +78,9 @@ impl Drop for Run {
 
 #[test]
 fn plant_and_controller_on_two_hosts_form_one_system() {
+    if support::skipped() {
+        return;
+    }
     let _turn = exclusive();
     let cluster = Cluster::new(2);
     let logs = tempfile::tempdir().unwrap();

@@ -1,9 +1,12 @@
-//! Shared by the multi-host semantics tests (`netns_*.rs`): test nodes on hosts, reading their
-//! JSON lines, the `ndds topics --json` listing, and one measuring test at a time.
+//! Shared by the multi-host tests (`netns*.rs`): whether they can run here at all, test nodes
+//! on hosts, reading their JSON lines, the `ndds topics --json` listing, and one measuring test
+//! at a time.
 
 #![allow(dead_code)]
 
 use std::collections::BTreeSet;
+use std::io::Write as _;
+use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -14,6 +17,74 @@ use serde_json::Value;
 
 /// How long a step that should take milliseconds may take before the test gives up.
 pub const WAIT: Duration = Duration::from_secs(10);
+
+/// The first line of every multi-host test: `if skipped() { return; }`.
+///
+/// True when this machine cannot run the test (not root, or no `ip` or `nft`): the test then
+/// says so on stderr (past the test harness's capture, so `cargo test` shows it) and passes as
+/// skipped, which lets an ordinary user run the whole suite. Under CI (`CI=true`) or with
+/// `NDDS_REQUIRE_NETNS=1` a missing prerequisite fails the test instead, so CI never skips one.
+pub fn skipped() -> bool {
+    let missing = netns_missing();
+    if missing.is_empty() {
+        return false;
+    }
+    let missing = missing.join("; ");
+    if let Some(why) = netns_required() {
+        panic!(
+            "the multi-host tests cannot run here ({missing}), and {why} is set, so they fail \
+             instead of being skipped: run them as root with `ip` and `nft` installed \
+             (apt-get install -y iproute2 nftables)"
+        );
+    }
+    let test = std::thread::current()
+        .name()
+        .unwrap_or("a multi-host test")
+        .to_owned();
+    let _ = writeln!(
+        std::io::stderr(),
+        "{test}: skipped: needs root and the `ip` and `nft` commands ({missing}); \
+         set NDDS_REQUIRE_NETNS=1 to fail instead"
+    );
+    true
+}
+
+/// What this process lacks for the multi-host tests, as `interop_tests::netns` checks it
+/// (root; `ip` and `nft` on `PATH` or in the sbin directories); empty when nothing is missing.
+fn netns_missing() -> Vec<String> {
+    let mut missing = Vec::new();
+    let uid = nix::unistd::geteuid();
+    if !uid.is_root() {
+        missing.push(format!("running as uid {uid}"));
+    }
+    for program in ["ip", "nft"] {
+        if locate(program).is_none() {
+            missing.push(format!("`{program}` not found"));
+        }
+    }
+    missing
+}
+
+/// Where `program` is, searched as `interop_tests::netns` searches it: `PATH`, then the sbin
+/// and bin directories (a user's `PATH` may lack sbin even under sudo).
+fn locate(program: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    std::env::split_paths(&path)
+        .chain(["/usr/sbin", "/sbin", "/usr/bin", "/bin"].map(PathBuf::from))
+        .map(|dir| dir.join(program))
+        .find(|candidate| candidate.is_file())
+}
+
+/// The setting that forbids skipping, if one is set: `CI` (as CI services set it) or
+/// `NDDS_REQUIRE_NETNS`, set to anything but empty, `0` or `false`.
+fn netns_required() -> Option<&'static str> {
+    ["NDDS_REQUIRE_NETNS", "CI"].into_iter().find(|name| {
+        std::env::var(name).is_ok_and(|value| {
+            let value = value.trim();
+            !value.is_empty() && value != "0" && !value.eq_ignore_ascii_case("false")
+        })
+    })
+}
 
 /// The tests of one file take turns, so each measures its figures on an otherwise quiet
 /// machine (two cores: a neighbour's 40 processes would show in a failover time).
