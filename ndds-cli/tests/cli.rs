@@ -1229,38 +1229,61 @@ fn habitat_statistics_are_echoed_and_configurations_switch_from_ndds_pub() {
     }
 
     assert!(eventually(SETTLE, || rt.mat("slow_in").value(0, 0) == 1.0));
-    // The configure topic is reliable: a best-effort `ndds pub` is told so.
-    let run = world.ndds(&["pub", "cs/cli-rt/configure", "\"high\"", "--wait", "2"]);
-    assert!(run.stderr.contains("pass --reliable"), "{run}");
-    assert_eq!(rt.current_configuration(), None);
-    let run = world.ndds(&[
-        "pub",
-        "cs/cli-rt/configure",
-        "\"high\"",
-        "--reliable",
-        "--wait",
-        "10",
-    ]);
-    assert!(run.success(), "{run}");
+    // The configure topic is a command: `ndds pub` sends it through the runtime's command
+    // port and reports what the runtime did.
+    let run = world.ndds(&["pub", "cs/cli-rt/configure", "\"high\"", "--wait", "10"]);
     assert!(
-        eventually(SETTLE, || rt.current_configuration().as_deref()
-            == Some("high")),
-        "the configure topic switched the runtime"
+        run.stderr
+            .contains("system `cli-rt` switched to configuration `high`"),
+        "{run}"
     );
+    assert!(run.success(), "{run}");
+    assert_eq!(rt.current_configuration().as_deref(), Some("high"));
     assert!(
         eventually(SETTLE, || rt.mat("slow_in").value(0, 0) == 10.0),
         "the new gain's output crossed the rate transition"
     );
+    // A refusal is the runtime's reason and a failure.
     let run = world.ndds(&[
         "pub",
         "cs/cli-rt/configure",
         "\"nonexistent\"",
-        "--reliable",
         "--wait",
         "10",
     ]);
-    assert!(run.success(), "{run}");
-    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        run.err()
+            .contains("system `cli-rt` has no configuration `nonexistent`; it has: high, low"),
+        "{run}"
+    );
     assert_eq!(rt.current_configuration().as_deref(), Some("high"));
+    // --force publishes a plain sample on the topic, reliably since its consumer asks for it.
+    let run = world.ndds(&[
+        "pub",
+        "--force",
+        "cs/cli-rt/configure",
+        "\"low\"",
+        "--wait",
+        "10",
+    ]);
+    assert!(run.stderr.contains("1 consumer(s) acknowledged"), "{run}");
+    assert!(
+        eventually(SETTLE, || rt.current_configuration().as_deref()
+            == Some("low")),
+        "the configure topic switched the runtime"
+    );
+    // --best-effort cannot reach the reliable consumer, and says so.
+    let run = world.ndds(&[
+        "pub",
+        "--force",
+        "--best-effort",
+        "cs/cli-rt/configure",
+        "\"high\"",
+        "--wait",
+        "2",
+    ]);
+    assert!(run.stderr.contains("request reliable delivery"), "{run}");
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(rt.current_configuration().as_deref(), Some("low"));
     rt.stop_all();
 }
