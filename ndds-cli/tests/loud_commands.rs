@@ -55,12 +55,18 @@ fn misspelt_stimuli_are_refused_with_the_machines_reason() {
         !run.ok().contains("state       Held"),
         "Coarse of a refused command ran: {run}"
     );
-    assert!(run.ok().contains("accepts     Coarse Precise Settled"), "{run}");
+    assert!(
+        run.ok().contains("accepts     Coarse Precise Settled"),
+        "{run}"
+    );
 
     // What it takes is reported as done, with the transition it caused.
     let run = world.ndds(&["fsm", "send", "arm", "Coarse"]);
     assert!(run.ok().contains("arm: Coarse: "), "{run}");
-    assert!(run.ok().contains("-> Held (switch JointPD, code 0)"), "{run}");
+    assert!(
+        run.ok().contains("-> Held (switch JointPD, code 0)"),
+        "{run}"
+    );
 
     // A machine that does not exist is named with the ones that do.
     let run = world.ndds(&["fsm", "send", "--wait", "1", "armm", "Coarse"]);
@@ -118,7 +124,15 @@ fn samples_nobody_can_take_are_not_reported_as_published() {
     let run = world.ndds(&["pub", "--force", "arm/torque", "[1,2,3]"]);
     assert!(run.success(), "--force publishes anyway: {run}");
 
-    let run = world.ndds(&["pub", "--type", "f64", "--wait", "0.5", "nobody/listens", "1"]);
+    let run = world.ndds(&[
+        "pub",
+        "--type",
+        "f64",
+        "--wait",
+        "0.5",
+        "nobody/listens",
+        "1",
+    ]);
     assert!(
         run.err()
             .contains("no consumer of \"nobody/listens\" matched within 500ms; nothing was sent"),
