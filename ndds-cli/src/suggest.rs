@@ -13,9 +13,9 @@
 //! ```
 //!
 //! A name is close when its edit distance (Levenshtein, ignoring case) is small for its length
-//! (at most 2, or a third of the longer name), or when one of the two is the other's last
-//! `/`-separated segments (`angles` for `arm/angles`). The closest come first, at most
-//! [`MAX_SUGGESTED`] of them.
+//! (at most 2, or a third of the longer name, and not every character), or when one of the
+//! two is the other's last `/`-separated segments (`angles` for `arm/angles`). The closest
+//! come first, at most [`MAX_SUGGESTED`] of them.
 
 /// At most this many names are suggested.
 pub const MAX_SUGGESTED: usize = 3;
@@ -79,7 +79,7 @@ fn closeness(wanted: &str, candidate: &str) -> Option<usize> {
     let length_gap = wanted.chars().count().abs_diff(candidate.chars().count());
     if length_gap <= limit {
         let distance = strsim::levenshtein(wanted, &candidate);
-        if distance <= limit {
+        if distance <= limit && distance < longer {
             return Some(distance);
         }
     }
@@ -127,6 +127,9 @@ mod tests {
         assert!(suggest("", &TOPICS).is_empty());
         assert!(suggest(&"x".repeat(1000), &TOPICS).is_empty());
         assert!(suggest::<_, str>("arm/angles", []).is_empty());
+        // Replacing every character is no near spelling, however short the name.
+        assert!(suggest("z", &["x", "y"]).is_empty());
+        assert_eq!(suggest("x", &["x1", "y"]), ["x1"]);
     }
 
     #[test]

@@ -1,13 +1,21 @@
 //! `ndds echo TOPIC`: print a topic's samples, decoded with the type carried in discovery.
-//! CSMat samples print as labelled tables unless `--json` is given.
+//! CSMat samples print as labelled tables unless `--json` or `--field` is given.
+//!
+//! `--rate HZ` prints at most HZ samples a second, the newest of each window ([`throttle`]);
+//! `--field PATH` prints one value of each sample ([`field`]).
 
-use std::time::{Duration, SystemTime};
+mod field;
+mod throttle;
+
+use std::time::{Duration, Instant, SystemTime};
 
 use ndds_client::runtime::CsMat;
-use ndds_client::{ConsumerQos, RawSample, TypeDescription};
+use ndds_client::{ConsumerQos, RawConsumer, RawEvent, RawSample, RecvError, TypeDescription};
 use ndds_core::dynamic;
 use serde_json::{Value, json};
 
+use self::field::FieldPath;
+use self::throttle::Throttle;
 use crate::builtin;
 use crate::connect::{DaemonArgs, connect};
 use crate::seconds;
@@ -24,6 +32,12 @@ pub struct Args {
     /// One JSON object per sample (value and metadata).
     #[arg(long)]
     json: bool,
+    /// Print at most this many samples per second: the newest of each 1/HZ window.
+    #[arg(long, value_name = "HZ", value_parser = seconds::parse_rate)]
+    rate: Option<Duration>,
+    /// Print only this field of each sample: `data`, `pose.x`, `data[1]`.
+    #[arg(long, value_name = "PATH", value_parser = FieldPath::parse)]
+    field: Option<FieldPath>,
     /// Choose among incompatible types on the topic by fingerprint.
     #[arg(long)]
     fingerprint: Option<String>,
@@ -46,31 +60,125 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             ..ConsumerQos::default()
         },
     )?;
-    // A CSMat topic decodes every sample into this one matrix.
-    let mut table = (!args.json && builtin::is_csmat(&desc)).then(|| CsMat::zeros("", 0, 0));
+    let mut printer = Printer {
+        args,
+        // A CSMat topic decodes every sample into this one matrix.
+        table: (!args.json && args.field.is_none() && builtin::is_csmat(&desc))
+            .then(|| CsMat::zeros("", 0, 0)),
+        desc,
+    };
     let mut printed = 0u64;
+    let mut throttle = args.rate.map(Throttle::new);
     while args.count.is_none_or(|count| printed < count) {
-        let sample = consumer.recv_raw()?;
-        let text = match table.as_mut() {
-            Some(mat) => mat
-                .decode_into(&sample.payload)
-                .map(|()| csmat_table(&args.topic, &sample, mat))
-                .map_err(anyhow::Error::from),
-            None => {
-                decode(&desc, &sample).map(|value| line(args.json, &args.topic, &sample, value))
-            }
+        let sample = match throttle.as_mut() {
+            Some(throttle) => next_due(&consumer, throttle)?,
+            None => consumer.recv_raw()?,
         };
-        match text {
-            // A closed pipe (`ndds echo TOPIC | head`) ends the command quietly (see `out`).
-            Ok(text) => outln!("{text}")?,
-            Err(err) => eprintln!(
-                "ndds: sample {} from {} skipped: {err}",
-                sample.info.seq, sample.info.writer
-            ),
-        }
+        printer.print(&sample)?;
         printed += 1;
     }
     Ok(())
+}
+
+/// Waits for the throttle's next due sample, feeding it what arrives meanwhile.
+fn next_due(
+    consumer: &RawConsumer,
+    throttle: &mut Throttle<RawSample>,
+) -> anyhow::Result<RawSample> {
+    loop {
+        let arrived = match throttle.poll_timeout() {
+            None => Some(consumer.recv_raw()?),
+            Some(due) => {
+                let wait = due.saturating_duration_since(Instant::now());
+                match consumer.recv_raw_event_timeout(wait) {
+                    Ok(RawEvent::Sample(sample)) => Some(sample),
+                    Ok(RawEvent::Notification(_)) | Err(RecvError::Timeout) => None,
+                    Err(err) => return Err(err.into()),
+                }
+            }
+        };
+        let now = Instant::now();
+        let due = throttle.poll_due(now);
+        if let Some(sample) = arrived {
+            throttle.handle_sample(now, sample);
+        }
+        if let Some(sample) = due {
+            return Ok(sample);
+        }
+    }
+}
+
+/// How samples are printed: as a CSMat table, a line of text, or a JSON object.
+struct Printer<'a> {
+    args: &'a Args,
+    desc: TypeDescription,
+    table: Option<CsMat>,
+}
+
+impl Printer<'_> {
+    /// Prints one sample; an undecodable one is reported on stderr and skipped, a `--field`
+    /// it does not have ends the command.
+    fn print(&mut self, sample: &RawSample) -> anyhow::Result<()> {
+        let topic = &self.args.topic;
+        let text = match self.table.as_mut() {
+            Some(mat) => match mat.decode_into(&sample.payload) {
+                Ok(()) => csmat_table(topic, sample, mat),
+                Err(err) => {
+                    skipped(sample, &err);
+                    return Ok(());
+                }
+            },
+            None => match decode(&self.desc, sample) {
+                Ok(value) => self.line(sample, value)?,
+                Err(err) => {
+                    skipped(sample, &err);
+                    return Ok(());
+                }
+            },
+        };
+        // A closed pipe (`ndds echo TOPIC | head`) ends the command quietly (see `out`).
+        outln!("{text}")?;
+        Ok(())
+    }
+
+    /// A decoded sample as one line: `[writer #seq] value`, only the value of `--field`, or
+    /// a JSON object with the metadata (and the field's path).
+    fn line(&self, sample: &RawSample, value: Value) -> anyhow::Result<String> {
+        let info = &sample.info;
+        let value = match &self.args.field {
+            Some(path) => path
+                .select(&value)
+                .map_err(|err| anyhow::anyhow!("--field {}: {err}", path.as_str()))?
+                .clone(),
+            None => value,
+        };
+        if !self.args.json {
+            return Ok(match self.args.field {
+                Some(_) => value.to_string(),
+                None => format!("[{} #{}] {value}", info.writer, info.seq),
+            });
+        }
+        let mut object = json!({
+            "topic": self.args.topic,
+            "writer": info.writer.to_string(),
+            "seq": info.seq,
+            "source_timestamp": seconds(info.source_timestamp),
+            "reception_timestamp": seconds(info.reception_timestamp),
+            "value": value,
+        });
+        if let Some(path) = &self.args.field {
+            object["field"] = json!(path.as_str());
+        }
+        Ok(object.to_string())
+    }
+}
+
+/// Reports an undecodable sample on stderr.
+fn skipped(sample: &RawSample, err: &dyn std::fmt::Display) {
+    eprintln!(
+        "ndds: sample {} from {} skipped: {err}",
+        sample.info.seq, sample.info.writer
+    );
 }
 
 /// A CSMat sample: a header line `topic  name  (rows x cols)  [writer #seq]`, the labelled
@@ -111,23 +219,6 @@ pub fn decode(desc: &TypeDescription, sample: &RawSample) -> anyhow::Result<Valu
             let hex: String = sample.payload.iter().map(|b| format!("{b:02x}")).collect();
             Ok(json!({ "opaque_hex": hex }))
         }
-    }
-}
-
-fn line(as_json: bool, topic: &str, sample: &RawSample, value: Value) -> String {
-    let info = &sample.info;
-    if as_json {
-        json!({
-            "topic": topic,
-            "writer": info.writer.to_string(),
-            "seq": info.seq,
-            "source_timestamp": seconds(info.source_timestamp),
-            "reception_timestamp": seconds(info.reception_timestamp),
-            "value": value,
-        })
-        .to_string()
-    } else {
-        format!("[{} #{}] {value}", info.writer, info.seq)
     }
 }
 
