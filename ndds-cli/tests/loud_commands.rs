@@ -158,4 +158,7 @@ fn a_second_copy_of_a_running_system_is_refused() {
         !second.stdout.contains("running"),
         "the copy must not start: {second}"
     );
+    // Checking the file starts nothing, so the running copy does not refuse it.
+    let check = world.ndds(&["run", "--check", &file]);
+    assert!(check.success(), "{check}");
 }

@@ -110,6 +110,7 @@ pub(crate) fn build(
         .or_else(|| system_name(&files))
         .unwrap_or_else(|| stem.to_owned());
     let runtime = match participant {
+        Some(p) if options.check => Runtime::with_participant_unserved(&name, p)?,
         Some(p) => Runtime::with_participant(&name, p)?,
         None => Runtime::new(&name),
     };
@@ -327,6 +328,7 @@ pub(crate) fn build_into(
         ports: d.ports,
         servers: std::sync::Mutex::new(Vec::new()),
         started: std::sync::Mutex::new(false),
+        check_only: options.check,
         simulated: std::sync::Mutex::new((0.0, Vec::new())),
         runtime: rt,
     })
