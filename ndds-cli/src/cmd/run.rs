@@ -62,6 +62,11 @@ pub struct Args {
     /// crossing the network still travel in real time.
     #[arg(long, value_parser = seconds::parse, conflicts_with_all = ["seconds", "check"])]
     simulate: Option<Duration>,
+    /// Run the system under this name instead of the file's (a name runs once per domain).
+    /// Its statistics and command port take the name; its topics and state machines keep the
+    /// file's names, so a second copy of one system belongs in another domain (--domain).
+    #[arg(long)]
+    name: Option<String>,
 }
 
 /// Runs `ndds run`.
@@ -76,10 +81,12 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     if args.check || args.simulate.is_some() {
         let options = LoadOptions {
             simulated: args.simulate.is_some(),
+            name: args.name.clone(),
+            check: args.check,
         };
         // Network bindings are built against a daemon: connect only if the file has some.
         let mut participant = None;
-        let loaded = match System::load_with(&args.file, None, options) {
+        let loaded = match System::load_with(&args.file, None, options.clone()) {
             Err(SystemError::Invalid(d)) if d.0.iter().any(|x| x.message == NEEDS_PARTICIPANT) => {
                 let p = participant.insert(connect(daemon, args.no_embedded, &args.file)?);
                 System::load_with(&args.file, Some(p), options)
@@ -96,8 +103,15 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         };
     }
     let participant = connect(daemon, args.no_embedded, &args.file)?;
-    let system =
-        System::load(&args.file, Some(&participant)).map_err(|e| describe_error(&args.file, e))?;
+    let system = System::load_with(
+        &args.file,
+        Some(&participant),
+        LoadOptions {
+            name: args.name.clone(),
+            ..LoadOptions::default()
+        },
+    )
+    .map_err(|e| describe_error(&args.file, e))?;
 
     system.start().context("starting the system")?;
     say!(

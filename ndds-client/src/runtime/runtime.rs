@@ -42,7 +42,9 @@ pub(crate) struct Inner {
 pub(crate) struct Services {
     pub(crate) stop: Arc<AtomicBool>,
     pub(crate) stats: Option<JoinHandle<()>>,
-    pub(crate) _commands: CallbackConsumer,
+    /// The command port's server (`super::command`).
+    pub(crate) commands: Option<JoinHandle<()>>,
+    pub(crate) _configure: CallbackConsumer,
 }
 
 impl Inner {
@@ -55,11 +57,15 @@ impl Drop for Inner {
     fn drop(&mut self) {
         if let Some(mut services) = lock(&self.services).take() {
             services.stop.store(true, Ordering::Release);
-            // The last handle may be the one the statistics thread holds for a moment.
-            if let Some(thread) = services.stats.take()
-                && thread.thread().id() != std::thread::current().id()
+            // The last handle may be the one the statistics or command thread holds for a
+            // moment.
+            for thread in [services.stats.take(), services.commands.take()]
+                .into_iter()
+                .flatten()
             {
-                let _ = thread.join();
+                if thread.thread().id() != std::thread::current().id() {
+                    let _ = thread.join();
+                }
             }
         }
         let habitats: Vec<Habitat> = lock(&self.db).habitats.values().cloned().collect();
@@ -143,14 +149,24 @@ impl Runtime {
     /// published on `cs/<runtime>/<habitat>/stats` once per statistics interval, and a string
     /// sample on `cs/<runtime>/configure` switches to the configuration it names.
     pub fn with_participant(name: &str, participant: &Participant) -> Result<Self, RuntimeError> {
+        let rt = Self::with_participant_unserved(name, participant)?;
+        rt.start_services(participant)?;
+        Ok(rt)
+    }
+
+    /// A runtime whose bindings are on the network but which starts no services (statistics,
+    /// configure topic, command port), so it does not hold its name in the domain: for
+    /// loading a description only to verify it while a copy of it runs.
+    pub(crate) fn with_participant_unserved(
+        name: &str,
+        participant: &Participant,
+    ) -> Result<Self, RuntimeError> {
         check_name(ObjectKind::Habitat, name).map_err(|_| RuntimeError::BadName {
             kind: ObjectKind::Habitat,
             name: name.to_owned(),
             why: "a runtime name must be non-empty, without `/` or control characters",
         })?;
-        let rt = Self::build(name, Some(participant.clone()));
-        rt.start_services(participant)?;
-        Ok(rt)
+        Ok(Self::build(name, Some(participant.clone())))
     }
 
     /// Its name.

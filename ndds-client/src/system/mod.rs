@@ -42,7 +42,7 @@
 //! ```
 
 mod build;
-mod decl;
+pub(crate) mod decl;
 mod source;
 
 use std::collections::BTreeMap;
@@ -86,6 +86,9 @@ pub enum SystemError {
     /// [`System::start`] was called twice.
     #[error("system `{0}` was started already")]
     AlreadyStarted(String),
+    /// [`System::start`] of a system loaded with [`LoadOptions::check`].
+    #[error("system `{0}` was loaded to be checked only; load it without `check` to run it")]
+    CheckOnly(String),
 }
 
 /// Where triggers and ports find a state machine once the system runs. A weak reference: only
@@ -113,6 +116,8 @@ pub struct System {
     ports: Vec<decl::PortDecl>,
     servers: Mutex<Vec<build::PortServer>>,
     started: Mutex<bool>,
+    /// Loaded with [`LoadOptions::check`]: never started.
+    check_only: bool,
     /// [`simulate`](Self::simulate)'s clock: simulated seconds, samples per habitat.
     simulated: Mutex<(f64, Vec<u64>)>,
 }
@@ -211,6 +216,9 @@ impl System {
         if *started {
             return Err(SystemError::AlreadyStarted(self.name.clone()));
         }
+        if self.check_only {
+            return Err(SystemError::CheckOnly(self.name.clone()));
+        }
         // Once only, even if starting fails half way (load the system anew to retry).
         *started = true;
         for (name, entry) in &self.machines {
@@ -224,7 +232,7 @@ impl System {
                     *lock(&entry.running) = Some(machine);
                 }
                 Err(err) => {
-                    tracing::error!(machine = %name, "state machine did not start: {err}");
+                    tracing::debug!(machine = %name, "state machine did not start: {err}");
                     self.stop_inner();
                     return Err(err.into());
                 }
@@ -357,8 +365,15 @@ impl Status {
 }
 
 /// How a description is loaded.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct LoadOptions {
+    /// The system's name instead of the files' (`[system] name`, else the top file's name):
+    /// for a second copy of a system in one domain. Its runtime, statistics and command port
+    /// take this name; its topics and state machines keep the names the files give them.
+    pub name: Option<String>,
+    /// Load to verify only: the system is never started, so its runtime serves nothing and
+    /// does not hold its name in the domain (a running copy does not refuse it).
+    pub check: bool,
     /// Every habitat is clocked by [`System::simulate`] (or [`Habitat::step`](
     /// crate::runtime::Habitat::step)) instead of its timer or clock topic: simulated time,
     /// as fast as the machine allows (for tests, and for trying a system without its hardware).
