@@ -398,10 +398,14 @@ fn behind(pace: Pace) -> String {
     let mut why = Vec::new();
     if pace.ratio() < BEHIND_BELOW {
         // Rounded down: 94.8 % is not shown as the 95 % it is below.
-        why.push(format!("{:.0} % of nominal", (pace.ratio() * 100.0).floor()));
+        why.push(format!(
+            "{:.0} % of nominal",
+            (pace.ratio() * 100.0).floor()
+        ));
     }
     if pace.new_overruns > 0 {
-        why.push(format!("+{} overruns", pace.new_overruns));
+        let s = if pace.new_overruns == 1 { "" } else { "s" };
+        why.push(format!("+{} overrun{s}", pace.new_overruns));
     }
     format!("  BEHIND ({})", why.join(", "))
 }
