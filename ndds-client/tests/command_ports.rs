@@ -184,6 +184,6 @@ fn refusals_are_typed() {
     let machine = StateMachine::start(program(), ActionSet::new()).unwrap();
     assert!(matches!(
         machine.send(Stimulus::parse("Object")),
-        Err(FsmError::Refused(Refusal::MissingValue { .. }))
+        Err(FsmError::Refused(r)) if matches!(*r, Refusal::MissingValue { .. })
     ));
 }

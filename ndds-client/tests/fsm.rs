@@ -314,9 +314,7 @@ fn undeclared_and_oversized_stimuli_are_refused_and_counted() {
     let fsm = StateMachine::start(program, actions).unwrap();
     assert!(matches!(
         fsm.send(Stimulus::event("Tock")),
-        Err(FsmError::Refused(
-            ndds_client::fsm::Refusal::Undeclared { .. }
-        ))
+        Err(FsmError::Refused(r)) if matches!(*r, ndds_client::fsm::Refusal::Undeclared { .. })
     ));
     let long = "T".repeat(ndds_client::fsm::MAX_NAME_LEN + 1);
     assert!(matches!(

@@ -169,7 +169,7 @@ pub enum FsmError {
     /// A stimulus the program does not take: undeclared, a value where none belongs, a
     /// condition without a value, or a near miss of a value its transitions test.
     #[error(transparent)]
-    Refused(#[from] Refusal),
+    Refused(Box<Refusal>),
     /// A machine of this name already runs in the domain (it owns the machine's command port).
     #[error(
         "state machine `{machine}` already runs in this domain: {owner}; stop it, or run this \
@@ -206,6 +206,12 @@ pub enum FsmError {
     /// The thread could not start.
     #[error("state machine `{0}`: cannot spawn its thread: {1}")]
     Spawn(String, std::io::Error),
+}
+
+impl From<Refusal> for FsmError {
+    fn from(refusal: Refusal) -> Self {
+        FsmError::Refused(Box::new(refusal))
+    }
 }
 
 fn list(problems: &[FsmProblem]) -> String {
@@ -559,7 +565,7 @@ fn enqueue(
             });
         }
         if let Err(refusal) = shared.vocabulary.check(stimulus) {
-            return refuse(refusal.into());
+            return refuse(FsmError::Refused(refusal));
         }
     }
     let mut queue = shared.queue.lock().unwrap_or_else(|p| p.into_inner());

@@ -155,11 +155,15 @@ impl Vocabulary {
     }
 
     /// Whether the machine takes `stimulus`, and if not, why.
-    pub fn check(&self, stimulus: &Stimulus) -> Result<(), Refusal> {
+    pub fn check(&self, stimulus: &Stimulus) -> Result<(), Box<Refusal>> {
+        self.refusal(stimulus).map_or(Ok(()), |r| Err(Box::new(r)))
+    }
+
+    fn refusal(&self, stimulus: &Stimulus) -> Option<Refusal> {
         let machine = self.machine.clone();
         let Some(accepted) = self.entries.get(&stimulus.name) else {
             let names: Vec<&str> = self.entries.keys().map(String::as_str).collect();
-            return Err(Refusal::Undeclared {
+            return Some(Refusal::Undeclared {
                 machine,
                 stimulus: stimulus.name.clone(),
                 suggestion: crate::system::decl::suggest(&stimulus.name, &names),
@@ -167,25 +171,25 @@ impl Vocabulary {
             });
         };
         match (accepted.kind.as_str(), &stimulus.value) {
-            ("condition", None) => Err(Refusal::MissingValue {
+            ("condition", None) => Some(Refusal::MissingValue {
                 machine,
                 accepted: accepted.clone(),
             }),
             ("condition", Some(value)) => match closest(value, &accepted.values) {
-                Some(near) if !accepted.values.contains(value) => Err(Refusal::NearMiss {
+                Some(near) if !accepted.values.contains(value) => Some(Refusal::NearMiss {
                     machine,
                     value: value.clone(),
                     suggestion: near.to_owned(),
                     accepted: accepted.clone(),
                 }),
-                _ => Ok(()),
+                _ => None,
             },
-            (kind, Some(_)) => Err(Refusal::UnexpectedValue {
+            (kind, Some(_)) => Some(Refusal::UnexpectedValue {
                 machine,
                 stimulus: stimulus.name.clone(),
                 kind: kind.to_owned(),
             }),
-            (_, None) => Ok(()),
+            (_, None) => None,
         }
     }
 }
@@ -228,7 +232,7 @@ mod tests {
         p
     }
 
-    fn check(text: &str) -> Result<(), Refusal> {
+    fn check(text: &str) -> Result<(), Box<Refusal>> {
         Vocabulary::of(&program()).check(&Stimulus::parse(text))
     }
 
@@ -249,7 +253,7 @@ mod tests {
     #[test]
     fn a_misspelt_stimulus_is_refused_with_a_suggestion_and_the_list() {
         let err = check("Corse").expect_err("undeclared");
-        assert!(matches!(err, Refusal::Undeclared { .. }), "{err:?}");
+        assert!(matches!(*err, Refusal::Undeclared { .. }), "{err:?}");
         assert_eq!(
             err.to_string(),
             "machine `arm` has no stimulus `Corse` (did you mean `Coarse`?); it accepts: \
@@ -275,7 +279,7 @@ mod tests {
     fn a_near_miss_of_a_tested_value_is_refused() {
         for typo in ["Object=Visibel", "Object=visible", "Object=Hiden"] {
             let err = check(typo).expect_err(typo);
-            assert!(matches!(err, Refusal::NearMiss { .. }), "{typo}: {err:?}");
+            assert!(matches!(*err, Refusal::NearMiss { .. }), "{typo}: {err:?}");
         }
         assert_eq!(
             check("Object=Visibel").expect_err("typo").to_string(),
