@@ -136,7 +136,7 @@ fn receive<T: TestSample>(
                 emit(report::notification(topic, &notification));
             }
             // Silent for `--timeout`, or the duration is over.
-            Err(RecvError::Timeout) => break,
+            Err(err) if err.is_timeout() => break,
             Err(err) => return Err(err.into()),
         }
     }
