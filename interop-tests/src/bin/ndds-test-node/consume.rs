@@ -4,7 +4,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use ndds_client::{Consumer, ConsumerQos, Event, Participant, RecvError, Reliability};
+use ndds_client::{Consumer, ConsumerQos, Event, Participant, Reliability};
 use serde_json::json;
 
 use crate::produce::topic_names;
