@@ -92,8 +92,7 @@ fn the_status_lists_a_never_received_input_and_the_warning_stays() {
     assert!(out.contains("rate Hz  achieved"), "{run}");
     let control = out
         .lines()
-        .filter(|l| l.trim_start().starts_with("control "))
-        .last()
+        .rfind(|l| l.trim_start().starts_with("control "))
         .expect("a habitat line");
     let achieved: f64 = control.split_whitespace().nth(2).unwrap().parse().unwrap();
     assert!(achieved > 10.0 && achieved < 200.0, "{control}");
