@@ -62,7 +62,13 @@ fn fingerprint_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
     format!("{:016x}", TypeDescription::of::<T>().fingerprint())
 }
 
+/// The short type name that text output shows (`Pose`).
 fn type_name_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
+    TypeDescription::of::<T>().short_name()
+}
+
+/// The full type name that `--json` output keeps (`cli::Pose`).
+fn full_type_name_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
     TypeDescription::of::<T>().name
 }
 
@@ -215,10 +221,10 @@ fn topics_lists_a_typed_producer_and_consumer() {
     assert!(is_hex16(topic["types"][0]["fingerprint"].as_str().unwrap()));
     assert_eq!(
         topic["types"],
-        json!([{ "name": type_name_of::<Pose>(), "fingerprint": fingerprint }])
+        json!([{ "name": full_type_name_of::<Pose>(), "fingerprint": fingerprint }])
     );
     assert!(
-        type_name_of::<Pose>().ends_with("Pose"),
+        full_type_name_of::<Pose>().ends_with("Pose"),
         "the type name is the Rust path: {run}"
     );
 
@@ -230,7 +236,7 @@ fn topics_lists_a_typed_producer_and_consumer() {
         assert_eq!(endpoint["host"], host.as_str());
         assert_eq!(endpoint["node"], node.as_str());
         assert_eq!(endpoint["process"], "topics-test");
-        assert_eq!(endpoint["type_name"], type_name_of::<Pose>());
+        assert_eq!(endpoint["type_name"], full_type_name_of::<Pose>());
         assert_eq!(endpoint["fingerprint"], fingerprint.as_str());
         let guid = endpoint["guid"].as_str().unwrap();
         assert!(
@@ -334,7 +340,11 @@ fn incompatible_types_are_flagged_and_echo_needs_a_fingerprint() {
     assert_eq!(topic["incompatible"], true, "{run}");
     let types = topic["types"].as_array().unwrap();
     assert_eq!(types.len(), 2, "{run}");
-    for (name, fp) in [(&pose_type, &pose_fp), (&temp_type, &temp_fp)] {
+    let full = [
+        full_type_name_of::<Pose>(),
+        full_type_name_of::<Temperature>(),
+    ];
+    for (name, fp) in [(&full[0], &pose_fp), (&full[1], &temp_fp)] {
         assert!(
             types.contains(&json!({ "name": name, "fingerprint": fp })),
             "{name} listed: {run}"
@@ -733,8 +743,13 @@ fn pub_says_when_the_consumers_have_another_type() {
         .unwrap();
     assert!(world.graph_until(&participant, |g| g.endpoints.len() == 1));
     let run = world.ndds(&["pub", "typed/topic", "1", "--type", "f64", "--wait", "1"]);
-    assert!(run.stderr.contains("incompatible"), "{run}");
-    assert!(run.stderr.contains(&type_name_of::<Pose>()), "{run}");
+    let err = run.err();
+    assert!(
+        err.contains("consumers of \"typed/topic\" expect type Pose{x: f64, y: f64,"),
+        "{run}"
+    );
+    assert!(err.contains("not f64"), "{run}");
+    assert!(err.contains("nothing was sent"), "{run}");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -291,9 +291,9 @@ fn unmatched(producer: &RawProducer, topic: &str, waited: Duration) -> String {
     if let Some(other) = consumers.first() {
         return format!(
             "consumers of {topic:?} expect type {} ({}), not {} ({}): they cannot take this sample",
-            other.type_desc.name,
+            other.type_desc.shape(),
             fingerprint_hex(other.fingerprint),
-            ours.name,
+            ours.shape(),
             fingerprint_hex(ours.fingerprint()),
         );
     }

@@ -123,7 +123,11 @@ fn print_topic(name: &str, topic: &Topic<'_>, verbose: bool) -> anyhow::Result<(
     )?;
     let types = topic.types();
     for (type_name, fingerprint) in &types {
-        outln!("  type {type_name} ({})", fingerprint_hex(*fingerprint))?;
+        outln!(
+            "  type {} ({})",
+            ndds_core::types::short_name(type_name),
+            fingerprint_hex(*fingerprint)
+        )?;
     }
     if types.len() > 1 {
         outln!("  INCOMPATIBLE: endpoints of different types do not exchange samples")?;
