@@ -17,7 +17,7 @@ use clap::Parser;
 
 fn main() -> std::process::ExitCode {
     let cli = cmd::Cli::parse();
-    init_logging();
+    init_logging(cli.explains_mismatches());
     match cmd::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         // `ndds topics | head -1`: the reader has all it wanted.
@@ -31,10 +31,17 @@ fn main() -> std::process::ExitCode {
 
 /// Library warnings (incompatible types, undecodable samples, a lost daemon) go to stderr;
 /// `RUST_LOG` chooses another level. They pass through the status screen, so `ndds run`'s
-/// live status is erased and redrawn below each of them instead of hiding it.
-fn init_logging() {
+/// live status is erased and redrawn below each of them instead of hiding it. A command that
+/// explains a mismatched endpoint in its own words (`quiet_mismatches`) does not also get the
+/// library's warning about it.
+fn init_logging(quiet_mismatches: bool) {
+    let default = if quiet_mismatches {
+        "warn,ndds_client::peers=error"
+    } else {
+        "warn"
+    };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(status_term::LogWriter::default)

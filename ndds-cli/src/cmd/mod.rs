@@ -46,6 +46,15 @@ enum Command {
     Run(run::Args),
 }
 
+impl Cli {
+    /// Whether the command says itself why an endpoint of its own is not matched (`ndds pub`
+    /// refuses with the consumers' type or reliability), so the library's warning would only
+    /// repeat it.
+    pub fn explains_mismatches(&self) -> bool {
+        matches!(self.command, Command::Pub(_))
+    }
+}
+
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
