@@ -123,7 +123,7 @@ fn plant_and_controller_on_two_hosts_form_one_system() {
 
     // Both hosts' tools see both ends of the topics.
     for host in [0, 1] {
-        let out = cluster.ndds(host, &["topics"], WAIT);
+        let out = cluster.ndds(host, &["topics", "--all"], WAIT);
         let text = &out.stdout;
         for topic in ["arm/torque", "arm/angles", "arm/endpoint", "fsm/arm/state"] {
             assert!(text.contains(topic), "host {host}: no {topic} in\n{text}");
