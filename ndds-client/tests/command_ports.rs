@@ -146,13 +146,13 @@ fn a_runtime_switches_explains_refusals_and_checks_sample_shapes() {
         })
         .is_ok()
     );
-    assert!(
+    assert_eq!(
         ask(RuntimeCommand::CheckSample {
             topic: "lab/other".into(),
-            sample: CsMat::zeros("u", 2, 1),
-        })
-        .is_err(),
-        "a topic the system does not subscribe"
+            sample: CsMat::zeros("u", 3, 1),
+        }),
+        Ok("system `lab` does not subscribe `lab/other`".into()),
+        "no objection to a topic the system does not subscribe"
     );
 }
 

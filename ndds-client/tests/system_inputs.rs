@@ -147,6 +147,8 @@ fn a_sample_of_another_shape_is_refused_not_received() {
         "no sample refused: {:?}",
         input(&system)
     );
+    // Past the grace a fed input would get (0.5 s at 100 Hz), it is reported.
+    step(&system, 60);
     let refused = input(&system);
     assert_eq!((refused.freshness, refused.received), (Freshness::Never, 0));
     assert!(refused.is_problem());

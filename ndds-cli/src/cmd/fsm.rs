@@ -113,8 +113,8 @@ pub fn command(
             anyhow::bail!("no state machine `{machine}` answered within {wait:?}{hint} ({listed})")
         }
         Err(PortError::Timeout { .. }) => anyhow::bail!(
-            "state machine `{machine}` took the stimuli but did not report their outcome within \
-             {wait:?} (an action may still be running; `ndds fsm show {machine}` shows its state)"
+            "state machine `{machine}` did not answer within {wait:?}: it may still be running an \
+             action, or the request did not reach it (`ndds fsm show {machine}` shows its state)"
         ),
         Err(err) => Err(err.into()),
     }

@@ -144,6 +144,13 @@ impl RawConsumer {
             .map_err(|err| self.explain_timeout(err, timeout))
     }
 
+    /// [`recv_raw_timeout`](Self::recv_raw_timeout) with a plain [`RecvError::Timeout`]: for
+    /// a loop that polls (a habitat's clock), which must not take the endpoint tables' lock
+    /// to explain every empty wait.
+    pub(crate) fn recv_raw_wait(&self, timeout: Duration) -> Result<RawSample, RecvError> {
+        self.next_sample(Wait::at_most(timeout))
+    }
+
     /// Turns a timeout into [`RecvError::TimeoutUnmatched`] when producers of the topic are
     /// not matched with this consumer; any other error is returned as it is.
     pub(crate) fn explain_timeout(&self, err: RecvError, waited: Duration) -> RecvError {

@@ -9,6 +9,7 @@
 //! program on its own thread, fed by one queue from any thread and from the network, with
 //! actions ([`ActionSet::runtime`]) that switch configurations and start or stop habitats.
 
+mod command;
 mod def;
 mod engine;
 mod expr;
@@ -18,14 +19,12 @@ mod tests;
 mod verify;
 mod vocabulary;
 
+pub use command::{CommandReply, command_port};
 pub use def::{ActionRef, DefError, MachineDef, Program, StimulusKind, TransitionDef};
 pub use engine::{
     Actions, Fault, Fired, MAX_CALL_DEPTH, MAX_STEPS, Machine, MachineState, Outcome, Stimulus,
 };
 pub use expr::{Expr, ParseError, Stimuli};
-pub use task::{
-    ActionSet, CommandReply, FsmError, MAX_NAME_LEN, MAX_VALUE_LEN, QUEUE_LIMIT, StateMachine,
-    command_port,
-};
+pub use task::{ActionSet, FsmError, MAX_NAME_LEN, MAX_VALUE_LEN, QUEUE_LIMIT, StateMachine};
 pub use verify::{FsmProblem, verify};
 pub use vocabulary::{Accepted, Refusal, Vocabulary};

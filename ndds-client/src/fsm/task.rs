@@ -12,11 +12,12 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::command::{Batch, CommandServer, command_port, settle};
 use super::def::Program;
 use super::engine::{Actions, Machine, MachineState, Stimulus};
 use super::verify::{FsmProblem, verify};
 use super::vocabulary::{Refusal, Vocabulary};
-use crate::ports::{OwnerLocation, PortError, PortOwner};
+use crate::ports::OwnerLocation;
 use crate::runtime::Runtime;
 use crate::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
 
@@ -222,15 +223,15 @@ fn list(problems: &[FsmProblem]) -> String {
         .join("\n")
 }
 
-struct Shared {
-    name: String,
+pub(super) struct Shared {
+    pub(super) name: String,
     vocabulary: Vocabulary,
     dropped: std::sync::atomic::AtomicU64,
     queue: Mutex<Queue>,
     ready: Condvar,
     state: Mutex<MachineState>,
     changed: Condvar,
-    stop: AtomicBool,
+    pub(super) stop: AtomicBool,
 }
 
 #[derive(Default)]
@@ -244,33 +245,11 @@ struct Queued {
     batch: Option<Arc<Batch>>,
 }
 
-/// A command's stimuli: the outcome of each, reported once the last has been handled.
-struct Batch {
-    lines: Mutex<Vec<String>>,
-    faults: Mutex<Vec<String>>,
-    remaining: std::sync::atomic::AtomicUsize,
-    report: Mutex<Option<Report>>,
-}
-
-/// Called once with the outcome of a whole command: what happened, or the faults.
-type Report = Box<dyn FnOnce(CommandReply) + Send>;
-
-/// The reply of a machine's command port: what the stimuli did, or why they were refused.
-pub type CommandReply = Result<String, String>;
-
-/// The port through which machine `machine` takes stimuli and answers with their outcome
-/// (`ndds fsm send` uses it): requests are the stimuli of one command (`Vec<Stimulus>`),
-/// accepted all together or refused all together; the reply ([`CommandReply`]) comes once
-/// the machine has handled the last of them.
-pub fn command_port(machine: &str) -> String {
-    format!("fsm.{machine}")
-}
-
 /// A running state machine. Dropping the last handle stops it.
 pub struct StateMachine {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
-    commands: Option<JoinHandle<()>>,
+    commands: Option<CommandServer>,
     _events: Option<CallbackConsumer>,
 }
 
@@ -343,7 +322,7 @@ impl StateMachine {
                         owner,
                     });
                 }
-                let commands = serve_commands(&shared, participant, &port)
+                let commands = CommandServer::start(&shared, participant, &port)
                     .map_err(|e| topic_error(&port, e.to_string()))?;
                 let topic = format!("fsm/{name}/events");
                 let qos = ConsumerQos {
@@ -458,95 +437,25 @@ impl Drop for StateMachine {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
-        if let Some(thread) = self.commands.take() {
-            let _ = thread.join();
+        let mut commands = self.commands.take();
+        if let Some(commands) = &mut commands {
+            commands.join_receiver();
+        }
+        // Queued commands will never be handled: dropping them lets the reply thread end.
+        self.shared
+            .queue
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .items
+            .clear();
+        if let Some(commands) = &mut commands {
+            commands.join_replier();
         }
     }
 }
 
-/// How long the command port's server waits for a request before checking for a stop.
-const COMMAND_POLL: Duration = Duration::from_millis(100);
-
-/// Owns the machine's command port and queues each request's stimuli, replying once the
-/// machine has handled them (or at once, when they are refused).
-fn serve_commands(
-    shared: &Arc<Shared>,
-    participant: &Participant,
-    port: &str,
-) -> Result<JoinHandle<()>, PortError> {
-    let owner: PortOwner<Vec<Stimulus>, CommandReply> =
-        PortOwner::declare(participant, port, &shared.name)?;
-    let weak = Arc::downgrade(shared);
-    let name = port.to_owned();
-    std::thread::Builder::new()
-        .name(format!("fsm-{}-commands", shared.name))
-        .spawn(move || {
-            loop {
-                let Some(shared) = weak.upgrade() else { return };
-                if shared.stop.load(Ordering::Acquire) {
-                    return;
-                }
-                drop(shared);
-                let (stimuli, handle) = match owner.receive(COMMAND_POLL) {
-                    Ok(request) => request,
-                    Err(PortError::Timeout { .. }) => continue,
-                    Err(err) => {
-                        tracing::debug!(port = %name, error = %err, "command not received");
-                        std::thread::sleep(COMMAND_POLL);
-                        continue;
-                    }
-                };
-                let Some(shared) = weak.upgrade() else { return };
-                let port = name.clone();
-                let report: Report = Box::new(move |reply| {
-                    if let Err(err) = handle.reply(&reply) {
-                        tracing::debug!(port = %port, error = %err, "command outcome not sent");
-                    }
-                });
-                if let Err((err, report)) = enqueue_reporting(&shared, stimuli, report) {
-                    report(Err(err.to_string()));
-                }
-            }
-        })
-        .map_err(|e| PortError::Transport {
-            port: port.to_owned(),
-            reason: e.to_string(),
-        })
-}
-
-/// [`enqueue`] with a report of the outcome; a refusal hands the report back.
-fn enqueue_reporting(
-    shared: &Shared,
-    stimuli: Vec<Stimulus>,
-    report: Report,
-) -> Result<(), (FsmError, Report)> {
-    if shared.stop.load(Ordering::Acquire) {
-        return Err((FsmError::Stopped(shared.name.clone()), report));
-    }
-    if stimuli.is_empty() {
-        report(Ok("no stimuli sent".to_owned()));
-        return Ok(());
-    }
-    let batch = Arc::new(Batch {
-        lines: Mutex::new(Vec::new()),
-        faults: Mutex::new(Vec::new()),
-        remaining: std::sync::atomic::AtomicUsize::new(stimuli.len()),
-        report: Mutex::new(Some(report)),
-    });
-    enqueue(shared, stimuli, Some(&batch)).map_err(|err| {
-        // Nothing was queued: the report is still the batch's.
-        let report = batch
-            .report
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take()
-            .unwrap_or_else(|| Box::new(|_| {}));
-        (err, report)
-    })
-}
-
 /// Queues `stimuli` together, or none of them: each is checked against the program first.
-fn enqueue(
+pub(super) fn enqueue(
     shared: &Shared,
     stimuli: Vec<Stimulus>,
     batch: Option<&Arc<Batch>>,
@@ -581,54 +490,6 @@ fn enqueue(
     }
     shared.ready.notify_one();
     Ok(())
-}
-
-/// Records what `stimulus` did in its batch, and reports the batch after its last stimulus.
-fn settle(batch: &Batch, stimulus: &Stimulus, outcome: &super::engine::Outcome, state: &str) {
-    let sent = match &stimulus.value {
-        Some(value) => format!("{}={value}", stimulus.name),
-        None => stimulus.name.clone(),
-    };
-    let line = if outcome.fired.is_empty() {
-        let fate = if outcome.vanished {
-            "no transition took it (transient: it is gone)"
-        } else {
-            "no transition fired"
-        };
-        format!("{sent}: {fate}; state {state}")
-    } else {
-        let steps: Vec<String> = outcome
-            .fired
-            .iter()
-            .map(|t| {
-                let code = t.code.map(|c| format!(", code {c}")).unwrap_or_default();
-                format!("{} -> {} ({}{code})", t.from, t.to, t.action)
-            })
-            .collect();
-        format!("{sent}: {}", steps.join(", then "))
-    };
-    lock_vec(&batch.lines).push(line);
-    lock_vec(&batch.faults).extend(outcome.faults.iter().map(|f| format!("{sent}: {f}")));
-    if batch.remaining.fetch_sub(1, Ordering::AcqRel) == 1 {
-        let report = batch
-            .report
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take();
-        if let Some(report) = report {
-            let faults = std::mem::take(&mut *lock_vec(&batch.faults));
-            let lines = std::mem::take(&mut *lock_vec(&batch.lines));
-            report(if faults.is_empty() {
-                Ok(lines.join("\n"))
-            } else {
-                Err(faults.join("\n"))
-            });
-        }
-    }
-}
-
-fn lock_vec(m: &Mutex<Vec<String>>) -> std::sync::MutexGuard<'_, Vec<String>> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 const REPUBLISH: Duration = Duration::from_secs(1);

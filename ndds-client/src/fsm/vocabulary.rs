@@ -8,8 +8,10 @@
 //! | `NAME=VALUE`                 | `NAME` is a declared condition, and `VALUE` is not a near miss of a value the transitions compare it with |
 //!
 //! A condition may take any value: a value no transition names makes every `NAME = X` false,
-//! which is how "none of them" is said. Only a value within a small edit distance of a named
-//! one (`Visibel`, `visible` for `Visible`) is refused as the typo it almost certainly is.
+//! which is how "none of them" is said. Only a near miss of a tested value is refused, as the
+//! typo it almost certainly is: the same but for case (`visible` for `Visible`), or, for
+//! values of 4 characters or more, one edit away (`Visibel`, `Hiden`). `Off` where only `On` is
+//! tested, or `2` where only `1` is, are values of their own.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -18,7 +20,6 @@ use serde::{Deserialize, Serialize};
 use super::def::{Program, StimulusKind};
 use super::engine::Stimulus;
 use super::expr::Expr;
-use crate::system::decl::closest;
 
 /// One stimulus a machine accepts, as published in its state (and listed by `ndds fsm show`).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -175,15 +176,14 @@ impl Vocabulary {
                 machine,
                 accepted: accepted.clone(),
             }),
-            ("condition", Some(value)) => match closest(value, &accepted.values) {
-                Some(near) if !accepted.values.contains(value) => Some(Refusal::NearMiss {
+            ("condition", Some(value)) => {
+                near_miss(value, &accepted.values).map(|near| Refusal::NearMiss {
                     machine,
                     value: value.clone(),
                     suggestion: near.to_owned(),
                     accepted: accepted.clone(),
-                }),
-                _ => None,
-            },
+                })
+            }
             (kind, Some(_)) => Some(Refusal::UnexpectedValue {
                 machine,
                 stimulus: stimulus.name.clone(),
@@ -192,6 +192,23 @@ impl Vocabulary {
             (_, None) => None,
         }
     }
+}
+
+/// The tested value `value` is a typo of, if any: the same but for case, or (for values of at
+/// least 4 characters) one edit away, a swap of two neighbours counting as one (`Visibel`,
+/// `Hiden`). Short values and values two edits away are words of their own (`Off` for `On`,
+/// `2` for `1`).
+fn near_miss<'a>(value: &str, tested: &'a [String]) -> Option<&'a str> {
+    if tested.iter().any(|t| t == value) {
+        return None;
+    }
+    tested
+        .iter()
+        .find(|t| {
+            t.to_lowercase() == value.to_lowercase()
+                || (value.chars().count() >= 4 && strsim::osa_distance(value, t) == 1)
+        })
+        .map(String::as_str)
 }
 
 fn compared_values<'a>(expr: &'a Expr, values: &mut BTreeMap<&'a str, BTreeSet<&'a str>>) {
@@ -217,7 +234,9 @@ mod tests {
         p.stimulus("Coarse", StimulusKind::Transient)
             .stimulus("Precise", StimulusKind::Latched)
             .stimulus("Object", StimulusKind::Condition)
-            .stimulus("Mode", StimulusKind::Condition);
+            .stimulus("Mode", StimulusKind::Condition)
+            .stimulus("Power", StimulusKind::Condition)
+            .stimulus("Gear", StimulusKind::Condition);
         let m = p.machine("arm", "Joint");
         m.states(&["Endpoint"]);
         m.transition(
@@ -228,6 +247,8 @@ mod tests {
         )
         .expect("parses");
         m.transition("Endpoint", "Object != Hidden", "none", &[(0, "Joint")])
+            .expect("parses");
+        m.transition("Joint", "Power = On or Gear = 1", "none", &[(0, "Joint")])
             .expect("parses");
         p
     }
@@ -244,7 +265,10 @@ mod tests {
             "Object=Visible",
             "Object=Hidden",
             "Object=Gone",
+            "Object=Visual",
             "Mode=anything",
+            "Power=Off",
+            "Gear=2",
         ] {
             assert_eq!(check(ok), Ok(()), "{ok}");
         }
@@ -257,7 +281,7 @@ mod tests {
         assert_eq!(
             err.to_string(),
             "machine `arm` has no stimulus `Corse` (did you mean `Coarse`?); it accepts: \
-             Coarse, Mode=VALUE, Object=Hidden|Visible, Precise"
+             Coarse, Gear=1, Mode=VALUE, Object=Hidden|Visible, Power=On, Precise"
         );
     }
 
@@ -277,7 +301,13 @@ mod tests {
 
     #[test]
     fn a_near_miss_of_a_tested_value_is_refused() {
-        for typo in ["Object=Visibel", "Object=visible", "Object=Hiden"] {
+        for typo in [
+            "Object=Visibel",
+            "Object=visible",
+            "Object=Hiden",
+            "Object=HIDDEN",
+            "Power=on",
+        ] {
             let err = check(typo).expect_err(typo);
             assert!(matches!(*err, Refusal::NearMiss { .. }), "{typo}: {err:?}");
         }

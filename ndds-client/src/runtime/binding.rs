@@ -100,12 +100,21 @@ pub struct InputStatus {
     pub sampled: Duration,
     /// The verdict of [`Freshness::of`].
     pub freshness: Freshness,
+    /// The sample period of its habitat.
+    pub period: Duration,
 }
 
 impl InputStatus {
-    /// Never received, or stale: the habitat computes with a value nobody sent recently.
+    /// Stale, or never received although its habitat has sampled for longer than
+    /// [`stale_after`] (the same grace a fed input gets, so a publisher that starts a moment
+    /// after the system is not reported): the habitat computes with a value nobody sent
+    /// recently.
     pub fn is_problem(&self) -> bool {
-        self.freshness != Freshness::Fresh
+        match self.freshness {
+            Freshness::Fresh => false,
+            Freshness::Stale => true,
+            Freshness::Never => self.sampled > stale_after(self.period),
+        }
     }
 }
 
@@ -180,6 +189,7 @@ impl Reception {
             age,
             sampled: Duration::from_nanos(ran),
             freshness: Freshness::of(age, period),
+            period,
         }
     }
 }
@@ -377,7 +387,18 @@ mod tests {
         reception.ran(&at(0));
         let status = reception.status("control");
         assert_eq!((status.freshness, status.age), (Freshness::Never, None));
-        assert!(status.is_problem());
+        assert!(
+            !status.is_problem(),
+            "not yet: a publisher may start a moment later"
+        );
+        reception.ran(&at(50));
+        assert!(!reception.status("control").is_problem(), "0.5 s of grace");
+        reception.ran(&at(51));
+        assert!(
+            reception.status("control").is_problem(),
+            "never, past the grace"
+        );
+        reception.restart(&at(0));
         reception.ran(&at(3));
         reception.took(&at(3));
         reception.ran(&at(53));

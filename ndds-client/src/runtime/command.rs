@@ -27,7 +27,8 @@ use crate::ports::{PortError, PortOwner};
 pub enum RuntimeCommand {
     /// Switch to this configuration (what a sample on `cs/<runtime>/configure` does).
     Configure(String),
-    /// Would the subscription of `topic` take `sample`? Answers without applying it.
+    /// Would the subscription of `topic` take `sample`? Answers without applying it: `Err`
+    /// only when this runtime subscribes the topic and would refuse the sample.
     CheckSample {
         /// The subscribed topic.
         topic: String,
@@ -81,7 +82,8 @@ impl Runtime {
         let module = format!("subscribe:{topic}");
         let db = self.db();
         let Some(entry) = db.modules.get(&module) else {
-            return Err(format!(
+            // No objection: another consumer of the process may take it.
+            return Ok(format!(
                 "system `{}` does not subscribe `{topic}`",
                 self.name()
             ));
@@ -144,16 +146,26 @@ pub(crate) fn serve(
     std::thread::Builder::new()
         .name(format!("cs-{}-commands", inner.name))
         .spawn(move || {
+            // A failure that lasts (a second owner) is logged when it begins or changes.
+            let mut failing: Option<String> = None;
             while !stop.load(Ordering::Acquire) {
                 let (command, reply) = match owner.receive(POLL) {
                     Ok(request) => request,
                     Err(PortError::Timeout { .. }) => continue,
+                    // A request that does not decode: its sender's problem, not a reason to
+                    // pause.
+                    Err(PortError::Codec { .. }) => continue,
                     Err(err) => {
-                        tracing::debug!(port = %port, error = %err, "command not received");
+                        let text = err.to_string();
+                        if failing.as_ref() != Some(&text) {
+                            tracing::error!(port = %port, "{text}; commands wait until it is resolved");
+                            failing = Some(text);
+                        }
                         std::thread::sleep(POLL);
                         continue;
                     }
                 };
+                failing = None;
                 let Some(inner) = weak.upgrade() else { return };
                 let answer = Runtime { inner }.answer(command);
                 match &answer {

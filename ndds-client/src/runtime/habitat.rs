@@ -551,7 +551,7 @@ fn run_topic_clock(shared: &Shared, options: &HabitatOptions, clock: &RawConsume
     let mut previous_start: Option<u64> = None;
     while !shared.stop.load(Ordering::Acquire) {
         if clock
-            .recv_raw_timeout(Duration::from_nanos(STOP_CHECK_NS))
+            .recv_raw_wait(Duration::from_nanos(STOP_CHECK_NS))
             .is_err()
         {
             rec.maybe_flush(shared, now_ns(), false);
