@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use ndds_daemon::{DaemonConfig, DaemonError, EmbedError, EmbeddedDaemon};
 
@@ -22,7 +23,7 @@ use crate::error::ConnectError;
 use crate::sync::lock;
 
 /// Embedded daemons of this process, by socket path.
-static EMBEDDED: std::sync::Mutex<Vec<(PathBuf, EmbeddedDaemon)>> =
+static EMBEDDED: std::sync::Mutex<Vec<(PathBuf, EmbeddedDaemon, Instant)>> =
     std::sync::Mutex::new(Vec::new());
 
 /// Set by the exit hook: the process is ending, no daemon may start any more (participants
@@ -49,8 +50,8 @@ pub(crate) fn ensure(config: &DaemonConfig) -> Result<Ensured, ConnectError> {
         return Err(ConnectError::Exiting);
     }
     // A daemon whose thread ended (it failed) no longer serves its path.
-    daemons.retain(|(_, daemon)| daemon.is_running());
-    if daemons.iter().any(|(path, _)| *path == config.socket) {
+    daemons.retain(|(_, daemon, _)| daemon.is_running());
+    if daemons.iter().any(|(path, _, _)| *path == config.socket) {
         return Ok(Ensured::Ours);
     }
     match EmbeddedDaemon::start(config.clone()) {
@@ -60,7 +61,7 @@ pub(crate) fn ensure(config: &DaemonConfig) -> Result<Ensured, ConnectError> {
                 interface = %config.interface,
                 "started an embedded ndds daemon"
             );
-            daemons.push((config.socket.clone(), daemon));
+            daemons.push((config.socket.clone(), daemon, Instant::now()));
             EXIT_HOOK.call_once(register_exit_hook);
             Ok(Ensured::Ours)
         }
@@ -93,12 +94,12 @@ extern "C" fn at_exit() {
 /// role over). Returns whether one was stopped.
 pub fn stop_embedded_daemon(socket: &Path) -> bool {
     let mut daemons = lock(&EMBEDDED);
-    let Some(index) = daemons.iter().position(|(path, _)| path == socket) else {
+    let Some(index) = daemons.iter().position(|(path, _, _)| path == socket) else {
         return false;
     };
     // Stopped while the registry is locked, so a concurrent connect waits for the socket to
     // be free instead of meeting the dying daemon.
-    let (_, mut daemon) = daemons.remove(index);
+    let (_, mut daemon, _) = daemons.remove(index);
     daemon.stop();
     true
 }
@@ -109,8 +110,25 @@ pub fn stop_embedded_daemon(socket: &Path) -> bool {
 pub fn stop_embedded_daemons() -> usize {
     let mut daemons = lock(&EMBEDDED);
     let stopped = daemons.len();
-    for (_, mut daemon) in daemons.drain(..) {
+    for (_, mut daemon, _) in daemons.drain(..) {
         daemon.stop();
     }
     stopped
+}
+
+/// How long a newly started embedded daemon takes to hear the domain: its first two
+/// solicitations (at 0 and 200 ms) and the answers (jittered by at most 10 ms).
+pub(crate) const FIRST_HEARING: Duration = Duration::from_millis(300);
+
+/// Waits, if this process started the daemon serving `socket` less than [`FIRST_HEARING`]
+/// ago, until that time has passed, so that its view of the domain includes the other
+/// hosts' endpoints (a name that must be unique in the domain is then checked against them).
+pub(crate) fn wait_first_hearing(socket: &Path) {
+    let started = lock(&EMBEDDED)
+        .iter()
+        .find(|(path, _, _)| path == socket)
+        .map(|(_, _, started)| *started);
+    if let Some(started) = started {
+        std::thread::sleep((started + FIRST_HEARING).saturating_duration_since(Instant::now()));
+    }
 }

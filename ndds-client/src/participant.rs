@@ -432,6 +432,11 @@ impl Participant {
         self.inner.data.snapshot()
     }
 
+    /// The socket of the daemon this participant's session is with.
+    pub(crate) fn daemon_socket(&self) -> &std::path::Path {
+        self.inner.session.path()
+    }
+
     /// The daemon's current view of the domain (what `ndds topics` and `ndds nodes` show).
     pub fn graph(&self) -> Result<Graph, QueryError> {
         self.inner.session.query_graph()

@@ -187,3 +187,18 @@ fn refusals_are_typed() {
         Err(FsmError::Refused(r)) if matches!(*r, Refusal::MissingValue { .. })
     ));
 }
+
+#[test]
+fn a_name_is_checked_against_other_hosts_even_on_a_daemon_started_just_now() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = common::unique_config(dir.path(), "host-a");
+    let host_a = common::participant(&config);
+    let _first = Runtime::with_participant("lab", &host_a).unwrap();
+    // A second host's daemon, started now: its first moments hear nobody yet.
+    let host_b = common::participant(&common::sibling(&config, dir.path(), "host-b"));
+    match Runtime::with_participant("lab", &host_b) {
+        Err(RuntimeError::AlreadyRunning { name, .. }) => assert_eq!(name, "lab"),
+        Err(other) => panic!("wrong refusal: {other}"),
+        Ok(_) => panic!("a second runtime `lab` started on another host"),
+    }
+}

@@ -28,8 +28,10 @@ impl std::fmt::Display for OwnerLocation {
 }
 
 /// The owners of `port` in the domain other than `participant` itself (the producers of the
-/// port's owner topic), as far as the local daemon knows them now. A port name that cannot
-/// be a port has no owner.
+/// port's owner topic), as far as the local daemon knows them now (a daemon this process
+/// started less than 300 ms ago is given that long to hear the other hosts first). A port
+/// name that cannot be a port has no owner. Owners that start at the same moment can both
+/// miss each other here; the port then reports its second owner.
 pub fn owners_elsewhere(
     participant: &Participant,
     port: &str,
@@ -38,6 +40,8 @@ pub fn owners_elsewhere(
         return Ok(Vec::new());
     }
     let owner_topic = topic(port, "owner");
+    // A daemon this process has just started has not heard the other hosts yet.
+    crate::embedded::wait_first_hearing(participant.daemon_socket());
     let graph = participant.graph()?;
     let mut owners: Vec<OwnerLocation> = graph
         .endpoints
