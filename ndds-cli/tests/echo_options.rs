@@ -117,9 +117,9 @@ fn rate_prints_the_newest_sample_of_each_window() {
             "samples between windows dropped: {values:?}\n{run}"
         );
         let apart = received[pair] - received[pair - 1];
-        // Each printed sample arrived near the end of its 250 ms window.
+        // One per 250 ms window at most (no upper bound: a loaded machine may be late).
         assert!(
-            (0.1..1.0).contains(&apart),
+            apart > 0.1,
             "printed samples arrived {apart} s apart: {received:?}\n{run}"
         );
     }

@@ -26,7 +26,7 @@ use crate::ports::{PortError, PortOwner, ReplyHandle};
 
 /// The reply of a machine's command port: what the stimuli did, or why not (refused, or an
 /// action that faulted; then what did happen comes first).
-pub type CommandReply = Result<String, String>;
+pub use crate::ports::CommandReply;
 
 /// The port through which machine `machine` takes stimuli and answers with their outcome
 /// (`ndds fsm send` uses it).

@@ -87,6 +87,10 @@ pub fn select(ports: &[&dyn Selectable], timeout: Duration) -> Result<usize, Por
     }
 }
 
+/// The reply of a command port (a machine's `fsm.NAME`, a runtime's `cs.NAME`): what the
+/// command did, or why not, in words for the person who asked.
+pub type CommandReply = Result<String, String>;
+
 /// How often an owner repeats its declaration; users forget an owner not heard for three.
 pub const ANNOUNCE_PERIOD: Duration = Duration::from_millis(250);
 

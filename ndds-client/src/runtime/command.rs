@@ -3,7 +3,7 @@
 //! not, so a command the system refuses is never reported as done.
 //!
 //! Port `cs.<runtime>` (see [`command_port`]) takes a [`RuntimeCommand`] and answers a
-//! [`CommandReply`](crate::fsm::CommandReply): `Ok(what happened)` or `Err(the reason)`.
+//! [`CommandReply`](crate::ports::CommandReply): `Ok(what happened)` or `Err(the reason)`.
 //! Owning it is also how a runtime says its name is taken: a second runtime of the same name
 //! in the domain is refused when it is created.
 
@@ -19,8 +19,7 @@ use super::error::RuntimeError;
 use super::module::Shape;
 use super::runtime::{Inner, Runtime};
 use crate::Participant;
-use crate::fsm::CommandReply;
-use crate::ports::{PortError, PortOwner};
+use crate::ports::{CommandReply, PortError, PortOwner};
 
 /// A request to a running runtime.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
