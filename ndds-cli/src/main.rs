@@ -11,7 +11,6 @@ mod out;
 mod render;
 mod seconds;
 mod status_term;
-mod suggest;
 
 use clap::Parser;
 

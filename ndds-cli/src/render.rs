@@ -8,7 +8,7 @@ use ndds_core::types::{TypeDescription, fingerprint_hex};
 use ndds_core::wire::{EndpointKind, EndpointQos, Reliability};
 use serde::Serialize;
 
-use crate::suggest;
+use ndds_core::suggest;
 
 /// Endpoints of one topic.
 pub struct Topic<'a> {

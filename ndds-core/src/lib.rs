@@ -20,6 +20,7 @@
 //! - [`ipc`]: frames between a client or tool and its local daemon over the Unix socket.
 //! - [`domain`]: how a domain id maps to multicast group, port and socket path.
 //! - [`ports`]: the pure logic of port-directed communication (priority select).
+//! - [`suggest`]: "did you mean" for mistyped names (topics, machines, configurations, ...).
 #![warn(missing_docs)]
 
 pub mod arbitration;
@@ -30,5 +31,6 @@ pub mod fragment;
 pub mod ipc;
 pub mod ports;
 pub mod reliability;
+pub mod suggest;
 pub mod types;
 pub mod wire;

@@ -13,7 +13,8 @@ use ndds_client::ports::{PortError, PortUser};
 use ndds_client::{ConsumerQos, Participant};
 
 use crate::connect::{DaemonArgs, connect};
-use crate::{outln, seconds, suggest};
+use crate::{outln, seconds};
+use ndds_core::suggest;
 
 /// Options of `ndds fsm`.
 #[derive(Debug, clap::Args)]

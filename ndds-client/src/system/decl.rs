@@ -574,25 +574,16 @@ pub(crate) fn list<S: AsRef<str>>(items: &[S]) -> String {
     }
 }
 
-/// ` (did you mean `x`?)` when a known name is close to `name`.
+/// ` (did you mean `x`?)` when a known name is close to `name` (the closest, by
+/// [`ndds_core::suggest`]'s rule, which the command line uses too).
 pub(crate) fn suggest<S: AsRef<str>>(name: &str, known: &[S]) -> String {
-    closest(name, known)
+    if known.len() > SUGGESTED_FROM {
+        return String::new();
+    }
+    ndds_core::suggest::suggest(name, known)
+        .first()
         .map(|k| format!(" (did you mean `{k}`?)"))
         .unwrap_or_default()
-}
-
-/// The known name closest to `name` when it is close enough to be a misspelling of it (an
-/// edit distance of at most 2, or a quarter of its length); never `name` itself.
-pub(crate) fn closest<'a, S: AsRef<str>>(name: &str, known: &'a [S]) -> Option<&'a str> {
-    if known.len() > SUGGESTED_FROM || name.len() > 256 {
-        return None;
-    }
-    known
-        .iter()
-        .map(|k| (strsim::levenshtein(name, k.as_ref()), k.as_ref()))
-        .filter(|(d, k)| *d <= 2.max(k.len() / 4) && *d > 0)
-        .min()
-        .map(|(_, k)| k)
 }
 
 fn category_group(named: &Named, p: &mut Diagnostics) -> Option<(String, String, Location)> {

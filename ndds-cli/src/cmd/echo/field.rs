@@ -10,7 +10,7 @@ use std::fmt;
 
 use serde_json::Value;
 
-use crate::suggest;
+use ndds_core::suggest;
 
 /// A parsed `--field` path.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -2,7 +2,8 @@
 //!
 //! [`suggest`] picks the known names close to a mistyped one; [`did_you_mean`] words them:
 //!
-//! ```ignore
+//! ```
+//! use ndds_core::suggest;
 //! let known = ["arm/angles", "arm/torques", "cs/status"];
 //! let close = suggest::suggest("arm/angels", known);
 //! assert_eq!(close, ["arm/angles"]);
