@@ -79,10 +79,9 @@ impl CommandServer {
             .spawn(move || send_replies(&name, &outgoing))
             .map_err(spawn_error)?;
         let weak = Arc::downgrade(shared);
-        let name = port.to_owned();
         let receiver = std::thread::Builder::new()
             .name(format!("fsm-{}-commands", shared.name))
-            .spawn(move || receive(&weak, &owner, &name, &replies))
+            .spawn(move || receive(&weak, &owner, &replies))
             .map_err(spawn_error)?;
         Ok(Self {
             receiver: Some(receiver),
@@ -111,32 +110,17 @@ impl CommandServer {
 fn receive(
     weak: &Weak<Shared>,
     owner: &PortOwner<Vec<Stimulus>, CommandReply>,
-    port: &str,
     replies: &SyncSender<Outgoing>,
 ) {
-    // A failure that lasts (a second owner) is logged when it begins or changes.
-    let mut failing: Option<String> = None;
+    let mut failing = None;
     loop {
         match weak.upgrade() {
             Some(shared) if !shared.stop.load(Ordering::Acquire) => {}
             _ => return,
         }
-        let (stimuli, handle) = match owner.receive(POLL) {
-            Ok(request) => request,
-            Err(PortError::Timeout { .. }) => continue,
-            // A request that does not decode: its sender's problem, not a reason to pause.
-            Err(PortError::Codec { .. }) => continue,
-            Err(err) => {
-                let text = err.to_string();
-                if failing.as_ref() != Some(&text) {
-                    tracing::error!(port, "{text}; commands wait until it is resolved");
-                    failing = Some(text);
-                }
-                std::thread::sleep(POLL);
-                continue;
-            }
+        let Some((stimuli, handle)) = owner.serve_next(POLL, &mut failing) else {
+            continue;
         };
-        failing = None;
         let Some(shared) = weak.upgrade() else { return };
         queue_command(&shared, stimuli, handle, replies);
     }

@@ -360,6 +360,34 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         }
     }
 
+    /// [`receive`](Self::receive) for a loop that serves the port: `None` at the timeout, for
+    /// a request that does not decode (its sender's problem: the next one is taken at once),
+    /// and for a failure that lasts (a second owner), which is logged as an error when it
+    /// begins or changes (`failing` remembers it between calls) and then waited out for
+    /// `timeout`.
+    pub fn serve_next(
+        &self,
+        timeout: Duration,
+        failing: &mut Option<String>,
+    ) -> Option<(Q, ReplyHandle<R>)> {
+        match self.receive(timeout) {
+            Ok(request) => {
+                *failing = None;
+                Some(request)
+            }
+            Err(PortError::Timeout { .. } | PortError::Codec { .. }) => None,
+            Err(err) => {
+                let text = err.to_string();
+                if failing.as_ref() != Some(&text) {
+                    tracing::error!(port = %self.shared.port, "{text}; requests wait until it is resolved");
+                    *failing = Some(text);
+                }
+                std::thread::sleep(timeout);
+                None
+            }
+        }
+    }
+
     /// Waits for the next request (at most `timeout`): the message and the handle to reply
     /// with. Fails while another owner of the port exists.
     pub fn receive(&self, timeout: Duration) -> Result<(Q, ReplyHandle<R>), PortError> {

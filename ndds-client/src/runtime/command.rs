@@ -19,7 +19,7 @@ use super::error::RuntimeError;
 use super::module::Shape;
 use super::runtime::{Inner, Runtime};
 use crate::Participant;
-use crate::ports::{CommandReply, PortError, PortOwner};
+use crate::ports::{CommandReply, PortOwner};
 
 /// A request to a running runtime.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -145,26 +145,11 @@ pub(crate) fn serve(
     std::thread::Builder::new()
         .name(format!("cs-{}-commands", inner.name))
         .spawn(move || {
-            // A failure that lasts (a second owner) is logged when it begins or changes.
-            let mut failing: Option<String> = None;
+            let mut failing = None;
             while !stop.load(Ordering::Acquire) {
-                let (command, reply) = match owner.receive(POLL) {
-                    Ok(request) => request,
-                    Err(PortError::Timeout { .. }) => continue,
-                    // A request that does not decode: its sender's problem, not a reason to
-                    // pause.
-                    Err(PortError::Codec { .. }) => continue,
-                    Err(err) => {
-                        let text = err.to_string();
-                        if failing.as_ref() != Some(&text) {
-                            tracing::error!(port = %port, "{text}; commands wait until it is resolved");
-                            failing = Some(text);
-                        }
-                        std::thread::sleep(POLL);
-                        continue;
-                    }
+                let Some((command, reply)) = owner.serve_next(POLL, &mut failing) else {
+                    continue;
                 };
-                failing = None;
                 let Some(inner) = weak.upgrade() else { return };
                 let answer = Runtime { inner }.answer(command);
                 match &answer {

@@ -12,7 +12,7 @@ use super::source::{Diagnostics, Location, RawValue, SourceFile};
 use super::{LoadOptions, MachineEntry, MachineSlot, System, SystemError};
 use crate::Participant;
 use crate::fsm::{ActionSet, FsmError, Program, StateMachine, Stimulus};
-use crate::ports::{PortError, PortOwner};
+use crate::ports::PortOwner;
 use crate::runtime::{
     Binder, Mat, ModuleError, Problem, RoutineResult, Runtime, SampleContext, SampleModule, Shape,
 };
@@ -498,24 +498,11 @@ impl PortServer {
         let thread = std::thread::Builder::new()
             .name(format!("port {name}"))
             .spawn(move || {
-                // A failure (a second owner appeared after the start) is logged when it
-                // begins and when it changes, not at every poll.
-                let mut failing: Option<String> = None;
+                let mut failing = None;
                 while !flag.load(Ordering::Acquire) {
-                    let (request, reply) = match owner.receive(PORT_POLL) {
-                        Ok(r) => r,
-                        Err(PortError::Timeout { .. }) => continue,
-                        Err(err) => {
-                            let text = err.to_string();
-                            if failing.as_ref() != Some(&text) {
-                                tracing::error!(port = %name, "{text}; requests wait until it is resolved");
-                                failing = Some(text);
-                            }
-                            std::thread::sleep(PORT_POLL);
-                            continue;
-                        }
+                    let Some((request, reply)) = owner.serve_next(PORT_POLL, &mut failing) else {
+                        continue;
                     };
-                    failing = None;
                     let answer = match &serves {
                         Serves::Configuration => rt.switch_explained(request.trim()),
                         Serves::Stimuli(m) => match machine
