@@ -28,12 +28,33 @@ pub fn connect(args: &DaemonArgs) -> anyhow::Result<Participant> {
     if let Some(socket) = &args.socket {
         builder = builder.socket(socket);
     }
-    builder.connect().map_err(|err| match err {
+    let participant = builder.connect().map_err(|err| match err {
         ConnectError::NoDaemon { path, reason } => anyhow::anyhow!(
             "no ndds daemon is running at {} ({reason}); start `ndds-daemon` (or a program \
              that embeds one), or name the daemon's socket with --socket or NDDS_SOCKET",
             path.display()
         ),
         other => other.into(),
-    })
+    })?;
+    check_domain(args, &participant)?;
+    Ok(participant)
+}
+
+/// A `--domain` that the daemon reached (through `--socket` or `NDDS_SOCKET`) does not serve
+/// is an error: the command would act on another domain than the one asked for.
+pub fn check_domain(args: &DaemonArgs, participant: &Participant) -> anyhow::Result<()> {
+    let serves = participant.daemon().domain;
+    match args.domain {
+        Some(asked) if asked != serves => anyhow::bail!(
+            "--domain {asked} was asked for, but the daemon at the socket given by {} serves \
+             domain {serves}; name domain {asked}'s socket (or unset NDDS_SOCKET, so --domain \
+             picks it)",
+            if args.socket.is_some() {
+                "--socket"
+            } else {
+                "NDDS_SOCKET"
+            }
+        ),
+        _ => Ok(()),
+    }
 }

@@ -82,12 +82,21 @@ fn configure_commands_report_the_outcome_and_refusals_exit_non_zero() {
     let world = World::start();
     let _arm = start_arm(&world);
 
+    // Hold the supervisor (Coarse: JointPD, no switching on its own), then command.
+    world.ndds(&["fsm", "send", "arm", "Coarse"]).ok();
     // No --reliable needed: the command goes through the runtime's port.
-    let run = world.ndds(&["pub", "cs/arm/configure", "\"JointPD\""]);
+    let run = world.ndds(&["pub", "cs/arm/configure", "\"endptLQG\""]);
     assert!(run.success(), "{run}");
     assert!(
         run.stderr
-            .contains("system `arm` switched to configuration `JointPD`"),
+            .contains("system `arm` switched to configuration `endptLQG`"),
+        "{run}"
+    );
+    // Asking for the configuration it is in changes nothing, and says so.
+    let run = world.ndds(&["pub", "cs/arm/configure", "\"endptLQG\""]);
+    assert!(
+        run.stderr
+            .contains("system `arm` is in configuration `endptLQG` already; nothing changed"),
         "{run}"
     );
     for extra in [&[][..], &["--reliable"][..]] {
@@ -161,4 +170,21 @@ fn a_second_copy_of_a_running_system_is_refused() {
     // Checking the file starts nothing, so the running copy does not refuse it.
     let check = world.ndds(&["run", "--check", &file]);
     assert!(check.success(), "{check}");
+}
+
+#[test]
+fn a_domain_the_named_daemon_does_not_serve_is_an_error() {
+    let world = World::start();
+    let serves = world.config.domain;
+    let other = if serves == 232 { 1 } else { serves + 1 };
+    let run = world.ndds(&["--domain", &other.to_string(), "topics"]);
+    assert!(
+        run.err().contains(&format!(
+            "--domain {other} was asked for, but the daemon at the socket given by --socket \
+             serves domain {serves}"
+        )),
+        "{run}"
+    );
+    let run = world.ndds(&["--domain", &serves.to_string(), "topics"]);
+    assert!(run.success(), "{run}");
 }

@@ -16,7 +16,7 @@ use ndds_client::ProducerQos;
 use ndds_client::runtime::CsMat;
 
 /// What the habitat thread logs for the wrong-shaped sample.
-const WARNING: &str = "is 3x1, the CSMat is declared 2x1";
+const WARNING: &str = "is 3x1; CSMat `";
 
 /// A 100 Hz controller subscribing `topic`, written to `dir`.
 fn description(dir: &Path, topic: &str) -> String {

@@ -63,7 +63,7 @@ pub fn run() -> anyhow::Result<()> {
         let daemon = Daemon::bind(config).await?;
         if daemon.config().interface.is_loopback() {
             tracing::info!(
-                "discovery is limited to this host (loopback); use --interface to reach other hosts"
+                "discovery on loopback: this host only (--interface with a shared network's address or name reaches other hosts)"
             );
         }
         daemon.run(shutdown).await?;

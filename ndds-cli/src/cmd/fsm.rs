@@ -106,18 +106,25 @@ pub fn command(
             let hint = suggest::did_you_mean(&suggest::suggest(machine, &known))
                 .map(|s| format!("; {s}"))
                 .unwrap_or_default();
-            let listed = if known.is_empty() {
-                "no state machine runs in this domain".to_owned()
-            } else {
-                format!("running: {}", known.join(", "))
-            };
-            anyhow::bail!("no state machine `{machine}` answered within {wait:?}{hint} ({listed})")
+            anyhow::bail!(
+                "no state machine `{machine}` answered within {wait:?}{hint} ({})",
+                running(&known)
+            )
         }
         Err(PortError::Timeout { .. }) => anyhow::bail!(
             "state machine `{machine}` did not answer within {wait:?}: it may still be running an \
              action, or the request did not reach it (`ndds fsm show {machine}` shows its state)"
         ),
         Err(err) => Err(err.into()),
+    }
+}
+
+/// `running: a, b`, or that none runs.
+fn running(known: &[String]) -> String {
+    if known.is_empty() {
+        "no state machine runs in this domain".to_owned()
+    } else {
+        format!("running: {}", known.join(", "))
     }
 }
 
@@ -145,15 +152,17 @@ fn show(daemon: &DaemonArgs, machine: &str, json: bool, wait: Duration) -> anyho
     let consumer = participant.consumer::<MachineState>(&topic, ConsumerQos::default())?;
     let sample = match consumer.recv_timeout(wait) {
         Ok(sample) => sample,
-        Err(err) => {
+        Err(err) if err.is_timeout() => {
             let known = machines(&participant);
             let hint = suggest::did_you_mean(&suggest::suggest(machine, &known))
                 .map(|s| format!("; {s}"))
                 .unwrap_or_default();
-            return Err(err).with_context(|| {
-                format!("no state from machine `{machine}` on {topic:?} within {wait:?}{hint}")
-            });
+            anyhow::bail!(
+                "no state from machine `{machine}` on {topic:?} within {wait:?}{hint} ({})",
+                running(&known)
+            );
         }
+        Err(err) => return Err(err).context(format!("reading {topic:?}")),
     };
     let state = sample.value;
     if json {

@@ -58,8 +58,8 @@ pub struct Args {
     /// acknowledged, failing if one did not.
     #[arg(long, conflicts_with = "best_effort")]
     reliable: bool,
-    /// Publish best-effort even where consumers ask for reliable delivery (they cannot take
-    /// it, so this needs --force).
+    /// Publish a plain topic best-effort even where its consumers ask for reliable delivery
+    /// (they cannot take it, so this needs --force); a command topic is not affected.
     #[arg(long)]
     best_effort: bool,
     /// Fire and forget: publish as a plain sample even on a command topic, and even when no
@@ -107,7 +107,15 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             || Ok(participant.graph()?),
         )
         .map_err(|err| {
-            anyhow::anyhow!("{err}; pass --type to publish a built-in type on a new topic")
+            if let Some(system) = command_topic_system(&args.topic) {
+                anyhow::anyhow!(
+                    "no system `{system}` runs in this domain to take {:?} (nothing owns its \
+                     command port); `ndds topics` lists what runs",
+                    args.topic
+                )
+            } else {
+                anyhow::anyhow!("{err}; pass --type to publish a built-in type on a new topic")
+            }
         })?,
     };
     let payload = encode(&desc, &value)?;
@@ -165,9 +173,15 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             args.topic
         );
         eprintln!(
-            "ndds: published {} sample(s) on {:?}; {consumers} consumer(s) acknowledged them",
+            "ndds: published {} sample(s) on {:?}; {consumers} consumer(s) acknowledged receiving \
+             them{}",
             producer.written(),
-            args.topic
+            args.topic,
+            if args.force {
+                " (with --force, what a system did with them is not asked)"
+            } else {
+                ""
+            }
         );
     } else {
         eprintln!(
@@ -252,6 +266,18 @@ fn command(
         return fsm::command(participant, machine, &[stimulus], args.wait).map(Some);
     }
     Ok(None)
+}
+
+/// The system or machine a command topic (`cs/NAME/configure`, `fsm/NAME/events`) names.
+fn command_topic_system(topic: &str) -> Option<&str> {
+    topic
+        .strip_prefix("cs/")
+        .and_then(|rest| rest.strip_suffix("/configure"))
+        .or_else(|| {
+            topic
+                .strip_prefix("fsm/")
+                .and_then(|rest| rest.strip_suffix("/events"))
+        })
 }
 
 /// Whether some process in the domain owns `port`.

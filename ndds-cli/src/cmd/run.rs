@@ -239,9 +239,11 @@ fn connect(
     if let Some(socket) = &daemon.socket {
         builder = builder.socket(socket);
     }
-    builder
+    let participant = builder
         .connect()
-        .context("cannot connect to a daemon or start an embedded one")
+        .context("cannot connect to a daemon or start an embedded one")?;
+    crate::connect::check_domain(daemon, &participant)?;
+    Ok(participant)
 }
 
 fn describe_error(file: &std::path::Path, err: SystemError) -> anyhow::Error {

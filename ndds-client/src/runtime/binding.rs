@@ -229,9 +229,9 @@ impl Subscriber {
             && (r, c) != (rows, cols)
         {
             return Err(ModuleError::Failed(format!(
-                "sample of `{}` from {} is {rows}x{cols}, the CSMat is declared {r}x{c}: ignored",
-                self.staging.name(),
-                sample.info.writer
+                "a sample from {} is {rows}x{cols}; CSMat `{}` is declared {r}x{c}: ignored",
+                sample.info.writer,
+                self.output.name()
             )));
         }
         let mut out = self.output.write();

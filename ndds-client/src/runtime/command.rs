@@ -66,6 +66,12 @@ impl Runtime {
                 crate::system::decl::suggest(name, &known)
             ));
         }
+        if self.current_configuration().as_deref() == Some(name) {
+            return Ok(format!(
+                "system `{}` is in configuration `{name}` already; nothing changed",
+                self.name()
+            ));
+        }
         self.switch(name)
             .map(|()| {
                 format!(
@@ -154,7 +160,8 @@ pub(crate) fn serve(
                 let answer = Runtime { inner }.answer(command);
                 match &answer {
                     Ok(done) => tracing::info!(port = %port, "{done}"),
-                    Err(refused) => tracing::warn!(port = %port, "command refused: {refused}"),
+                    // The one who asked is told; here it is news, not a warning.
+                    Err(refused) => tracing::info!(port = %port, "command refused: {refused}"),
                 }
                 if let Err(err) = reply.reply(&answer) {
                     tracing::debug!(port = %port, error = %err, "command outcome not sent");

@@ -111,7 +111,7 @@ pub enum RuntimeError {
     /// A runtime of this name already runs in the domain (it owns the name's command port).
     #[error(
         "system `{name}` already runs in this domain: {owner}; stop it, or run this copy in \
-         another domain (--domain), or under another name"
+         another domain (--domain)"
     )]
     AlreadyRunning {
         /// The runtime's name.
