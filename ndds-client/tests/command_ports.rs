@@ -202,3 +202,32 @@ fn a_name_is_checked_against_other_hosts_even_on_a_daemon_started_just_now() {
         Ok(_) => panic!("a second runtime `lab` started on another host"),
     }
 }
+
+#[test]
+fn the_reply_streams_of_users_that_went_away_are_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let (machine_side, tool_side) = two(dir.path());
+    let _machine = StateMachine::start_on(program(), ActionSet::new(), &machine_side).unwrap();
+    let replies = |g: &ndds_client::Graph| {
+        g.endpoints
+            .iter()
+            .filter(|e| e.info.topic.starts_with("port/fsm.cell/reply/"))
+            .filter(|e| e.info.qos.kind() == ndds_core::wire::EndpointKind::Producer)
+            .count()
+    };
+    // Three tools, each sending once and leaving, as `ndds fsm send` does.
+    for _ in 0..3 {
+        let user = PortUser::<Vec<Stimulus>, CommandReply>::declare(
+            &tool_side,
+            &command_port("cell"),
+            "tool",
+        )
+        .unwrap();
+        send(&user, &["Object=Hidden"]).expect("accepted");
+    }
+    assert!(
+        common::eventually(WAIT, || tool_side.graph().is_ok_and(|g| replies(&g) == 0)),
+        "reply streams left behind: {:?}",
+        tool_side.graph().map(|g| replies(&g))
+    );
+}

@@ -33,6 +33,16 @@ pub(crate) struct OwnerShared {
 }
 
 impl OwnerShared {
+    /// Drops the reply streams of users that went away: no reply consumer matched any more,
+    /// and none used for four announcement periods (a user that has just declared is given
+    /// that long to match). A domain where tools come and go keeps no stream per past call.
+    fn prune_replies(&self) {
+        let mut replies = self.replies.lock().unwrap_or_else(|p| p.into_inner());
+        replies.retain(|_, (producer, used)| {
+            used.elapsed() < ANNOUNCE_PERIOD * 4 || producer.wait_for_consumers(1, Duration::ZERO)
+        });
+    }
+
     /// Takes user declarations, forgets users not heard for three periods, and returns the
     /// user handles admitted under `max_users` (all of them without it).
     fn admit(&self, users: &Consumer<UserInfo>) -> Vec<String> {
@@ -212,6 +222,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 let mut info = info;
                 while !flag.stop.load(Ordering::Acquire) {
                     info.admitted = flag.admit(&users);
+                    flag.prune_replies();
                     let queue = queued.lock().unwrap_or_else(|p| p.into_inner()).len();
                     info.queue = u32::try_from(queue).unwrap_or(u32::MAX);
                     let _ = announce.write(&info);
