@@ -2,7 +2,7 @@
 //!
 //! `ndds topics | head -1` closes the pipe while `ndds` is still writing. `println!` panics
 //! then ("failed printing to stdout: Broken pipe"); [`outln!`](crate::outln) and
-//! [`out!`](crate::out) return an [`Error`] instead, and `main` ends the command quietly with
+//! [`out!`](crate::out!) return an [`Error`] instead, and `main` ends the command quietly with
 //! exit status 0 when the error is [`Error::Closed`] (see [`is_closed`]). Any other write error
 //! (a full disk behind `> file`) stays an error with a message.
 //!
@@ -51,7 +51,7 @@ impl std::error::Error for Error {
     }
 }
 
-/// Writes `args` to stdout and flushes; what [`out!`](crate::out) and
+/// Writes `args` to stdout and flushes; what [`out!`](crate::out!) and
 /// [`outln!`](crate::outln) expand to.
 pub fn write(args: fmt::Arguments<'_>) -> Result<(), Error> {
     let mut stdout = io::stdout().lock();
