@@ -107,7 +107,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             || Ok(participant.graph()?),
         )
         .map_err(|err| {
-            if let Some(system) = command_topic_system(&args.topic) {
+            if let Some(system) = runtime_of(&args.topic).or_else(|| machine_of(&args.topic)) {
                 anyhow::anyhow!(
                     "no system `{system}` runs in this domain to take {:?} (nothing owns its \
                      command port); `ndds topics` lists what runs",
@@ -229,9 +229,7 @@ fn command(
         );
         Ok(())
     };
-    if let Some(system) = topic
-        .strip_prefix("cs/")
-        .and_then(|rest| rest.strip_suffix("/configure"))
+    if let Some(system) = runtime_of(topic)
         && owned(participant, &command_port(system))?
     {
         once()?;
@@ -248,9 +246,7 @@ fn command(
             .with_context(|| format!("system `{system}` did not answer"))?;
         return Ok(Some(reply));
     }
-    if let Some(machine) = topic
-        .strip_prefix("fsm/")
-        .and_then(|rest| rest.strip_suffix("/events"))
+    if let Some(machine) = machine_of(topic)
         && owned(participant, &ndds_client::fsm::command_port(machine))?
     {
         once()?;
@@ -268,16 +264,14 @@ fn command(
     Ok(None)
 }
 
-/// The system or machine a command topic (`cs/NAME/configure`, `fsm/NAME/events`) names.
-fn command_topic_system(topic: &str) -> Option<&str> {
-    topic
-        .strip_prefix("cs/")
-        .and_then(|rest| rest.strip_suffix("/configure"))
-        .or_else(|| {
-            topic
-                .strip_prefix("fsm/")
-                .and_then(|rest| rest.strip_suffix("/events"))
-        })
+/// The runtime whose configure topic (`cs/NAME/configure`) `topic` is.
+fn runtime_of(topic: &str) -> Option<&str> {
+    topic.strip_prefix("cs/")?.strip_suffix("/configure")
+}
+
+/// The machine whose events topic (`fsm/NAME/events`) `topic` is.
+fn machine_of(topic: &str) -> Option<&str> {
+    topic.strip_prefix("fsm/")?.strip_suffix("/events")
 }
 
 /// Whether some process in the domain owns `port`.

@@ -453,7 +453,7 @@ pub(crate) struct PortServer {
 }
 
 /// A port's reply.
-pub type PortReply = Result<String, String>;
+pub type PortReply = crate::ports::CommandReply;
 
 impl PortServer {
     pub(crate) fn start(
