@@ -117,6 +117,9 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
         );
         let mut last_sent: Option<Instant> = None;
         let mut changed = true;
+        // Whether the last arrival that went out (written without error) had every message:
+        // the others wait for it, so this task leaves the round only after it went out.
+        let mut sent_complete = false;
         loop {
             while let Ok(sample) = self.consumer.try_recv() {
                 let arrival = sample.value;
@@ -138,22 +141,26 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
                 }
             }
             let have: Vec<String> = arrivals.keys().cloned().collect();
+            let complete = have.len() == self.tasks.len();
             if changed || last_sent.is_none_or(|t| t.elapsed() >= REPEAT) {
-                let _ = self.producer.write(&Arrival {
+                let written = self.producer.write(&Arrival {
                     round,
                     task: self.task.clone(),
                     payload: payload.clone(),
                     seen: have.clone(),
                 });
                 last_sent = Some(Instant::now());
-                changed = false;
+                // A write that failed (a full window on a loaded machine) is tried again.
+                changed = written.is_err();
+                if written.is_ok() {
+                    sent_complete = complete;
+                }
             }
-            let complete = have.len() == self.tasks.len();
             let acknowledged = arrivals
                 .values()
                 .filter(|a| a.task != self.task)
                 .all(|a| a.seen.contains(&self.task));
-            if complete && acknowledged {
+            if complete && acknowledged && sent_complete {
                 break;
             }
             if start.elapsed() >= timeout {
