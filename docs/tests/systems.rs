@@ -183,14 +183,7 @@ fn system_blocks_load_and_run() {
             let dir = tempdir(&format!("block{count}"));
             let file = dir.join("system.toml");
             std::fs::write(&file, &text).unwrap();
-            match System::load_with(
-                &file,
-                None,
-                LoadOptions {
-                    simulated: true,
-                    ..LoadOptions::default()
-                },
-            ) {
+            match System::load_with(&file, None, LoadOptions::simulated()) {
                 Err(err) => problems.at(&doc, block.line, format!("does not load: {err}")),
                 Ok(system) => {
                     system.start().unwrap();

@@ -67,15 +67,8 @@ fn every_example_loads_verifies_and_runs_bounded_samples() {
     assert!(files.len() >= 5, "examples: {files:?}");
     let (_dir, participant) = participant();
     for file in &files {
-        let system = System::load_with(
-            file,
-            Some(&participant),
-            LoadOptions {
-                simulated: true,
-                ..LoadOptions::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{}:\n{e}", file.display()));
+        let system = System::load_with(file, Some(&participant), LoadOptions::simulated())
+            .unwrap_or_else(|e| panic!("{}:\n{e}", file.display()));
         assert!(system.runtime().verify().is_ok());
         system.start().unwrap();
         let samples = system.simulate(1.0).unwrap();
@@ -99,10 +92,7 @@ fn multirate_servo_follows_the_plan_to_the_goal() {
     let system = System::load_with(
         examples().join("multirate.toml"),
         None,
-        LoadOptions {
-            simulated: true,
-            ..LoadOptions::default()
-        },
+        LoadOptions::simulated(),
     )
     .unwrap();
     system.start().unwrap();
@@ -138,10 +128,7 @@ fn sequence_visits_a_then_b_then_home() {
     let system = System::load_with(
         examples().join("sequence.toml"),
         None,
-        LoadOptions {
-            simulated: true,
-            ..LoadOptions::default()
-        },
+        LoadOptions::simulated(),
     )
     .unwrap();
     system.start().unwrap();
@@ -271,15 +258,7 @@ fn simulated_time_goes_on_across_calls() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("clock.toml");
     std::fs::write(&file, text).unwrap();
-    let system = System::load_with(
-        &file,
-        None,
-        LoadOptions {
-            simulated: true,
-            ..LoadOptions::default()
-        },
-    )
-    .unwrap();
+    let system = System::load_with(&file, None, LoadOptions::simulated()).unwrap();
     system.start().unwrap();
     let mut samples = 0;
     for _ in 0..250 {
@@ -306,15 +285,7 @@ fn a_recording_is_written_next_to_its_description() {
          type = \"recorder\"\nhabitat = \"h\"\ninputs = [\"time\"]\nfile = \"run.csv\"\n",
     )
     .unwrap();
-    let system = System::load_with(
-        &file,
-        None,
-        LoadOptions {
-            simulated: true,
-            ..LoadOptions::default()
-        },
-    )
-    .unwrap();
+    let system = System::load_with(&file, None, LoadOptions::simulated()).unwrap();
     system.start().unwrap();
     system.simulate(0.05).unwrap();
     system.stop();

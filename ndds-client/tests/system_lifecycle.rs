@@ -19,15 +19,7 @@ fn systems_with_machines_and_triggers_come_and_go_without_panics() {
     }));
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/sequence.toml");
     for round in 0..200 {
-        let system = System::load_with(
-            &file,
-            None,
-            LoadOptions {
-                simulated: true,
-                ..LoadOptions::default()
-            },
-        )
-        .unwrap();
+        let system = System::load_with(&file, None, LoadOptions::simulated()).unwrap();
         system.start().unwrap();
         // Far enough for the triggers to fire and the machine to switch configurations.
         for _ in 0..(round % 4) * 10 {

@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 
 /// Where `program` is: the first match on `PATH`, then the sbin directories (which a user's
 /// `PATH` may lack even under sudo).
-fn locate(program: &str) -> Option<PathBuf> {
+pub fn locate(program: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH").unwrap_or_default();
     std::env::split_paths(&path)
         .chain(["/usr/sbin", "/sbin", "/usr/bin", "/bin"].map(PathBuf::from))

@@ -38,7 +38,7 @@ use std::net::Ipv4Addr;
 use std::sync::Mutex;
 
 pub use cluster::Cluster;
-pub use command::require;
+pub use command::{locate, require};
 pub use faults::{Faults, TABLE};
 pub use host::Host;
 pub use meter::{METER_TABLE, Traffic};

@@ -6,7 +6,6 @@
 
 use std::collections::BTreeSet;
 use std::io::Write as _;
-use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -58,21 +57,11 @@ fn netns_missing() -> Vec<String> {
         missing.push(format!("running as uid {uid}"));
     }
     for program in ["ip", "nft"] {
-        if locate(program).is_none() {
+        if interop_tests::netns::locate(program).is_none() {
             missing.push(format!("`{program}` not found"));
         }
     }
     missing
-}
-
-/// Where `program` is, searched as `interop_tests::netns` searches it: `PATH`, then the sbin
-/// and bin directories (a user's `PATH` may lack sbin even under sudo).
-fn locate(program: &str) -> Option<PathBuf> {
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    std::env::split_paths(&path)
-        .chain(["/usr/sbin", "/sbin", "/usr/bin", "/bin"].map(PathBuf::from))
-        .map(|dir| dir.join(program))
-        .find(|candidate| candidate.is_file())
 }
 
 /// The setting that forbids skipping, if one is set: `CI` (as CI services set it) or

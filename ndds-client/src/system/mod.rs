@@ -382,6 +382,17 @@ pub struct LoadOptions {
     pub simulated: bool,
 }
 
+impl LoadOptions {
+    /// Simulated time and otherwise the defaults: every habitat clocked by
+    /// [`System::simulate`].
+    pub fn simulated() -> Self {
+        Self {
+            simulated: true,
+            ..Self::default()
+        }
+    }
+}
+
 /// A snapshot of a running system, as `ndds run` prints it.
 #[derive(Clone, Debug)]
 pub struct Status {
