@@ -2,10 +2,10 @@
 //! verifies with the runtime's actions; its code excerpts are verbatim; its tables list the
 //! stimulus kinds and the published state's fields exactly.
 
-use ndds_client::fsm::{ActionSet, MachineState, Program, verify};
-use ndds_client::runtime::Runtime;
 use ndds_docs::excerpts::{self, source};
 use ndds_docs::markdown::Doc;
+use ndds_runtime::Runtime;
+use ndds_runtime::fsm::{ActionSet, MachineState, Program, verify};
 
 fn doc() -> Doc {
     Doc::load("fsm.md")

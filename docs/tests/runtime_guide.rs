@@ -2,10 +2,10 @@
 //! name, and its tables of entry routines, verification problems and
 //! statistics fields list exactly what the code has.
 
-use ndds_client::runtime::HabitatStats;
 use ndds_docs::excerpts::{self, source};
 use ndds_docs::markdown::Doc;
 use ndds_docs::report::Problems;
+use ndds_runtime::HabitatStats;
 
 fn doc() -> Doc {
     Doc::load("runtime.md")
@@ -57,7 +57,7 @@ fn code_excerpts_are_verbatim() {
 fn entry_routines_are_the_traits() {
     let doc = doc();
     let mut problems = Problems::new();
-    let trait_source = source("ndds-client/src/runtime/module.rs");
+    let trait_source = source("ndds-runtime/src/module.rs");
     let routines = names_in_block(&trait_source, "pub trait SampleModule", |line| {
         let rest = line.strip_prefix("fn ")?;
         Some(rest[..rest.find('(')?].to_owned())
@@ -76,7 +76,7 @@ fn entry_routines_are_the_traits() {
 fn verification_problems_are_the_enums() {
     let doc = doc();
     let mut problems = Problems::new();
-    let verify = source("ndds-client/src/runtime/verify.rs");
+    let verify = source("ndds-runtime/src/verify.rs");
     let variants = names_in_block(&verify, "pub enum Problem", |line| {
         let name: String = line.chars().take_while(|c| c.is_alphanumeric()).collect();
         (line.ends_with('{') && name.chars().next().is_some_and(char::is_uppercase)).then_some(name)

@@ -5,10 +5,10 @@
 
 use std::path::Path;
 
-use ndds_client::runtime::{ComponentSpec, ParamKind, Runtime};
-use ndds_client::system::{LoadOptions, SECTION_KEYS, System};
 use ndds_docs::markdown::{Doc, plain};
 use ndds_docs::report::Problems;
+use ndds_runtime::system::{LoadOptions, SECTION_KEYS, System};
+use ndds_runtime::{ComponentSpec, ParamKind, Runtime};
 
 /// The component reference's chapters, in order: every registered type must be in one.
 const CHAPTERS: &[(&str, &[&str])] = &[
@@ -78,6 +78,7 @@ fn generated(rt: &Runtime) -> String {
 #[test]
 fn component_reference_is_generated_from_the_specs() {
     let rt = Runtime::new("docs");
+    ndds_components::register(&rt);
     let listed: Vec<&str> = CHAPTERS
         .iter()
         .flat_map(|(_, t)| t.iter().copied())
@@ -183,7 +184,11 @@ fn system_blocks_load_and_run() {
             let dir = tempdir(&format!("block{count}"));
             let file = dir.join("system.toml");
             std::fs::write(&file, &text).unwrap();
-            match System::load_with(&file, None, LoadOptions::simulated()) {
+            match System::load_with(
+                &file,
+                None,
+                LoadOptions::simulated().with_library(ndds_components::library()),
+            ) {
                 Err(err) => problems.at(&doc, block.line, format!("does not load: {err}")),
                 Ok(system) => {
                     system.start().unwrap();
@@ -264,8 +269,8 @@ fn the_guides_error_example_is_the_loaders() {
         .flat_map(|b| b.lines.iter())
         .find(|(_, l)| l.starts_with("first.toml:"))
         .expect("the guide shows the error");
-    match System::from_str("first.toml", &broken, None) {
-        Err(ndds_client::system::SystemError::Invalid(d)) => {
+    match System::from_str("first.toml", &broken, None, ndds_components::library()) {
+        Err(ndds_runtime::system::SystemError::Invalid(d)) => {
             assert_eq!(d.0.len(), 1, "{d}");
             assert_eq!(
                 d.0[0].to_string(),

@@ -11,11 +11,11 @@ use std::time::{Duration, Instant};
 
 use examples::{WAIT, program, settles};
 use interop_tests::{TestDomain, wait_until};
-use ndds_client::fsm::{MachineState, Stimulus};
-use ndds_client::runtime::{CsMat, HabitatStats};
 use ndds_client::{
     Consumer, ConsumerQos, EmbeddedPolicy, Participant, Producer, ProducerQos, Reliability,
 };
+use ndds_runtime::fsm::{MachineState, Stimulus};
+use ndds_runtime::{CsMat, HabitatStats};
 
 /// Waits for a published state that satisfies `check`.
 fn published(

@@ -7,8 +7,8 @@ mod examples;
 
 use examples::{WAIT, program, settles};
 use interop_tests::{TestDomain, wait_until};
-use ndds_client::runtime::{CsMat, HabitatStats};
 use ndds_client::{ConsumerQos, EmbeddedPolicy, Participant, ProducerQos, Reliability};
+use ndds_runtime::{CsMat, HabitatStats};
 
 #[test]
 fn plant_and_controller_in_two_processes_close_the_loop_and_switch_over_the_network() {

@@ -4,7 +4,7 @@
 use std::sync::OnceLock;
 
 use ndds_client::TypeDescription;
-use ndds_client::runtime::CsMat;
+use ndds_runtime::CsMat;
 
 /// Names accepted by `--type`, with the Rust type each stands for.
 pub const NAMES: &[(&str, &str)] = &[
@@ -21,7 +21,7 @@ pub const NAMES: &[(&str, &str)] = &[
     ("f64", "f64"),
     ("string", "String"),
     ("bytes", "Vec<u8>"),
-    ("csmat", "ndds_client::runtime::CsMat"),
+    ("csmat", "ndds_runtime::CsMat"),
 ];
 
 /// The description of a built-in type, or `None` for an unknown name.
@@ -87,9 +87,7 @@ mod tests {
         let csmat = describe("csmat").unwrap();
         assert!(is_csmat(&csmat));
         assert!(!is_csmat(&describe("f64").unwrap()));
-        assert!(!is_csmat(&TypeDescription::opaque(
-            "ndds_client::runtime::CsMat"
-        )));
+        assert!(!is_csmat(&TypeDescription::opaque("ndds_runtime::CsMat")));
         let good = CsMat::from_row_slice("x", 2, 1, &[1.0, 2.0]).unwrap();
         check_csmat(&postcard::to_allocvec(&good).unwrap()).unwrap();
         let err = check_csmat(&[1, b'x', 2, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]).unwrap_err();

@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use common::{RUN_LIMIT, Running, SETTLE, World, dead_socket, eventually, ndds_at};
-use ndds_client::runtime::CsMat;
 use ndds_client::{ConsumerQos, ProducerQos, RawProducer, TypeDescription};
+use ndds_runtime::CsMat;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
@@ -1194,8 +1194,8 @@ fn hz_reports_when_its_duration_ends() {
 /// runtime's configure topic switches its configuration.
 #[test]
 fn habitat_statistics_are_echoed_and_configurations_switch_from_ndds_pub() {
-    use ndds_client::runtime::components::Gain;
-    use ndds_client::runtime::{HabitatOptions, Runtime};
+    use ndds_components::Gain;
+    use ndds_runtime::{HabitatOptions, Runtime};
 
     let world = World::start();
     let participant = world.participant("runtime-test");

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use common::{RUN_LIMIT, SETTLE, World};
 use ndds_client::ProducerQos;
-use ndds_client::fsm::MachineState;
+use ndds_runtime::fsm::MachineState;
 
 /// `ndds --socket SOCKET ARGS...` with its stdout and stderr piped.
 fn command(world: &World, args: &[&str]) -> Command {

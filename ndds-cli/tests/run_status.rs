@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use common::{Running, World};
 use ndds_client::ProducerQos;
-use ndds_client::runtime::CsMat;
+use ndds_runtime::CsMat;
 
 /// What the habitat thread logs for the wrong-shaped sample.
 const WARNING: &str = "is 3x1; CSMat `";

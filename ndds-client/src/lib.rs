@@ -37,7 +37,6 @@
 pub mod consumer;
 pub mod embedded;
 pub mod error;
-pub mod fsm;
 mod link;
 pub mod participant;
 mod peers;
@@ -46,12 +45,10 @@ pub mod ports;
 pub mod producer;
 pub mod qos;
 mod router;
-pub mod runtime;
 pub mod sample;
 mod session;
 mod slot;
 mod sync;
-pub mod system;
 
 pub use consumer::{
     CallbackConsumer, Consumer, ConsumerStats, DirectConsumer, EventStream, RawConsumer,

@@ -30,54 +30,60 @@ use crate::peers::PeerSpec;
 
 /// The daemon's settings as the config file and the command line give them, every one
 /// optional. Unknown keys in the file are an error.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Deserialize, clap::Args)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(deny_unknown_fields)]
 pub struct ConfigFile {
     /// Domain id (0-232) [default: 0].
-    #[arg(long, env = "NDDS_DOMAIN")]
+    #[cfg_attr(feature = "cli", arg(long, env = "NDDS_DOMAIN"))]
     pub domain: Option<u32>,
     /// Unix socket path [default: /tmp/ndds-DOMAIN.sock].
-    #[arg(long, env = "NDDS_SOCKET")]
+    #[cfg_attr(feature = "cli", arg(long, env = "NDDS_SOCKET"))]
     pub socket: Option<PathBuf>,
     /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub interface: Option<String>,
     /// Do not use multicast: neither join the discovery group nor send to it; discovery then
     /// relies on --peers and on the daemons that list this one (config file: multicast = false).
-    #[arg(long = "no-multicast", num_args = 0, default_missing_value = "false")]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "no-multicast", num_args = 0, default_missing_value = "false")
+    )]
     pub multicast: Option<bool>,
     /// Discovery multicast group [default: 239.255.76.DOMAIN].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub multicast_group: Option<Ipv4Addr>,
     /// Discovery multicast port [default: 7600 + DOMAIN].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub discovery_port: Option<u16>,
     /// Unicast discovery port; 0 picks any free port. Given explicitly, it must be free
     /// [default: 7850 + DOMAIN, or any free port if that one is taken].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub unicast_port: Option<u16>,
     /// Static unicast peers, HOST or HOST:PORT (port default: 7850 + DOMAIN), comma-separated
     /// and repeatable; every discovery datagram is also sent to each, multicast or not
     /// (config file: peers = ["a:7850", "b"]). Flags replace the file's list.
-    #[arg(long, value_delimiter = ',')]
+    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ','))]
     pub peers: Option<Vec<PeerSpec>>,
     /// Refresh period in milliseconds [default: 1000].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub announce_period_ms: Option<u64>,
     /// Lease in milliseconds: how long others remember this daemon without a refresh
     /// [default: 5000].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub lease_ms: Option<u64>,
     /// Multicast TTL [default: 1].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub multicast_ttl: Option<u32>,
     /// Random seed of announcement jitter [default: random].
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub seed: Option<u64>,
 }
 
 impl ConfigFile {
-    /// Reads and parses a config file.
+    /// Reads and parses a config file (with the `cli` feature, on by default: the SDK embeds
+    /// daemons without it and never reads TOML).
+    #[cfg(feature = "cli")]
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_owned(),

@@ -16,10 +16,13 @@
 //! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution;
 //!   [`peers`]: static unicast peers, parsed and resolved.
 //! - [`claim`]: one daemon per socket path; [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
-//! - [`cli`]: the binary's command line, usable from other binaries too.
+//! - `cli`: the binary's command line, usable from other binaries too (feature `cli`, on by
+//!   default; the SDK turns it off, so a program embedding a daemon compiles neither clap nor
+//!   TOML).
 #![warn(missing_docs)]
 
 pub mod claim;
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod config;
 pub mod connection;

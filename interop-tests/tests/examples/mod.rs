@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use interop_tests::{TestDomain, binary, wait_until};
 use ndds_client::Consumer;
-use ndds_client::runtime::CsMat;
+use ndds_runtime::CsMat;
 
 /// How long an example may take to reach a state.
 pub const WAIT: Duration = Duration::from_secs(15);

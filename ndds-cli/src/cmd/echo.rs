@@ -9,9 +9,9 @@ mod throttle;
 
 use std::time::{Duration, Instant, SystemTime};
 
-use ndds_client::runtime::CsMat;
 use ndds_client::{ConsumerQos, RawConsumer, RawEvent, RawSample, RecvError, TypeDescription};
 use ndds_core::dynamic;
+use ndds_runtime::CsMat;
 use serde_json::{Value, json};
 
 use self::field::FieldPath;

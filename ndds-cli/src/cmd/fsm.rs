@@ -1,4 +1,4 @@
-//! `ndds fsm`: drive and watch the state machines of a live system (`ndds_client::fsm`).
+//! `ndds fsm`: drive and watch the state machines of a live system (`ndds_runtime::fsm`).
 //!
 //! - `ndds fsm send MACHINE STIMULUS[=VALUE]...` sends stimuli through the machine's command
 //!   port (`fsm.MACHINE`) and prints what they did, or fails with the machine's reason for
@@ -8,9 +8,9 @@
 use std::time::Duration;
 
 use anyhow::Context as _;
-use ndds_client::fsm::{CommandReply, MachineState, Stimulus, command_port};
 use ndds_client::ports::{PortError, PortUser};
 use ndds_client::{ConsumerQos, Participant};
+use ndds_runtime::fsm::{CommandReply, MachineState, Stimulus, command_port};
 
 use crate::connect::{DaemonArgs, connect};
 use crate::{outln, seconds};

@@ -11,14 +11,14 @@
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use ndds_client::fsm::{CommandReply, Stimulus};
 use ndds_client::ports::PortUser;
-use ndds_client::runtime::{CsMat, RuntimeCommand, command_port};
 use ndds_client::{Participant, ProducerQos, RawProducer, Reliability, TypeDescription};
 use ndds_core::dynamic;
 use ndds_core::ipc::Graph;
 use ndds_core::types::fingerprint_hex;
 use ndds_core::wire::{EndpointKind, EndpointQos};
+use ndds_runtime::fsm::{CommandReply, Stimulus};
+use ndds_runtime::{CsMat, RuntimeCommand, command_port};
 
 use crate::builtin;
 use crate::cmd::echo::wait_for_type;
@@ -247,7 +247,7 @@ fn command(
         return Ok(Some(reply));
     }
     if let Some(machine) = machine_of(topic)
-        && owned(participant, &ndds_client::fsm::command_port(machine))?
+        && owned(participant, &ndds_runtime::fsm::command_port(machine))?
     {
         once()?;
         let stimulus = match value {

@@ -1,4 +1,4 @@
-//! `ndds run FILE`: load a system description (`ndds_client::system`), verify it, run it on
+//! `ndds run FILE`: load a system description (`ndds_runtime::system`), verify it, run it on
 //! the local daemon (or an embedded one on loopback when none runs), print a compact live
 //! status, and shut it down cleanly (disable and shutdown routines) on Ctrl-C.
 //!
@@ -12,9 +12,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use ndds_client::runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace};
-use ndds_client::system::{LoadOptions, NEEDS_PARTICIPANT, Status, System, SystemError};
 use ndds_client::{EmbeddedPolicy, Participant};
+use ndds_runtime::system::{LoadOptions, NEEDS_PARTICIPANT, Status, System, SystemError};
+use ndds_runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace};
 
 use crate::connect::DaemonArgs;
 use crate::seconds;
@@ -83,6 +83,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             simulated: args.simulate.is_some(),
             name: args.name.clone(),
             check: args.check,
+            library: ndds_components::library(),
         };
         // Network bindings are built against a daemon: connect only if the file has some.
         let mut participant = None;
@@ -108,7 +109,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         Some(&participant),
         LoadOptions {
             name: args.name.clone(),
-            ..LoadOptions::default()
+            ..LoadOptions::default().with_library(ndds_components::library())
         },
     )
     .map_err(|e| describe_error(&args.file, e))?;

@@ -147,7 +147,7 @@ impl RawConsumer {
     /// [`recv_raw_timeout`](Self::recv_raw_timeout) with a plain [`RecvError::Timeout`]: for
     /// a loop that polls (a habitat's clock), which must not take the endpoint tables' lock
     /// to explain every empty wait.
-    pub(crate) fn recv_raw_wait(&self, timeout: Duration) -> Result<RawSample, RecvError> {
+    pub fn recv_raw_wait(&self, timeout: Duration) -> Result<RawSample, RecvError> {
         self.next_sample(Wait::at_most(timeout))
     }
 

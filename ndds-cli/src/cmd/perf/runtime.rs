@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use hdrhistogram::Histogram;
-use ndds_client::runtime::components::Gain;
-use ndds_client::runtime::{
+use ndds_components::Gain;
+use ndds_runtime::{
     Clock, CsMat, HabitatOptions, HabitatStats, Percentiles, Runtime, SampleModule,
 };
 use serde_json::json;

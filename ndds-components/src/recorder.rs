@@ -1,0 +1,538 @@
+//! Recording: the `recorder` keeps the last `capacity` samples of its inputs in memory, for
+//! code to read through a [`RecorderHandle`] and, if given a `file`, writes them as CSV when
+//! sampling ends.
+//!
+//! | type       | module       | reads    | writes |
+//! |------------|--------------|----------|--------|
+//! | `recorder` | [`Recorder`] | `inputs` | —      |
+//!
+//! Each sample is one row: the sample's nominal time (s since sampling began), then every
+//! element of every input, input by input, each row by row. The columns are named `time` and
+//! `<mat>[<row>,<col>]`, or `<mat>.<field>` for a column whose rows have field names; the CSV
+//! file quotes names holding a comma (`"y[0,0]"`), as CSV requires.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, TryLockError};
+
+use super::sources::param_checks::whole_number;
+use ndds_runtime::Mat;
+use ndds_runtime::csmat::CsMat;
+use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
+use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+
+/// Most values (samples × columns) one recorder holds: 1 GiB of `f64`.
+const MAX_VALUES: usize = 1 << 27;
+
+/// Largest `capacity` the `recorder` component accepts.
+const MAX_CAPACITY: f64 = 1e8;
+
+/// The recording: `capacity` rows of `width` values in one buffer, filled in place.
+#[derive(Default)]
+struct Ring {
+    columns: Vec<String>,
+    width: usize,
+    capacity: usize,
+    data: Vec<f64>,
+    /// The row the next sample goes to.
+    next: usize,
+    /// Rows held (at most `capacity`).
+    len: usize,
+    /// Samples recorded since sampling began, overwritten ones included.
+    recorded: u64,
+}
+
+impl Ring {
+    /// The rows held, oldest first.
+    fn rows(&self) -> Vec<Vec<f64>> {
+        let first = if self.len < self.capacity {
+            0
+        } else {
+            self.next
+        };
+        (0..self.len)
+            .map(|k| {
+                let row = (first + k) % self.capacity;
+                self.data[row * self.width..(row + 1) * self.width].to_vec()
+            })
+            .collect()
+    }
+}
+
+struct Shared {
+    ring: Mutex<Ring>,
+    /// Samples not recorded because a reader held the recording.
+    dropped: AtomicU64,
+}
+
+/// Read access to a [`Recorder`]'s recording, from any thread (cheap to clone). Each call
+/// locks the recording briefly; a sample that finds it locked is not recorded but counted in
+/// [`dropped`](Self::dropped).
+#[derive(Clone)]
+pub struct RecorderHandle(Arc<Shared>);
+
+impl RecorderHandle {
+    fn ring(&self) -> MutexGuard<'_, Ring> {
+        self.0.ring.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The column names: `time`, then one per input element (empty until sampling begins).
+    pub fn columns(&self) -> Vec<String> {
+        self.ring().columns.clone()
+    }
+
+    /// Rows held now (at most [`capacity`](Self::capacity)).
+    pub fn len(&self) -> usize {
+        self.ring().len
+    }
+
+    /// Whether no row is held.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Rows it holds at most; older rows are overwritten.
+    pub fn capacity(&self) -> usize {
+        self.ring().capacity
+    }
+
+    /// Samples recorded since sampling began, including those overwritten since.
+    pub fn recorded(&self) -> u64 {
+        self.ring().recorded
+    }
+
+    /// Samples not recorded because a reader held the recording at the time.
+    pub fn dropped(&self) -> u64 {
+        self.0.dropped.load(Ordering::Relaxed)
+    }
+
+    /// The rows held, oldest first: `[time, values…]` in [`columns`](Self::columns) order.
+    pub fn rows(&self) -> Vec<Vec<f64>> {
+        self.ring().rows()
+    }
+
+    /// The column `name` (see [`columns`](Self::columns)), oldest first.
+    pub fn column(&self, name: &str) -> Option<Vec<f64>> {
+        let ring = self.ring();
+        let index = ring.columns.iter().position(|c| c == name)?;
+        Some(ring.rows().iter().map(|row| row[index]).collect())
+    }
+
+    /// Writes the rows held as CSV: a header line of column names, then one line per row.
+    pub fn write_csv(&self, path: &Path) -> std::io::Result<()> {
+        let (columns, rows) = {
+            let ring = self.ring();
+            (ring.columns.clone(), ring.rows())
+        };
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let header: Vec<String> = columns.iter().map(|c| csv_field(c)).collect();
+        writeln!(out, "{}", header.join(","))?;
+        let mut line = String::new();
+        for row in rows {
+            line.clear();
+            for (i, x) in row.iter().enumerate() {
+                let sep = if i == 0 { "" } else { "," };
+                let _ = write!(line, "{sep}{x}");
+            }
+            writeln!(out, "{line}")?;
+        }
+        out.flush()
+    }
+}
+
+/// `text` as one CSV field (quoted when it holds a comma, quote or line break).
+fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_owned()
+    }
+}
+
+/// The column names of `mat`'s elements, row by row.
+fn column_names(name: &str, mat: &CsMat, out: &mut Vec<String>) {
+    let fields = mat.row_fields();
+    let named = mat.cols() == 1 && !fields.is_empty() && fields.iter().all(|f| !f.name.is_empty());
+    if named {
+        out.extend(fields.iter().map(|f| format!("{name}.{}", f.name)));
+        return;
+    }
+    for r in 0..mat.rows() {
+        for c in 0..mat.cols() {
+            out.push(format!("{name}[{r},{c}]"));
+        }
+    }
+}
+
+/// Records its inputs each sample into a ring of `capacity` rows (the last `capacity`
+/// samples are kept): `[time, every element of every input]`. The ring is allocated when
+/// sampling begins (`startup`, which also starts a new recording), so `execute` only copies
+/// values. Read it through [`handle`](Self::handle); with a `file`, `shutdown` writes it there
+/// as CSV (see [`RecorderHandle::write_csv`]).
+pub struct Recorder {
+    inputs: Vec<Mat>,
+    /// Each input's shape when sampling began.
+    shapes: Vec<(usize, usize)>,
+    file: Option<PathBuf>,
+    name: String,
+    shared: Arc<Shared>,
+}
+
+impl Recorder {
+    /// Records `inputs` (at least one), keeping `capacity` (≥ 1) samples.
+    pub fn new(
+        b: &mut Binder<'_>,
+        inputs: &[&str],
+        capacity: usize,
+        file: Option<&Path>,
+    ) -> Result<Self, ModuleError> {
+        if inputs.is_empty() {
+            return Err(ModuleError::Failed(
+                "parameter `inputs`: expected at least one CSMat".into(),
+            ));
+        }
+        if capacity == 0 {
+            return Err(ModuleError::Failed(
+                "parameter `capacity`: expected at least 1 sample".into(),
+            ));
+        }
+        let ring = Ring {
+            capacity,
+            ..Ring::default()
+        };
+        Ok(Self {
+            inputs: inputs.iter().map(|i| b.input(i, Shape::Any)).collect(),
+            shapes: Vec::new(),
+            file: file.map(Path::to_path_buf),
+            name: b.module_name().to_owned(),
+            shared: Arc::new(Shared {
+                ring: Mutex::new(ring),
+                dropped: AtomicU64::new(0),
+            }),
+        })
+    }
+
+    /// A handle to read the recording with.
+    pub fn handle(&self) -> RecorderHandle {
+        RecorderHandle(Arc::clone(&self.shared))
+    }
+
+    fn failed(&self, text: impl std::fmt::Display) -> ModuleError {
+        ModuleError::Failed(format!("recorder `{}`: {text}", self.name))
+    }
+
+    /// Allocates the ring for the inputs' shapes now and empties it.
+    fn prepare(&mut self) -> RoutineResult {
+        self.shapes.clear();
+        let mut columns = vec!["time".to_owned()];
+        for input in &self.inputs {
+            let value = input.read();
+            self.shapes.push(value.shape());
+            column_names(input.name(), &value, &mut columns);
+        }
+        let mut ring = self
+            .shared
+            .ring
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        let (width, capacity) = (columns.len(), ring.capacity);
+        let Some(size) = capacity.checked_mul(width) else {
+            return Err(self.failed("capacity × columns overflows"));
+        };
+        if size > MAX_VALUES {
+            return Err(self.failed(format_args!(
+                "{capacity} samples of {width} values exceed the recorder's limit of \
+                 {MAX_VALUES} values (1 GiB); lower `capacity`"
+            )));
+        }
+        if ring.data.len() != size {
+            ring.data = Vec::new();
+            ring.data.try_reserve_exact(size).map_err(|err| {
+                self.failed(format_args!(
+                    "cannot allocate {capacity} samples of {width} values: {err}"
+                ))
+            })?;
+            ring.data.resize(size, 0.0);
+        }
+        ring.columns = columns;
+        ring.width = width;
+        ring.next = 0;
+        ring.len = 0;
+        ring.recorded = 0;
+        self.shared.dropped.store(0, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Copies this sample into `ring`'s next row.
+    fn record(&self, ring: &mut Ring, time: f64) -> RoutineResult {
+        let (width, next) = (ring.width, ring.next);
+        if ring.data.len() < (next + 1) * width || width == 0 {
+            return Err(self.failed("not prepared: sampling has not begun"));
+        }
+        let row = &mut ring.data[next * width..(next + 1) * width];
+        row[0] = time;
+        let mut at = 1;
+        for (input, &shape) in self.inputs.iter().zip(&self.shapes) {
+            let value = input.read();
+            if value.shape() != shape {
+                return Err(self.failed(format_args!(
+                    "input `{}` is {}x{} but was {}x{} when sampling began",
+                    input.name(),
+                    value.rows(),
+                    value.cols(),
+                    shape.0,
+                    shape.1
+                )));
+            }
+            // Row by row, as the column names go.
+            for r in 0..shape.0 {
+                for c in 0..shape.1 {
+                    row[at] = value.matrix()[(r, c)];
+                    at += 1;
+                }
+            }
+        }
+        ring.next = (next + 1) % ring.capacity;
+        ring.len = (ring.len + 1).min(ring.capacity);
+        ring.recorded += 1;
+        Ok(())
+    }
+}
+
+impl SampleModule for Recorder {
+    fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
+        let mut ring = match self.shared.ring.try_lock() {
+            Ok(ring) => ring,
+            Err(TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+            Err(TryLockError::WouldBlock) => {
+                self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                return Ok(());
+            }
+        };
+        self.record(&mut ring, ctx.time.as_secs_f64())
+    }
+
+    fn startup(&mut self, _: &SampleContext) -> RoutineResult {
+        self.prepare()
+    }
+
+    fn shutdown(&mut self, _: &SampleContext) -> RoutineResult {
+        let Some(path) = &self.file else {
+            return Ok(());
+        };
+        self.handle()
+            .write_csv(path)
+            .map_err(|err| self.failed(format_args!("writing `{}`: {err}", path.display())))
+    }
+}
+
+/// `recorder`.
+pub const RECORDER: ComponentSpec = ComponentSpec {
+    name: "recorder",
+    summary: "Records its inputs each sample (time, then every element) into a ring of the \
+              last `capacity` samples, read from code through a RecorderHandle; with `file`, \
+              writes them as CSV when sampling ends.",
+    params: &[
+        P::required("inputs", K::Inputs, "the CSMats to record (at least one)"),
+        P::optional("capacity", K::Number, "10000", "samples kept (the newest)"),
+        P::optional(
+            "file",
+            K::File,
+            "none",
+            "CSV file written when sampling ends (header: time, <mat>[<row>,<col>], …)",
+        ),
+    ],
+};
+
+/// Registers this file's component types.
+pub(crate) fn register(registry: &mut Registry) {
+    registry.add(&RECORDER, |b, p| {
+        let inputs = p.texts("inputs")?;
+        let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
+        let capacity = whole_number(
+            "capacity",
+            p.number_or("capacity", 10000.0)?,
+            1.0,
+            MAX_CAPACITY,
+        )?;
+        let file = if p.has("file") {
+            Some(Path::new(p.text("file")?))
+        } else {
+            None
+        };
+        Recorder::new(b, &names, capacity as usize, file)
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Recorder, RecorderHandle};
+    use ndds_runtime::{Clock, CsMat, HabitatOptions, Params, Runtime};
+
+    type TestResult = Result<(), Box<dyn std::error::Error>>;
+    type Outcome<T> = Result<T, Box<dyn std::error::Error>>;
+
+    /// A 100 Hz manual habitat `h` with a ramp `y = t` and a constant `pair = [1, 2]` with
+    /// named rows, recorded by `rec` keeping `capacity` samples.
+    fn recording(capacity: usize) -> Outcome<(Runtime, RecorderHandle)> {
+        let rt = Runtime::new("t");
+        crate::register(&rt);
+        rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
+        let ramp = Params::new().with("output", "y").with("slope", 1.0);
+        rt.install_component("h", "ramp", "ramp", &ramp)?;
+        let pair = CsMat::from_row_slice("pair", 2, 1, &[1.0, 2.0])?
+            .with_row_fields([("left", "m"), ("right", "m")])?;
+        rt.create_mat(pair)?;
+        let mut handle = None;
+        rt.install("h", "rec", |b| {
+            let recorder = Recorder::new(b, &["y", "pair"], capacity, None)?;
+            handle = Some(recorder.handle());
+            Ok(recorder)
+        })?;
+        let handle = handle.ok_or("no handle")?;
+        rt.habitat("h").start()?;
+        Ok((rt, handle))
+    }
+
+    fn steps(rt: &Runtime, n: usize) -> TestResult {
+        for _ in 0..n {
+            rt.habitat("h").step()?;
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn records_each_sample_exactly() -> TestResult {
+        let (rt, handle) = recording(100)?;
+        assert_eq!(
+            handle.columns(),
+            ["time", "y[0,0]", "pair.left", "pair.right"]
+        );
+        assert!(handle.is_empty());
+        steps(&rt, 50)?;
+        let rows = handle.rows();
+        assert_eq!(rows.len(), 50);
+        for (k, row) in rows.iter().enumerate() {
+            let t = k as f64 / 100.0;
+            assert_eq!(row, &[t, t, 1.0, 2.0], "sample {k}");
+        }
+        assert_eq!(handle.column("pair.right"), Some(vec![2.0; 50]));
+        assert_eq!((handle.recorded(), handle.dropped()), (50, 0));
+        Ok(())
+    }
+
+    #[test]
+    fn the_ring_keeps_the_newest_samples() -> TestResult {
+        let (rt, handle) = recording(10)?;
+        steps(&rt, 25)?;
+        assert_eq!(
+            (handle.len(), handle.capacity(), handle.recorded()),
+            (10, 10, 25)
+        );
+        let times = handle.column("time").ok_or("no time column")?;
+        let expected: Vec<f64> = (15..25).map(|k| k as f64 / 100.0).collect();
+        assert_eq!(times, expected);
+        // A new sampling session starts a new recording.
+        rt.habitat("h").stop();
+        rt.habitat("h").start()?;
+        steps(&rt, 3)?;
+        assert_eq!(handle.column("time"), Some(vec![0.0, 0.01, 0.02]));
+        Ok(())
+    }
+
+    #[test]
+    fn a_sample_finding_the_recording_locked_is_counted_as_dropped() -> TestResult {
+        let (rt, handle) = recording(10)?;
+        steps(&rt, 2)?;
+        {
+            let _reader = handle.0.ring.lock();
+            steps(&rt, 1)?;
+        }
+        steps(&rt, 1)?;
+        assert_eq!((handle.recorded(), handle.dropped()), (3, 1));
+        assert_eq!(handle.column("time"), Some(vec![0.0, 0.01, 0.03]));
+        Ok(())
+    }
+
+    #[test]
+    fn writes_csv_when_sampling_ends() -> TestResult {
+        let dir = tempfile::tempdir()?;
+        let path = dir.path().join("run.csv");
+        let rt = Runtime::new("t");
+        crate::register(&rt);
+        rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
+        rt.create_mat(CsMat::from_row_slice("m,x", 1, 2, &[0.5, -1.0])?)?;
+        let ramp = Params::new().with("output", "y").with("slope", 2.0);
+        rt.install_component("h", "ramp", "ramp", &ramp)?;
+        let params = Params::new()
+            .with("inputs", vec!["y".to_owned(), "m,x".to_owned()])
+            .with("capacity", 3.0)
+            .with("file", path.to_str().ok_or("path")?);
+        rt.install_component("h", "rec", "recorder", &params)?;
+        let h = rt.habitat("h");
+        h.start()?;
+        steps(&rt, 4)?;
+        assert!(!path.exists());
+        h.stop();
+        let csv = std::fs::read_to_string(&path)?;
+        // Names holding a comma are quoted, as CSV requires.
+        let expected = "time,\"y[0,0]\",\"m,x[0,0]\",\"m,x[0,1]\"\n\
+                        0.01,0.02,0.5,-1\n0.02,0.04,0.5,-1\n0.03,0.06,0.5,-1\n";
+        assert_eq!(csv, expected);
+        assert_eq!(h.stats().module_errors, 0);
+        Ok(())
+    }
+
+    #[test]
+    fn bad_parameters_and_unwritable_files_are_errors() -> TestResult {
+        let rt = Runtime::new("t");
+        crate::register(&rt);
+        rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
+        rt.create_mat(CsMat::zeros("y", 1, 1))?;
+        let params = Params::new().with("inputs", vec!["y".to_owned()]);
+        let err = rt
+            .install_component(
+                "h",
+                "bad",
+                "recorder",
+                &params.clone().with("capacity", 0.0),
+            )
+            .err()
+            .ok_or("installed")?
+            .to_string();
+        assert!(err.contains("`capacity`"), "{err}");
+
+        let dir = tempfile::tempdir()?;
+        let path = dir.path().join("missing").join("run.csv");
+        let params = params.with("file", path.to_str().ok_or("path")?);
+        rt.install_component("h", "rec", "recorder", &params)?;
+        let h = rt.habitat("h");
+        h.start()?;
+        steps(&rt, 2)?;
+        h.stop();
+        assert_eq!(h.stats().module_errors, 1, "the failed write is reported");
+        Ok(())
+    }
+
+    /// A ring larger than 1 GiB is refused when it would be allocated, not attempted.
+    #[test]
+    fn a_huge_recording_is_refused_not_allocated() -> TestResult {
+        let rt = Runtime::new("t");
+        crate::register(&rt);
+        rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
+        rt.create_mat(CsMat::zeros("wide", 8, 1))?;
+        let params = Params::new()
+            .with("inputs", vec!["wide".to_owned()])
+            .with("capacity", 1e8);
+        let recorder = rt.install_component("h", "rec", "recorder", &params);
+        assert!(recorder.is_ok(), "{recorder:?}");
+        let h = rt.habitat("h");
+        h.start()?;
+        steps(&rt, 3)?;
+        let stats = h.stats();
+        assert!(stats.module_errors >= 1, "{stats:?}");
+        Ok(())
+    }
+}

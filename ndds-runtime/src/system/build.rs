@@ -1,0 +1,543 @@
+//! Building a checked description through the linking database, then verifying it; and the
+//! parts a system adds around its runtime (triggers, state machine actions, port servers).
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use super::decl::{self, PortDecl, Serves, TriggerDecl};
+use super::source::{Diagnostics, Location, RawValue, SourceFile};
+use super::{LoadOptions, MachineEntry, MachineSlot, System, SystemError};
+use crate::fsm::{ActionSet, FsmError, Program, StateMachine, Stimulus};
+use crate::{
+    Binder, Mat, ModuleError, Problem, RoutineResult, Runtime, SampleContext, SampleModule, Shape,
+};
+use ndds_client::Participant;
+use ndds_client::ports::PortOwner;
+
+/// How long a port server waits for a request before checking whether to stop.
+const PORT_POLL: Duration = Duration::from_millis(200);
+
+/// The `[system] name` of the top file (or of the first included file that has one).
+fn system_name(files: &[SourceFile]) -> Option<String> {
+    files.iter().rev().find_map(|f| {
+        let RawValue::Table(t) = &f.top.get("system")?.value else {
+            return None;
+        };
+        match &t.get("name")?.value {
+            RawValue::Text(s) if !s.trim().is_empty() => Some(s.clone()),
+            _ => None,
+        }
+    })
+}
+
+/// Where things were declared, to report runtime refusals and verify problems there.
+#[derive(Default)]
+struct Places {
+    /// By module name.
+    modules: BTreeMap<String, Location>,
+    /// By (module, CSMat).
+    uses: BTreeMap<(String, String), Location>,
+    /// By CSMat: where it was created or first named.
+    mats: BTreeMap<String, Location>,
+    /// By configuration name.
+    configurations: BTreeMap<String, Location>,
+}
+
+impl Places {
+    fn use_of(&self, module: &str, mat: &str) -> Option<&Location> {
+        self.uses
+            .get(&(module.to_owned(), mat.to_owned()))
+            .or_else(|| self.modules.get(module))
+    }
+
+    fn problem(&self, problem: &Problem, fallback: &Location) -> Location {
+        let found = match problem {
+            Problem::Unbound {
+                name,
+                referenced_by,
+                ..
+            } => referenced_by
+                .iter()
+                .find_map(|m| self.use_of(m, name))
+                .or_else(|| self.mats.get(name)),
+            Problem::ShapeMismatch { mat, module, .. } => self.use_of(module, mat),
+            Problem::MissingProducer { mat, readers, .. } => {
+                readers.iter().find_map(|m| self.use_of(m, mat))
+            }
+            Problem::DoubleWriter { mat, writers, .. } => {
+                writers.iter().rev().find_map(|m| self.use_of(m, mat))
+            }
+            // The module declared last closed the loop.
+            Problem::AlgebraicLoop { modules, .. } => modules
+                .iter()
+                .filter_map(|m| self.modules.get(m))
+                .max_by_key(|at| (at.file.as_path(), at.line, at.column)),
+            Problem::WrongCategory { configuration, .. } => self.configurations.get(configuration),
+        };
+        found.unwrap_or(fallback).clone()
+    }
+}
+
+/// The location of the parameter a component's refusal names (its message says
+/// "parameter `NAME`: ..."), else `fallback`.
+fn param_named<'a>(
+    message: &str,
+    params: &'a BTreeMap<String, Location>,
+    fallback: &'a Location,
+) -> &'a Location {
+    message
+        .split("parameter `")
+        .skip(1)
+        .filter_map(|rest| rest.split('`').next())
+        // `plant.stiffness` is a key of the table `plant`.
+        .filter_map(|name| params.get(name.split('.').next().unwrap_or(name)))
+        .next()
+        .unwrap_or(fallback)
+}
+
+pub(crate) fn build(
+    files: Vec<SourceFile>,
+    stem: &str,
+    participant: Option<&Participant>,
+    options: LoadOptions,
+) -> Result<System, SystemError> {
+    let name = options
+        .name
+        .clone()
+        .or_else(|| system_name(&files))
+        .unwrap_or_else(|| stem.to_owned());
+    let runtime = match participant {
+        Some(p) if options.check => Runtime::with_participant_unserved(&name, p)?,
+        Some(p) => Runtime::with_participant(&name, p)?,
+        None => Runtime::new(&name),
+    };
+    runtime.add_library(options.library.clone());
+    build_into(files, runtime, participant, options)
+}
+
+pub(crate) fn build_into(
+    files: Vec<SourceFile>,
+    rt: Runtime,
+    participant: Option<&Participant>,
+    options: LoadOptions,
+) -> Result<System, SystemError> {
+    let mut p = Diagnostics::default();
+    let known: Vec<String> = rt.component_types().into_iter().map(|(n, _)| n).collect();
+    let spec = |name: &str| match rt.component_spec(name) {
+        Some(spec) => Ok(Some(spec)),
+        None if known.iter().any(|k| k == name) => Ok(None),
+        None => Err(known.clone()),
+    };
+    let d = decl::describe(&files, &spec, &mut p);
+    let fallback = d.start.clone().unwrap_or_else(|| Location {
+        file: Arc::new("<system>".into()),
+        line: 1,
+        column: 1,
+    });
+    if participant.is_none() {
+        for at in d
+            .subscribes
+            .iter()
+            .map(|s| &s.at)
+            .chain(d.publishes.iter().map(|s| &s.at))
+            .chain(d.ports.iter().map(|s| &s.name.at))
+        {
+            p.push(at, super::NEEDS_PARTICIPANT);
+        }
+    }
+    if !p.is_empty() {
+        return Err(invalid(p));
+    }
+
+    let mut places = Places::default();
+    let refuse = |p: &mut Diagnostics, at: &Location, err: &dyn std::fmt::Display| {
+        p.push(at, err.to_string());
+    };
+
+    for h in &d.habitats {
+        let mut habitat_options = h.options.clone();
+        if options.simulated {
+            habitat_options.clock = crate::Clock::Manual;
+        }
+        if let Err(err) = rt.create_habitat(&h.name.name, habitat_options) {
+            refuse(&mut p, &h.name.at, &err);
+        }
+    }
+    for m in &d.mats {
+        places.mats.insert(m.name.name.clone(), m.name.at.clone());
+        if let Err(err) = rt.create_mat(m.value.clone()) {
+            refuse(&mut p, &m.name.at, &err);
+        }
+    }
+    // Groups before modules: a module installed into an inactive group never conflicts with
+    // the active one writing the same CSMat.
+    // In the order declared: a category's first group is active unless a configuration says
+    // otherwise.
+    let mut groups: Vec<GroupDecl<'_>> = Vec::new();
+    for c in &d.components {
+        if let Some((category, group, at)) = &c.group {
+            let key = (category.clone(), group.clone());
+            match groups.iter_mut().find(|(k, _)| *k == key) {
+                Some((_, (modules, _))) => modules.push(&c.name.name),
+                None => groups.push((key, (vec![&c.name.name], at.clone()))),
+            }
+        }
+    }
+    for ((category, group), (modules, at)) in &groups {
+        if let Err(err) = rt.group(category, group, modules) {
+            refuse(&mut p, at, &err);
+        }
+    }
+    for conf in &d.configurations {
+        places
+            .configurations
+            .insert(conf.name.name.clone(), conf.name.at.clone());
+        let pairs: Vec<(&str, &str)> = conf
+            .groups
+            .iter()
+            .map(|(c, g, _)| (c.as_str(), g.as_str()))
+            .collect();
+        if let Err(err) = rt.configuration(&conf.name.name, &pairs) {
+            refuse(&mut p, &conf.name.at, &err);
+        }
+    }
+    for c in &d.components {
+        places
+            .modules
+            .insert(c.name.name.clone(), c.name.at.clone());
+        for (mat, at, _) in &c.mats {
+            places
+                .uses
+                .entry((c.name.name.clone(), mat.clone()))
+                .or_insert_with(|| at.clone());
+            places.mats.entry(mat.clone()).or_insert_with(|| at.clone());
+        }
+        if let Err(err) =
+            rt.install_component(&c.habitat.name, &c.name.name, &c.type_name.name, &c.params)
+        {
+            let message = err.to_string();
+            let at = param_named(&message, &c.param_at, &c.name.at);
+            refuse(&mut p, at, &err);
+        }
+    }
+    // Subscriptions after the components: a subscribed CSMat that a component created (a
+    // parameter such as `filter.tau`) keeps the component's value until a sample arrives.
+    for s in &d.subscribes {
+        let module = format!("subscribe:{}", s.topic);
+        places.modules.insert(module.clone(), s.at.clone());
+        places
+            .uses
+            .insert((module, s.mat.name.clone()), s.mat.at.clone());
+        places
+            .mats
+            .entry(s.mat.name.clone())
+            .or_insert_with(|| s.mat.at.clone());
+        if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
+            refuse(&mut p, &s.at, &err);
+        }
+    }
+    for r in &d.rates {
+        for half in ["in", "out"] {
+            places
+                .modules
+                .insert(format!("{}.{half}", r.name.name), r.name.at.clone());
+        }
+        if let Err(err) = rt.rate_transition(
+            &r.name.name,
+            (&r.from.0.name, &r.from.1.name),
+            (&r.to.0.name, &r.to.1.name),
+        ) {
+            refuse(&mut p, &r.name.at, &err);
+        }
+    }
+    let mut machines: BTreeMap<String, MachineEntry> = BTreeMap::new();
+    for m in &d.machines {
+        let slot: MachineSlot = Arc::new(OnceLock::new());
+        let pending = PendingMachine {
+            program: m.program.clone(),
+        };
+        let actions = pending.actions(&rt);
+        let problems = crate::fsm::verify(&m.program, &|action| actions.codes(action));
+        for problem in problems {
+            p.push(
+                &m.at,
+                format!(
+                    "state machine `{}` ({}): {problem}",
+                    m.program.main,
+                    m.file.display()
+                ),
+            );
+        }
+        machines.insert(
+            m.program.main.clone(),
+            MachineEntry {
+                slot,
+                running: std::sync::Mutex::new(None),
+                pending,
+            },
+        );
+    }
+    for (i, t) in d.triggers.iter().enumerate() {
+        let module = format!("trigger{i}:{}", t.stimulus.name);
+        places.modules.insert(module.clone(), t.at.clone());
+        places
+            .uses
+            .insert((module.clone(), t.input.name.clone()), t.input.at.clone());
+        let Some(entry) = machines.get(&t.machine.name) else {
+            continue; // reported by the cross-check
+        };
+        let slot = Arc::clone(&entry.slot);
+        if let Err(err) = rt.install(&t.habitat.name, &module, |b| Ok(Trigger::new(b, t, slot))) {
+            refuse(&mut p, &t.at, &err);
+        }
+    }
+    for s in &d.publishes {
+        let module = format!("publish:{}", s.topic);
+        places.modules.insert(module.clone(), s.at.clone());
+        places
+            .uses
+            .insert((module, s.mat.name.clone()), s.mat.at.clone());
+        if let Err(err) = rt.publish(&s.habitat.name, &s.mat.name, &s.topic, s.qos) {
+            refuse(&mut p, &s.at, &err);
+        }
+    }
+    if let Some(conf) = &d.configuration
+        && p.is_empty()
+        && let Err(err) = rt.switch(&conf.name)
+    {
+        refuse(&mut p, &conf.at, &err);
+    }
+    if p.is_empty() {
+        let report = rt.verify();
+        for problem in &report.problems {
+            p.push(&places.problem(problem, &fallback), problem.to_string());
+        }
+    }
+    if !p.is_empty() {
+        return Err(invalid(p));
+    }
+    Ok(System {
+        name: rt.name().to_owned(),
+        files: files.iter().map(|f| f.path.as_ref().clone()).collect(),
+        participant: participant.cloned(),
+        description: d.description.clone(),
+        display: d.display.iter().map(|n| n.name.clone()).collect(),
+        machines,
+        ports: d.ports,
+        servers: std::sync::Mutex::new(Vec::new()),
+        started: std::sync::Mutex::new(false),
+        check_only: options.check,
+        simulated: std::sync::Mutex::new((0.0, Vec::new())),
+        runtime: rt,
+    })
+}
+
+/// `(category, group)`, its modules, where it was first named.
+type GroupDecl<'a> = ((String, String), (Vec<&'a str>, Location));
+
+/// The problems, in file order.
+fn invalid(mut p: Diagnostics) -> SystemError {
+    p.0.sort_by(|a, b| {
+        let (a, b) = (&a.location, &b.location);
+        (a.file.as_path(), a.line, a.column).cmp(&(b.file.as_path(), b.line, b.column))
+    });
+    p.truncate();
+    SystemError::Invalid(p)
+}
+
+/// A state machine loaded and verified, started with the system.
+pub(crate) struct PendingMachine {
+    program: Program,
+}
+
+impl PendingMachine {
+    /// The actions a description's state machines have: the runtime's (`switch`, `start`,
+    /// `stop`, `reset`) and `set CSMAT V1 V2 ...` (row-major values; 0 done, 1 refused).
+    fn actions(&self, rt: &Runtime) -> ActionSet {
+        let mut set = ActionSet::runtime(rt);
+        let rt = rt.clone();
+        set.add("set", &[0, 1], move |arg| {
+            let arg = arg.ok_or("`set` needs a CSMat name and its values")?;
+            let mut words = arg.split_whitespace();
+            let name = words.next().ok_or("`set` needs a CSMat name")?;
+            let values: Result<Vec<f64>, _> = words.map(str::parse::<f64>).collect();
+            let Ok(values) = values else {
+                tracing::warn!("`set {arg}`: the values are not numbers");
+                return Ok(1);
+            };
+            // The loader checked that `name` is a CSMat of the system.
+            let result = rt.mat(name).write().copy_from_slice(&values);
+            Ok(match result {
+                Ok(()) => 0,
+                Err(err) => {
+                    tracing::warn!("`set {arg}`: {err}");
+                    1
+                }
+            })
+        });
+        set
+    }
+
+    pub(crate) fn start(
+        &self,
+        rt: &Runtime,
+        participant: Option<&Participant>,
+    ) -> Result<StateMachine, FsmError> {
+        let actions = self.actions(rt);
+        match participant {
+            Some(p) => StateMachine::start_on(self.program.clone(), actions, p),
+            None => StateMachine::start(self.program.clone(), actions),
+        }
+    }
+}
+
+/// Sends a stimulus to a state machine when a CSMat crosses a threshold: on each sample where
+/// the condition holds after it did not (the largest absolute element above `above`, or below
+/// `below`). Stimuli sent before the machine runs, or refused by a full queue, are counted in
+/// the module's errors.
+struct Trigger {
+    input: Mat,
+    above: Option<f64>,
+    below: Option<f64>,
+    machine: MachineSlot,
+    stimulus: Stimulus,
+    was: bool,
+}
+
+impl Trigger {
+    fn new(b: &mut Binder<'_>, t: &TriggerDecl, machine: MachineSlot) -> Self {
+        Self {
+            input: b.input(&t.input.name, Shape::Any),
+            above: t.above,
+            below: t.below,
+            machine,
+            stimulus: t.stimulus.clone(),
+            was: false,
+        }
+    }
+}
+
+impl SampleModule for Trigger {
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let norm = self.input.read().matrix().amax();
+        let now = self.above.is_none_or(|x| norm > x) && self.below.is_none_or(|x| norm < x);
+        let rising = now && !self.was;
+        self.was = now;
+        if !rising {
+            return Ok(());
+        }
+        match self.machine.get().and_then(std::sync::Weak::upgrade) {
+            Some(machine) => machine
+                .send(self.stimulus.clone())
+                .map_err(|e| ModuleError::Failed(e.to_string())),
+            None => Err(ModuleError::Failed(format!(
+                "stimulus `{}`: its state machine is not running",
+                self.stimulus.name
+            ))),
+        }
+    }
+
+    fn enable(&mut self, _: &SampleContext) -> RoutineResult {
+        self.was = false;
+        Ok(())
+    }
+}
+
+/// Serves a port declared in a description: requests are strings (configuration names or
+/// stimuli), replies `Ok(what happened)` or `Err(why not)`.
+pub(crate) struct PortServer {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// A port's reply.
+pub type PortReply = ndds_client::ports::CommandReply;
+
+impl PortServer {
+    pub(crate) fn start(
+        system: &System,
+        participant: &Participant,
+        port: &PortDecl,
+    ) -> Result<Self, SystemError> {
+        let taken =
+            ndds_client::ports::owners_elsewhere(participant, &port.name.name).map_err(|e| {
+                SystemError::Port {
+                    port: port.name.name.clone(),
+                    message: e.to_string(),
+                }
+            })?;
+        if let Some(owner) = taken.first() {
+            return Err(SystemError::Port {
+                port: port.name.name.clone(),
+                message: format!(
+                    "already owned by {owner}; a port has one owner: stop that one or rename \
+                     this port"
+                ),
+            });
+        }
+        let owner: PortOwner<String, PortReply> = PortOwner::declare_with(
+            participant,
+            &port.name.name,
+            system.name(),
+            port.restrictions.clone(),
+        )
+        .map_err(|e| SystemError::Port {
+            port: port.name.name.clone(),
+            message: e.to_string(),
+        })?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let rt = system.runtime().clone();
+        let machine = match &port.serves {
+            Serves::Stimuli(m) => system.machines.get(m).map(|entry| Arc::clone(&entry.slot)),
+            Serves::Configuration => None,
+        };
+        let serves = port.serves.clone();
+        let flag = Arc::clone(&stop);
+        let name = port.name.name.clone();
+        let thread = std::thread::Builder::new()
+            .name(format!("port {name}"))
+            .spawn(move || {
+                let mut failing = None;
+                while !flag.load(Ordering::Acquire) {
+                    let Some((request, reply)) = owner.serve_next(PORT_POLL, &mut failing) else {
+                        continue;
+                    };
+                    let answer = match &serves {
+                        Serves::Configuration => rt.switch_explained(request.trim()),
+                        Serves::Stimuli(m) => match machine
+                            .as_ref()
+                            .and_then(|s| s.get())
+                            .and_then(std::sync::Weak::upgrade)
+                        {
+                            Some(sm) => sm
+                                .send(Stimulus::parse(&request))
+                                .map(|()| format!("sent `{}` to `{m}`", request.trim()))
+                                .map_err(|e| e.to_string()),
+                            None => Err(format!("state machine `{m}` is not running")),
+                        },
+                    };
+                    if let Err(err) = reply.reply(&answer) {
+                        tracing::warn!(port = %name, "reply: {err}");
+                    }
+                }
+            })
+            .map_err(|e| SystemError::Port {
+                port: port.name.name.clone(),
+                message: e.to_string(),
+            })?;
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    pub(crate) fn stop(mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
