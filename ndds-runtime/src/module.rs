@@ -42,9 +42,31 @@ pub enum ModuleError {
     /// Matrix arithmetic refused its operands.
     #[error(transparent)]
     Mat(#[from] MatError),
+    /// A parameter is missing, mistyped or out of range: `name` is the key a description
+    /// file gives it (`plant.stiffness` for a key of a table), so the loader can point at it.
+    #[error("parameter `{name}`: {reason}")]
+    Param {
+        /// The parameter (dotted for a key inside a table parameter).
+        name: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The module publishes or subscribes and its runtime has no participant.
+    #[error("needs the network, and its runtime has no participant (Runtime::with_participant)")]
+    NeedsParticipant,
     /// Anything else, in the module's words.
     #[error("{0}")]
     Failed(String),
+}
+
+impl ModuleError {
+    /// A [`ModuleError::Param`].
+    pub fn param(name: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Param {
+            name: name.into(),
+            reason: reason.into(),
+        }
+    }
 }
 
 /// Result of an entry routine.

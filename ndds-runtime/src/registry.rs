@@ -145,7 +145,10 @@ pub struct ParamError {
 
 impl From<ParamError> for ModuleError {
     fn from(err: ParamError) -> Self {
-        ModuleError::Failed(err.to_string())
+        ModuleError::Param {
+            name: err.name,
+            reason: err.problem,
+        }
     }
 }
 
