@@ -18,7 +18,7 @@
 //! | `multicast_ttl` | 1 |
 
 use std::net::Ipv4Addr;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use ndds_core::discovery::MAX_PEERS;
@@ -84,7 +84,7 @@ impl ConfigFile {
     /// Reads and parses a config file (with the `cli` feature, on by default: the SDK embeds
     /// daemons without it and never reads TOML).
     #[cfg(feature = "cli")]
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+    pub fn load(path: &std::path::Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_owned(),
             source,
