@@ -2,7 +2,8 @@
 //!
 //! The SDK that control programs link: typed producers and consumers of named topics, with
 //! samples sent directly from producing to consuming processes over UDP, and discovery handled
-//! by the host's `ndds-daemon` (or an embedded one when none runs).
+//! by the host's `ndds-daemon` (or an embedded one when none runs); and, on top of topics,
+//! ports: named channels with one owner and any number of users.
 //!
 //! ```no_run
 //! use std::time::Duration;
@@ -27,11 +28,28 @@
 //! types never match (both sides log an *incompatible type* warning) and tools such as
 //! `ndds echo` decode the topic without the Rust type.
 //!
+//! ## What it does not do
+//! - Protocol logic: the wire format, type descriptions, the discovery engine and the rules
+//!   of arbitration (strength, persistence, minimum separation, deadlines) are `ndds-core`'s,
+//!   without IO; this crate drives them with sockets, threads and the clock.
+//! - Discovery: the host's daemon (`ndds-daemon`) runs it; the SDK asks the daemon over a
+//!   Unix socket, or embeds one when none answers.
+//! - ControlShell: CSMats, sample modules, habitats, configurations, state machines and
+//!   description files are in `ndds-runtime` (which builds on this crate), the component
+//!   library in `ndds-components`; neither is a dependency of the SDK.
+//!
 //! ## Layout
 //! - [`participant`]: connecting, the embedded-daemon fallback, declaring endpoints;
 //!   [`embedded`]: the daemons this process embeds, and stopping them.
-//! - [`producer`], [`consumer`]: the endpoint handles; [`sample`]: what consumers receive.
-//! - `session` (the daemon connection) and `data` (the UDP data plane) are internal.
+//! - [`producer`], [`consumer`]: the endpoint handles; [`sample`]: what consumers receive;
+//!   [`qos`]: what endpoints are declared with; [`error`]: one error enum per operation.
+//! - [`ports`]: port-directed communication over reliable topics (send, receive and reply;
+//!   query and response; `waitfor`; `sendall`; a priority select).
+//! - Internal: `session` (the daemon connection) and `link` (its reader thread, which also
+//!   reconnects); `router` (the local endpoints by entity number) and `peers` (what each one
+//!   is matched with); `plane` (the UDP data plane: its socket, receive and timer threads);
+//!   `slot` (one consumer's receiving end: reliable streams, arbiter, sink); `sync` (lock
+//!   helpers).
 #![warn(missing_docs)]
 
 pub mod consumer;

@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use common::{eventually, participant, sibling, unique_config};
 use ndds_client::{
-    ConsumerQos, EmbeddedPolicy, Participant, ProducerQos, RecvError, TypeDescription,
+    ConsumerQos, EmbeddedPolicy, Event, Notification, Participant, ProducerQos, RecvError,
+    TypeDescription,
 };
 use serde::{Deserialize, Serialize};
 
@@ -67,6 +68,50 @@ fn typed_samples_flow_between_participants_of_one_daemon() {
         RecvError::Timeout
     );
     assert_eq!(consumer.matched().len(), 1);
+}
+
+/// `try_recv_event` is the non-blocking form of `recv_event`: it gives the queued samples and
+/// notifications in the order they were queued, and `Empty` when none is left, never waiting.
+#[test]
+fn try_recv_event_takes_samples_and_notifications_without_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let writer_side = participant(&config);
+    let reader_side = participant(&config);
+    let consumer = reader_side
+        .consumer::<u32>("events", ConsumerQos::default())
+        .unwrap();
+    assert_eq!(consumer.try_recv_event().unwrap_err(), RecvError::Empty);
+    let producer = writer_side
+        .producer::<u32>("events", ProducerQos::default())
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    producer.write(&7).unwrap();
+    let writer = producer.guid();
+    drop(producer); // the consumer is told its producer is gone
+
+    let mut events = Vec::new();
+    assert!(
+        eventually(WAIT, || {
+            events.extend(std::iter::from_fn(|| consumer.try_recv_event().ok()));
+            events.len() >= 2
+        }),
+        "{events:?}"
+    );
+    match &events[..] {
+        [
+            Event::Sample(sample),
+            Event::Notification(Notification::ProducerLost {
+                writer: lost,
+                was_current: true,
+            }),
+        ] => {
+            assert_eq!((sample.value, sample.info.writer), (7, writer));
+            assert_eq!(*lost, writer);
+        }
+        other => panic!("expected the sample, then its producer lost: {other:?}"),
+    }
+    assert_eq!(consumer.try_recv_event().unwrap_err(), RecvError::Empty);
 }
 
 #[test]

@@ -71,7 +71,8 @@ impl<T: DeserializeOwned> Consumer<T> {
             .map(|e| decode_event(&self.raw.state.decoder, e))
     }
 
-    /// Returns a queued sample or notification without blocking.
+    /// Returns a queued sample or notification without blocking (`Err(RecvError::Empty)` if
+    /// none).
     pub fn try_recv_event(&self) -> Result<Event<T>, RecvError> {
         self.raw
             .next_event(Wait::Try)
