@@ -76,6 +76,48 @@ fn the_stronger_producer_wins_and_the_weaker_takes_over_after_persistence() {
 }
 
 #[test]
+fn a_weaker_producer_takes_over_at_its_first_sample_once_the_persistence_has_run_out() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    // A (strength 10, persistence 200 ms) writes once at 0 and falls silent. Its clock is an
+    // hour ahead: the persistence counts from the arrival here, not from the source time.
+    let strong = Incoming {
+        source_ns: 3_600_000 * 1_000_000,
+        ..incoming(1, 10, 200, 0)
+    };
+    a.handle_sample(t0, strong, 0);
+    assert_eq!(delivered(&drain(&mut a)), vec![0]);
+    // B (strength 5) writes every 7 ms from 4 ms: at 4, 11, ..., 193, 200, 207, ...
+    let mut first_accepted = None;
+    for t_ms in (4..=300).step_by(7) {
+        a.handle_sample(
+            t0 + MS * t_ms,
+            incoming(2, 5, 200, u64::from(t_ms)),
+            1000 + u64::from(t_ms),
+        );
+        let out = drain(&mut a);
+        if first_accepted.is_none() && !out.is_empty() {
+            first_accepted = Some((t_ms, out));
+        }
+    }
+    // Refused up to 193 ms; the sample arriving exactly when the persistence ends is taken,
+    // so the takeover comes within the persistence plus one period of B.
+    let (t_ms, out) = first_accepted.expect("B takes over");
+    assert_eq!(t_ms, 200);
+    assert_eq!(
+        out,
+        vec![Output::Deliver {
+            sample: 1200,
+            status: SampleStatus::TookOver {
+                previous: writer(1)
+            }
+        }]
+    );
+    assert_eq!(a.stats().weaker, 28, "every B sample before 200 ms");
+    assert_eq!(a.in_charge(), Some(writer(2)));
+}
+
+#[test]
 fn equal_strengths_share_and_a_lost_producer_releases_at_once() {
     let t0 = Instant::now();
     let mut a = Arbiter::new(Rules::default(), t0);
