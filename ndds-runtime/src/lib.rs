@@ -81,6 +81,7 @@ pub mod system;
 mod verify;
 
 pub use binding::{Freshness, InputStatus, stale_after};
+pub use clock::pin_to_cpu;
 pub use command::{RuntimeCommand, command_port};
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;

@@ -18,7 +18,7 @@ use anyhow::Context as _;
 use hdrhistogram::Histogram;
 use ndds_components::Gain;
 use ndds_runtime::{
-    Clock, CsMat, HabitatOptions, HabitatStats, Percentiles, Runtime, SampleModule,
+    Clock, CsMat, HabitatOptions, HabitatStats, Percentiles, Runtime, SampleModule, pin_to_cpu,
 };
 use serde_json::json;
 
@@ -215,16 +215,10 @@ fn jitter(args: &Args) -> anyhow::Result<HabitatStats> {
 }
 
 fn busy(stop: &AtomicBool, cpu: Option<usize>) {
-    if let Some(cpu) = cpu {
-        // SAFETY: a zeroed cpu_set_t is a valid empty set and `cpu` is checked against its
-        // size; pid 0 is the calling thread.
-        unsafe {
-            if cpu < libc::CPU_SETSIZE as usize {
-                let mut set: libc::cpu_set_t = std::mem::zeroed();
-                libc::CPU_SET(cpu, &mut set);
-                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
-            }
-        }
+    if let Some(cpu) = cpu
+        && let Err(err) = pin_to_cpu(cpu)
+    {
+        eprintln!("ndds: cannot pin a busy thread to CPU {cpu} ({err}); it runs unpinned");
     }
     let mut x = 0u64;
     while !stop.load(Ordering::Relaxed) {
