@@ -504,6 +504,50 @@ fn each_restriction_refuses_what_it_should_naming_the_port_and_both_sides() {
 }
 
 #[test]
+fn a_port_declared_wrong_says_what_is_wrong() {
+    use ndds_client::ports::{Filter, Rendezvous, Responder};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "misdeclared");
+    let filter = |capacity| Restrictions {
+        filter: Some(Filter::BoundedBuffer { capacity }),
+        ..Restrictions::default()
+    };
+    let refused = PortOwner::<u32, ()>::declare_with(&p, "empty.buffer", "gate", filter(0));
+    let err = refused.err().expect("a buffer of 0 is refused");
+    assert!(
+        matches!(&err, PortError::ZeroCapacity { port } if port == "empty.buffer"),
+        "{err}"
+    );
+    let refused = PortOwner::<u32, u32>::declare_with(&p, "typed.buffer", "gate", filter(2));
+    let err = refused
+        .err()
+        .expect("a filter with replies of u32 is refused");
+    assert!(
+        matches!(&err, PortError::ReplyType { port, expected: "()", got: "u32" } if port == "typed.buffer"),
+        "{err}"
+    );
+    let refused = Rendezvous::<u32>::join(&p, "meet", "carol", &["alice", "bob"]);
+    let err = refused
+        .err()
+        .expect("a task the rendezvous does not name is refused");
+    assert!(
+        matches!(&err, PortError::UnknownTask { name, task, tasks }
+            if name == "meet" && task == "carol" && tasks == &["alice", "bob"]),
+        "{err}"
+    );
+    let mut responder = Responder::new(&p, "server").unwrap();
+    responder.handle("twice.query", 0, |n: u32| n).unwrap();
+    let err = responder
+        .handle("twice.query", 0, |n: u32| n + 1)
+        .expect_err("a second handler for one port is refused");
+    assert!(
+        matches!(&err, PortError::Handler { port, .. } if port == "twice.query"),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_bounded_buffer_filter_makes_sends_non_blocking_until_it_is_full() {
     use ndds_client::ports::Filter;
 

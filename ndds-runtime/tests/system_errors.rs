@@ -456,7 +456,39 @@ fn nothing_starts_when_a_file_is_broken_and_custom_types_load() {
 fn network_sections_need_a_participant() {
     let text = "[[habitat]]\nname = \"h\"\nrate = 10\n\n[[subscribe]]\nmat = \"u\"\n\
                 topic = \"t/u\"\nhabitat = \"h\"\nshape = [1, 1]\n";
-    expect_one(text, "[[subscribe]]", &["need a connection to a daemon"]);
+    let needs = match System::from_str("broken.toml", text, None, ndds_components::library()) {
+        Err(SystemError::NeedsParticipant(d)) => d.0,
+        Ok(_) => panic!("loaded without a participant"),
+        Err(other) => panic!("expected NeedsParticipant, got {other}"),
+    };
+    assert_eq!(needs.len(), 1, "{needs:#?}");
+    let (line, column) = at(text, "[[subscribe]]", 0);
+    assert_eq!(
+        (needs[0].location.line, needs[0].location.column),
+        (line, column)
+    );
+    let d = needs[0].to_string();
+    assert!(
+        d.contains("`t/u`") && d.contains("connection to a daemon"),
+        "{d}"
+    );
+}
+
+#[test]
+fn a_description_with_problems_reports_them_before_the_network_it_needs() {
+    let text = "[[habitat]]\nname = \"h\"\nrate = 10\n\n[[subscribe]]\nmat = \"u\"\n\
+                topic = \"t/u\"\nhabitat = \"nowhere\"\nshape = [1, 1]\n";
+    let found = problems("broken.toml", text);
+    assert!(
+        found
+            .iter()
+            .any(|d| d.message.contains("unknown habitat `nowhere`")),
+        "{found:#?}"
+    );
+    assert!(
+        found.iter().all(|d| !d.message.contains("daemon")),
+        "only the description's own problems: {found:#?}"
+    );
 }
 
 #[test]

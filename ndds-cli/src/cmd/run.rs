@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use ndds_client::{EmbeddedPolicy, Participant};
-use ndds_runtime::system::{LoadOptions, NEEDS_PARTICIPANT, Status, System, SystemError};
+use ndds_runtime::system::{LoadOptions, Status, System, SystemError};
 use ndds_runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace};
 
 use crate::connect::DaemonArgs;
@@ -88,7 +88,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         // Network bindings are built against a daemon: connect only if the file has some.
         let mut participant = None;
         let loaded = match System::load_with(&args.file, None, options.clone()) {
-            Err(SystemError::Invalid(d)) if d.0.iter().any(|x| x.message == NEEDS_PARTICIPANT) => {
+            Err(SystemError::NeedsParticipant(_)) => {
                 let p = participant.insert(connect(daemon, args.no_embedded, &args.file)?);
                 System::load_with(&args.file, Some(p), options)
             }

@@ -12,6 +12,7 @@ use serde::de::DeserializeOwned;
 
 use super::error::PortError;
 use super::owner::{PortOwner, ReplyHandle};
+use super::spawn_error;
 use super::user::PortUser;
 use super::waitfor::Rendezvous;
 
@@ -23,22 +24,18 @@ where
 {
     let (tx, rx) = flume::bounded(1);
     let port = port.to_owned();
+    let thread = format!("port-async-{port}");
     let spawned = std::thread::Builder::new()
-        .name(format!("port-async-{port}"))
+        .name(thread.clone())
         .spawn(move || {
             let _ = tx.send(work());
-        });
-    async move {
-        spawned.map_err(|e| PortError::Transport {
-            port: port.clone(),
-            reason: format!("cannot start the operation's thread: {e}"),
-        })?;
-        rx.recv_async().await.unwrap_or_else(|_| {
-            Err(PortError::Transport {
-                port,
-                reason: "the operation's thread ended without a result".into(),
-            })
         })
+        .map_err(spawn_error(&port, &thread));
+    async move {
+        spawned?;
+        rx.recv_async()
+            .await
+            .unwrap_or(Err(PortError::ThreadEnded { port }))
     }
 }
 

@@ -1,6 +1,11 @@
-//! [`PortError`]: what a port primitive can fail with. Every variant names the port.
+//! [`PortError`]: what a port primitive can fail with. Every variant names the port (or the
+//! rendezvous), except a [`Responder`](super::Responder)'s own thread that did not start.
 
 use std::time::Duration;
+
+use ndds_core::ports::SelectError;
+
+use crate::error::{DeclareError, WriteError};
 
 /// A port primitive that failed.
 #[derive(Debug, thiserror::Error)]
@@ -82,13 +87,91 @@ pub enum PortError {
         /// Why it failed.
         reason: String,
     },
-    /// A topic of the port could not be declared or written.
-    #[error("port `{port}`: {reason}")]
-    Transport {
+    /// A topic of the port could not be declared.
+    #[error("port `{port}`: topic `{topic}`: {source}")]
+    Declare {
         /// The port.
         port: String,
-        /// Why.
-        reason: String,
+        /// The topic.
+        topic: String,
+        /// Why the daemon did not declare it.
+        source: DeclareError,
+    },
+    /// A message could not be written to a topic of the port (a closed window, a failed send:
+    /// see the source).
+    #[error("port `{port}`: writing {what}: {source}")]
+    Write {
+        /// The port.
+        port: String,
+        /// What was being written (a request, the reply to a task, ...).
+        what: String,
+        /// Why it failed.
+        source: WriteError,
+    },
+    /// A thread the primitive runs on could not be started.
+    #[error("{}cannot start thread `{thread}`: {source}", port.as_ref().map(|p| format!("port `{p}`: ")).unwrap_or_default())]
+    Spawn {
+        /// The port (`None` for a [`Responder`](super::Responder), which has none yet).
+        port: Option<String>,
+        /// The thread's name.
+        thread: String,
+        /// Why it did not start.
+        source: std::io::Error,
+    },
+    /// An async operation's thread ended without a result (it panicked).
+    #[error("port `{port}`: the operation's thread ended without a result")]
+    ThreadEnded {
+        /// The port.
+        port: String,
+    },
+    /// A bounded-buffer filter declared with a capacity of 0.
+    #[error("port `{port}`: a bounded-buffer filter needs a capacity of at least 1")]
+    ZeroCapacity {
+        /// The port.
+        port: String,
+    },
+    /// The owner's reply type does not suit its restrictions (a bounded-buffer filter answers
+    /// sends at once, so its replies must be `()`).
+    #[error(
+        "port `{port}`: a bounded-buffer filter answers sends at once: the reply type must be \
+         `{expected}`, not `{got}`"
+    )]
+    ReplyType {
+        /// The port.
+        port: String,
+        /// The reply type needed.
+        expected: &'static str,
+        /// The owner's reply type.
+        got: &'static str,
+    },
+    /// A request whose reply id cannot name a reply topic: the sender's bug, not the port's.
+    #[error("port `{port}`: `{sender}` gave an unusable reply id {id:?}")]
+    BadReplyId {
+        /// The port.
+        port: String,
+        /// The task that sent the request.
+        sender: String,
+        /// The id it gave.
+        id: String,
+    },
+    /// A [`Responder`](super::Responder) could not take a handler for the port (it has one
+    /// already).
+    #[error("port `{port}`: cannot add its response handler: {source}")]
+    Handler {
+        /// The port.
+        port: String,
+        /// Why not.
+        source: SelectError,
+    },
+    /// [`Rendezvous::join`](super::Rendezvous::join) as a task the rendezvous does not name.
+    #[error("waitfor `{name}`: task `{task}` is not among the rendezvous' tasks {tasks:?}")]
+    UnknownTask {
+        /// The rendezvous.
+        name: String,
+        /// The task that tried to join.
+        task: String,
+        /// The tasks it names.
+        tasks: Vec<String>,
     },
     /// A port name that cannot be part of topic names.
     #[error("bad port name `{0}`: it must be non-empty, without `/` or control characters")]

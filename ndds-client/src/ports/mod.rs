@@ -105,10 +105,21 @@ fn check_name(port: &str) -> Result<(), PortError> {
     Ok(())
 }
 
-fn transport(port: &str, topic: &str, err: impl std::fmt::Display) -> PortError {
-    PortError::Transport {
+fn declare_error(port: &str, topic: &str, source: crate::error::DeclareError) -> PortError {
+    PortError::Declare {
         port: port.to_owned(),
-        reason: format!("topic `{topic}`: {err}"),
+        topic: topic.to_owned(),
+        source,
+    }
+}
+
+/// A [`PortError::Spawn`] of thread `thread` for `port`.
+fn spawn_error(port: &str, thread: &str) -> impl FnOnce(std::io::Error) -> PortError {
+    let (port, thread) = (port.to_owned(), thread.to_owned());
+    move |source| PortError::Spawn {
+        port: Some(port),
+        thread,
+        source,
     }
 }
 
@@ -159,7 +170,7 @@ fn reliable_consumer<T: PortWire>(
     };
     participant
         .consumer_with_type::<T>(topic, T::description(), qos)
-        .map_err(|e| transport(port, topic, e))
+        .map_err(|e| declare_error(port, topic, e))
 }
 
 fn reliable_producer<T: PortWire>(
@@ -173,5 +184,5 @@ fn reliable_producer<T: PortWire>(
     };
     participant
         .producer_with_type::<T>(topic, T::description(), qos)
-        .map_err(|e| transport(port, topic, e))
+        .map_err(|e| declare_error(port, topic, e))
 }

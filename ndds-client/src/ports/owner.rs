@@ -13,7 +13,9 @@ use serde::de::DeserializeOwned;
 
 use super::error::PortError;
 use super::wire::{Filter, OwnerInfo, Reply, Request, Restrictions, UserInfo};
-use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
+use super::{
+    ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, spawn_error, topic,
+};
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
 pub(crate) struct OwnerShared {
@@ -188,36 +190,35 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         let (requests, filter) = match shared.restrictions.filter {
             None => (Some(requests), None),
             Some(Filter::BoundedBuffer { capacity: 0 }) => {
-                return Err(PortError::Transport {
+                return Err(PortError::ZeroCapacity {
                     port: port.to_owned(),
-                    reason: "a bounded-buffer filter needs a capacity of at least 1".into(),
                 });
             }
             Some(Filter::BoundedBuffer { capacity }) => {
                 if TypeDescription::of::<R>().fingerprint()
                     != TypeDescription::of::<()>().fingerprint()
                 {
-                    return Err(PortError::Transport {
+                    return Err(PortError::ReplyType {
                         port: port.to_owned(),
-                        reason: "a bounded-buffer filter answers sends at once: the reply type must be ()".into(),
+                        expected: std::any::type_name::<()>(),
+                        got: std::any::type_name::<R>(),
                     });
                 }
                 let shared = Arc::clone(&shared);
                 let buffer = Arc::clone(&pending);
+                let name = format!("port-filter-{port}");
                 let thread = std::thread::Builder::new()
-                    .name(format!("port-filter-{port}"))
+                    .name(name.clone())
                     .spawn(move || bounded_buffer(&shared, &requests, &buffer, capacity as usize))
-                    .map_err(|e| PortError::Transport {
-                        port: port.to_owned(),
-                        reason: e.to_string(),
-                    })?;
+                    .map_err(spawn_error(port, &name))?;
                 (None, Some(thread))
             }
         };
         let flag = Arc::clone(&shared);
         let queued = Arc::clone(&pending);
+        let thread = format!("port-{port}");
         let announcer = std::thread::Builder::new()
-            .name(format!("port-{port}"))
+            .name(thread.clone())
             .spawn(move || {
                 let mut info = info;
                 while !flag.stop.load(Ordering::Acquire) {
@@ -232,10 +233,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     }
                 }
             })
-            .map_err(|e| PortError::Transport {
-                port: port.to_owned(),
-                reason: e.to_string(),
-            })?;
+            .map_err(spawn_error(port, &thread))?;
         Ok(Self {
             broadcast: reliable_producer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_consumer(participant, port, &topic(port, "all-reply"))?,
@@ -283,9 +281,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 task: self.shared.task.clone(),
                 payload,
             })
-            .map_err(|e| PortError::Transport {
+            .map_err(|source| PortError::Write {
                 port: port.clone(),
-                reason: e.to_string(),
+                what: "a broadcast".to_owned(),
+                source,
             })?;
         let first = super::sendall::next_reply(
             port,
@@ -569,9 +568,10 @@ fn send_reply(
 ) -> Result<(), PortError> {
     let reply = Reply { id, payload };
     let write = |producer: &Producer<Reply>| {
-        producer.write(&reply).map_err(|e| PortError::Transport {
+        producer.write(&reply).map_err(|source| PortError::Write {
             port: shared.port.clone(),
-            reason: format!("replying to `{task}`: {e}"),
+            what: format!("the reply to `{task}`"),
+            source,
         })
     };
     {
@@ -582,9 +582,10 @@ fn send_reply(
         }
     }
     if check_name(user).is_err() {
-        return Err(PortError::Transport {
+        return Err(PortError::BadReplyId {
             port: shared.port.clone(),
-            reason: format!("`{task}` gave an unusable reply id"),
+            sender: task.to_owned(),
+            id: user.to_owned(),
         });
     }
     let name = topic(&shared.port, &format!("reply/{user}"));

@@ -51,12 +51,14 @@ impl Responder {
             stop: AtomicBool::new(false),
         });
         let worker = Arc::clone(&shared);
+        let name = format!("respond-{task}");
         let thread = std::thread::Builder::new()
-            .name(format!("respond-{task}"))
+            .name(name.clone())
             .spawn(move || serve(&worker))
-            .map_err(|e| PortError::Transport {
-                port: String::new(),
-                reason: format!("responder thread: {e}"),
+            .map_err(|source| PortError::Spawn {
+                port: None,
+                thread: name,
+                source,
             })?;
         Ok(Self {
             shared,
@@ -86,15 +88,16 @@ impl Responder {
             .unwrap_or_else(|p| p.into_inner())
             .select
             .add_port(port, priority, PENDING_PER_PORT)
-            .map_err(|e| PortError::Transport {
+            .map_err(|source| PortError::Handler {
                 port: port.to_owned(),
-                reason: e.to_string(),
+                source,
             })?;
         let handler = Arc::new(Mutex::new(handler));
         let shared = Arc::clone(&self.shared);
         let name = port.to_owned();
+        let thread_name = format!("port-rx-{port}");
         let thread = std::thread::Builder::new()
-            .name(format!("port-rx-{port}"))
+            .name(thread_name.clone())
             .spawn(move || {
                 while !shared.stop.load(Ordering::Acquire) {
                     let (query, reply) = match owner.receive(Duration::from_millis(50)) {
@@ -134,10 +137,7 @@ impl Responder {
                     }
                 }
             })
-            .map_err(|e| PortError::Transport {
-                port: port.to_owned(),
-                reason: e.to_string(),
-            })?;
+            .map_err(super::spawn_error(port, &thread_name))?;
         self.threads.push(thread);
         Ok(())
     }

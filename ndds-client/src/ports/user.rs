@@ -12,7 +12,9 @@ use serde::de::DeserializeOwned;
 
 use super::error::PortError;
 use super::wire::{OwnerInfo, Reply, Request, Usage, UserInfo};
-use super::{ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, topic};
+use super::{
+    ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, spawn_error, topic,
+};
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
 /// A user of a port: sends requests of type `Q`, gets replies of type `R`.
@@ -74,8 +76,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         };
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = std::sync::Arc::clone(&stop);
+        let thread = format!("port-user-{port}");
         let announcer = std::thread::Builder::new()
-            .name(format!("port-user-{port}"))
+            .name(thread.clone())
             .spawn(move || {
                 while !flag.load(Ordering::Acquire) {
                     let _ = announce.write(&info);
@@ -85,10 +88,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                     }
                 }
             })
-            .map_err(|e| PortError::Transport {
-                port: port.to_owned(),
-                reason: e.to_string(),
-            })?;
+            .map_err(spawn_error(port, &thread))?;
         Ok(Self {
             usages: usages.to_vec(),
             declared: Instant::now(),
@@ -281,10 +281,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             demux.awaiting.remove(&id);
             demux.waiting.remove(&id);
         }
-        if let Err(e) = written {
-            return Err(PortError::Transport {
+        if let Err(source) = written {
+            return Err(PortError::Write {
                 port: self.port.clone(),
-                reason: e.to_string(),
+                what: "a request".to_owned(),
+                source,
             });
         }
         let reply = reply.ok_or_else(|| timed_out(Some(owner)))?;
@@ -340,9 +341,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 task: self.task.clone(),
                 payload,
             })
-            .map_err(|e| PortError::Transport {
+            .map_err(|source| PortError::Write {
                 port: self.port.clone(),
-                reason: e.to_string(),
+                what: "a broadcast reply".to_owned(),
+                source,
             })?;
         Ok(value)
     }

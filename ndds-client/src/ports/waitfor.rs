@@ -66,9 +66,10 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
         check_name(name)?;
         let tasks: BTreeSet<String> = tasks.iter().map(|t| (*t).to_owned()).collect();
         if !tasks.contains(task) {
-            return Err(PortError::Transport {
-                port: name.to_owned(),
-                reason: format!("task `{task}` is not among the rendezvous' tasks {tasks:?}"),
+            return Err(PortError::UnknownTask {
+                name: name.to_owned(),
+                task: task.to_owned(),
+                tasks: tasks.into_iter().collect(),
             });
         }
         let topic = format!("waitfor/{name}");

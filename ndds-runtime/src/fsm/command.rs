@@ -69,20 +69,25 @@ impl CommandServer {
         let owner: PortOwner<Vec<Stimulus>, CommandReply> =
             PortOwner::declare(participant, port, &shared.name)?;
         let (replies, outgoing) = std::sync::mpsc::sync_channel(REPLIES_WAITING);
-        let spawn_error = |e: std::io::Error| PortError::Transport {
-            port: port.to_owned(),
-            reason: e.to_string(),
+        let spawn_error = |thread: String| {
+            move |source| PortError::Spawn {
+                port: Some(port.to_owned()),
+                thread,
+                source,
+            }
         };
         let name = port.to_owned();
+        let thread = format!("fsm-{}-replies", shared.name);
         let replier = std::thread::Builder::new()
-            .name(format!("fsm-{}-replies", shared.name))
+            .name(thread.clone())
             .spawn(move || send_replies(&name, &outgoing))
-            .map_err(spawn_error)?;
+            .map_err(spawn_error(thread))?;
         let weak = Arc::downgrade(shared);
+        let thread = format!("fsm-{}-commands", shared.name);
         let receiver = std::thread::Builder::new()
-            .name(format!("fsm-{}-commands", shared.name))
+            .name(thread.clone())
             .spawn(move || receive(&weak, &owner, &replies))
-            .map_err(spawn_error)?;
+            .map_err(spawn_error(thread))?;
         Ok(Self {
             receiver: Some(receiver),
             replier: Some(replier),

@@ -11,8 +11,10 @@ use super::decl::{self, PortDecl, Serves, TriggerDecl};
 use super::source::{Diagnostics, Location, RawValue, SourceFile};
 use super::{LoadOptions, MachineEntry, MachineSlot, System, SystemError};
 use crate::fsm::{ActionSet, FsmError, Program, StateMachine, Stimulus};
+use crate::habitat::HabitatError;
 use crate::{
-    Binder, Mat, ModuleError, Problem, RoutineResult, Runtime, SampleContext, SampleModule, Shape,
+    Binder, Mat, ModuleError, Problem, RoutineResult, Runtime, RuntimeError, SampleContext,
+    SampleModule, Shape,
 };
 use ndds_client::Participant;
 use ndds_client::ports::PortOwner;
@@ -81,21 +83,108 @@ impl Places {
     }
 }
 
-/// The location of the parameter a component's refusal names (its message says
-/// "parameter `NAME`: ..."), else `fallback`.
-fn param_named<'a>(
-    message: &str,
+/// The module error inside `err`: the source of [`RuntimeError::Build`], or the first
+/// [`ModuleError`] down its chain of sources.
+fn module_error(err: &RuntimeError) -> Option<&ModuleError> {
+    if let RuntimeError::Build { source, .. } = err {
+        return Some(source);
+    }
+    let mut cause = std::error::Error::source(err);
+    while let Some(e) = cause {
+        if let Some(found) = e.downcast_ref::<ModuleError>() {
+            return Some(found);
+        }
+        cause = e.source();
+    }
+    None
+}
+
+/// Where the parameter a component refused ([`ModuleError::Param`]) was written, else
+/// `fallback`.
+fn param_at<'a>(
+    err: &RuntimeError,
     params: &'a BTreeMap<String, Location>,
     fallback: &'a Location,
 ) -> &'a Location {
-    message
-        .split("parameter `")
-        .skip(1)
-        .filter_map(|rest| rest.split('`').next())
+    match module_error(err) {
         // `plant.stiffness` is a key of the table `plant`.
-        .filter_map(|name| params.get(name.split('.').next().unwrap_or(name)))
-        .next()
-        .unwrap_or(fallback)
+        Some(ModuleError::Param { name, .. }) => name
+            .split('.')
+            .next()
+            .and_then(|key| params.get(key))
+            .unwrap_or(fallback),
+        _ => fallback,
+    }
+}
+
+/// Whether `err` is a refusal for want of a participant: a network binding, or a module
+/// that says it [needs one](ModuleError::NeedsParticipant).
+fn needs_participant(err: &RuntimeError) -> bool {
+    matches!(
+        err,
+        RuntimeError::NoParticipant(_) | RuntimeError::Habitat(HabitatError::NoParticipant(_))
+    ) || matches!(module_error(err), Some(ModuleError::NeedsParticipant))
+}
+
+/// What building refused so far: problems of the description, and (loaded without a
+/// participant) what one would let through.
+struct Refusals {
+    /// Loaded with a participant: a refusal for want of one is a problem like any other.
+    with_participant: bool,
+    problems: Diagnostics,
+    needs_participant: Diagnostics,
+}
+
+impl Refusals {
+    fn new(participant: Option<&Participant>) -> Self {
+        Self {
+            with_participant: participant.is_some(),
+            problems: Diagnostics::default(),
+            needs_participant: Diagnostics::default(),
+        }
+    }
+
+    /// Reports `err` at `at`, among the problems or among what needs a participant.
+    fn refuse(&mut self, at: &Location, err: &RuntimeError) {
+        if !self.with_participant && needs_participant(err) {
+            self.needs_participant.push(at, err.to_string());
+        } else {
+            self.problems.push(at, err.to_string());
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.problems.is_empty() && self.needs_participant.is_empty()
+    }
+
+    /// The problems if there are any, else what needs a participant, else nothing.
+    fn into_result(self) -> Result<(), SystemError> {
+        if !self.problems.is_empty() {
+            return Err(invalid(self.problems));
+        }
+        if !self.needs_participant.is_empty() {
+            return Err(SystemError::NeedsParticipant(in_file_order(
+                self.needs_participant,
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Each network binding and port of `d`, loaded without a participant.
+fn network_sections(d: &decl::Description) -> Diagnostics {
+    let mut needs = Diagnostics::default();
+    let advice = "needs a connection to a daemon (load the system with a participant)";
+    for s in &d.subscribes {
+        needs.push(&s.at, format!("subscribing to `{}` {advice}", s.topic));
+    }
+    for s in &d.publishes {
+        needs.push(&s.at, format!("publishing on `{}` {advice}", s.topic));
+    }
+    for port in &d.ports {
+        needs.push(&port.name.at, format!("port `{}` {advice}", port.name.name));
+    }
+    needs
 }
 
 pub(crate) fn build(
@@ -137,25 +226,18 @@ pub(crate) fn build_into(
         line: 1,
         column: 1,
     });
-    if participant.is_none() {
-        for at in d
-            .subscribes
-            .iter()
-            .map(|s| &s.at)
-            .chain(d.publishes.iter().map(|s| &s.at))
-            .chain(d.ports.iter().map(|s| &s.name.at))
-        {
-            p.push(at, super::NEEDS_PARTICIPANT);
-        }
-    }
     if !p.is_empty() {
         return Err(invalid(p));
     }
+    if participant.is_none() {
+        let needs = network_sections(&d);
+        if !needs.is_empty() {
+            return Err(SystemError::NeedsParticipant(in_file_order(needs)));
+        }
+    }
 
     let mut places = Places::default();
-    let refuse = |p: &mut Diagnostics, at: &Location, err: &dyn std::fmt::Display| {
-        p.push(at, err.to_string());
-    };
+    let mut found = Refusals::new(participant);
 
     for h in &d.habitats {
         let mut habitat_options = h.options.clone();
@@ -163,13 +245,13 @@ pub(crate) fn build_into(
             habitat_options.clock = crate::Clock::Manual;
         }
         if let Err(err) = rt.create_habitat(&h.name.name, habitat_options) {
-            refuse(&mut p, &h.name.at, &err);
+            found.refuse(&h.name.at, &err);
         }
     }
     for m in &d.mats {
         places.mats.insert(m.name.name.clone(), m.name.at.clone());
         if let Err(err) = rt.create_mat(m.value.clone()) {
-            refuse(&mut p, &m.name.at, &err);
+            found.refuse(&m.name.at, &err);
         }
     }
     // Groups before modules: a module installed into an inactive group never conflicts with
@@ -188,7 +270,7 @@ pub(crate) fn build_into(
     }
     for ((category, group), (modules, at)) in &groups {
         if let Err(err) = rt.group(category, group, modules) {
-            refuse(&mut p, at, &err);
+            found.refuse(at, &err);
         }
     }
     for conf in &d.configurations {
@@ -201,7 +283,7 @@ pub(crate) fn build_into(
             .map(|(c, g, _)| (c.as_str(), g.as_str()))
             .collect();
         if let Err(err) = rt.configuration(&conf.name.name, &pairs) {
-            refuse(&mut p, &conf.name.at, &err);
+            found.refuse(&conf.name.at, &err);
         }
     }
     for c in &d.components {
@@ -218,9 +300,7 @@ pub(crate) fn build_into(
         if let Err(err) =
             rt.install_component(&c.habitat.name, &c.name.name, &c.type_name.name, &c.params)
         {
-            let message = err.to_string();
-            let at = param_named(&message, &c.param_at, &c.name.at);
-            refuse(&mut p, at, &err);
+            found.refuse(param_at(&err, &c.param_at, &c.name.at), &err);
         }
     }
     // Subscriptions after the components: a subscribed CSMat that a component created (a
@@ -236,7 +316,7 @@ pub(crate) fn build_into(
             .entry(s.mat.name.clone())
             .or_insert_with(|| s.mat.at.clone());
         if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
-            refuse(&mut p, &s.at, &err);
+            found.refuse(&s.at, &err);
         }
     }
     for r in &d.rates {
@@ -250,7 +330,7 @@ pub(crate) fn build_into(
             (&r.from.0.name, &r.from.1.name),
             (&r.to.0.name, &r.to.1.name),
         ) {
-            refuse(&mut p, &r.name.at, &err);
+            found.refuse(&r.name.at, &err);
         }
     }
     let mut machines: BTreeMap<String, MachineEntry> = BTreeMap::new();
@@ -262,7 +342,7 @@ pub(crate) fn build_into(
         let actions = pending.actions(&rt);
         let problems = crate::fsm::verify(&m.program, &|action| actions.codes(action));
         for problem in problems {
-            p.push(
+            found.problems.push(
                 &m.at,
                 format!(
                     "state machine `{}` ({}): {problem}",
@@ -291,7 +371,7 @@ pub(crate) fn build_into(
         };
         let slot = Arc::clone(&entry.slot);
         if let Err(err) = rt.install(&t.habitat.name, &module, |b| Ok(Trigger::new(b, t, slot))) {
-            refuse(&mut p, &t.at, &err);
+            found.refuse(&t.at, &err);
         }
     }
     for s in &d.publishes {
@@ -301,24 +381,25 @@ pub(crate) fn build_into(
             .uses
             .insert((module, s.mat.name.clone()), s.mat.at.clone());
         if let Err(err) = rt.publish(&s.habitat.name, &s.mat.name, &s.topic, s.qos) {
-            refuse(&mut p, &s.at, &err);
+            found.refuse(&s.at, &err);
         }
     }
     if let Some(conf) = &d.configuration
-        && p.is_empty()
+        && found.is_empty()
         && let Err(err) = rt.switch(&conf.name)
     {
-        refuse(&mut p, &conf.at, &err);
+        found.refuse(&conf.at, &err);
     }
-    if p.is_empty() {
+    // A module missing for want of a participant would show as a missing producer.
+    if found.is_empty() {
         let report = rt.verify();
         for problem in &report.problems {
-            p.push(&places.problem(problem, &fallback), problem.to_string());
+            found
+                .problems
+                .push(&places.problem(problem, &fallback), problem.to_string());
         }
     }
-    if !p.is_empty() {
-        return Err(invalid(p));
-    }
+    found.into_result()?;
     Ok(System {
         name: rt.name().to_owned(),
         files: files.iter().map(|f| f.path.as_ref().clone()).collect(),
@@ -339,13 +420,18 @@ pub(crate) fn build_into(
 type GroupDecl<'a> = ((String, String), (Vec<&'a str>, Location));
 
 /// The problems, in file order.
-fn invalid(mut p: Diagnostics) -> SystemError {
+fn invalid(p: Diagnostics) -> SystemError {
+    SystemError::Invalid(in_file_order(p))
+}
+
+/// `p` sorted by place, the first [`MAX_DIAGNOSTICS`](super::source::MAX_DIAGNOSTICS) kept.
+fn in_file_order(mut p: Diagnostics) -> Diagnostics {
     p.0.sort_by(|a, b| {
         let (a, b) = (&a.location, &b.location);
         (a.file.as_path(), a.line, a.column).cmp(&(b.file.as_path(), b.line, b.column))
     });
     p.truncate();
-    SystemError::Invalid(p)
+    p
 }
 
 /// A state machine loaded and verified, started with the system.

@@ -57,11 +57,6 @@ use crate::fsm::{FsmError, MachineState, StateMachine};
 use crate::{HabitatStats, Registry, Runtime, RuntimeError};
 use ndds_client::Participant;
 
-/// The problem reported at each network binding and port of a description loaded without a
-/// participant (so a tool can tell "needs a daemon" from other problems).
-pub const NEEDS_PARTICIPANT: &str =
-    "network bindings and ports need a connection to a daemon (load the system with a participant)";
-
 /// Why a system could not be loaded or started.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -69,6 +64,12 @@ pub enum SystemError {
     /// The description is wrong: every problem, each where it was written.
     #[error("{0}")]
     Invalid(Diagnostics),
+    /// Loaded without a participant, the description is right but needs the network: each
+    /// network binding and port (or module that needs a participant), where it was written.
+    /// Load it again with a participant. Reported only when nothing else is wrong
+    /// ([`Invalid`](Self::Invalid) comes first).
+    #[error("{0}")]
+    NeedsParticipant(Diagnostics),
     /// The runtime refused to start.
     #[error(transparent)]
     Runtime(#[from] RuntimeError),
@@ -126,8 +127,8 @@ impl System {
     /// Reads `path` and the files it includes, checks them, builds the system and verifies
     /// it. Its components are made from `library`'s types (the built-in library is
     /// `ndds_components::library()`). With a participant, network bindings, state machines
-    /// and ports are on the network; without one, a description that publishes or subscribes
-    /// is refused.
+    /// and ports are on the network; without one, a description that publishes, subscribes
+    /// or declares ports is refused with [`SystemError::NeedsParticipant`].
     pub fn load(
         path: impl AsRef<Path>,
         participant: Option<&Participant>,
