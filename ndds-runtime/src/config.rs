@@ -1,21 +1,53 @@
 //! The configuration manager: modules → module groups → categories (one active group each) →
-//! named configurations, switched atomically at sample boundaries.
+//! named configurations.
+//!
+//! A switch is prepared off the habitat threads and swapped in by each habitat at a sample
+//! boundary, in the way ros2_control switches controllers:
+//! 1. the next active set is checked against the database (a CSMat written in two habitats)
+//!    and each affected habitat's next execution order is sorted, without any list lock: a
+//!    failure changes nothing;
+//! 2. the entering modules are lent out of their (sampling) lists and their `enable` runs on
+//!    the calling thread while the habitats go on sampling the old set, so an expensive
+//!    `enable` (an LQG design) costs no sample; it can read the leaving modules' outputs;
+//! 3. the affected lists are taken together at their sample boundaries and the prepared
+//!    orders swapped in (moves only: no routine runs, nothing is sorted);
+//! 4. the leaving modules, lent out by the swap, get `disable` on the calling thread after
+//!    their last sample, and go back into their lists.
 
 use std::collections::BTreeMap;
+use std::sync::{MutexGuard, TryLockError};
+use std::time::Duration;
 
 use super::database::{CategoryEntry, Database, GroupEntry, ObjectKind};
 use super::error::RuntimeError;
 use super::habitat::Habitat;
-use super::list::ExecList;
-use super::runtime::{Runtime, check_name, lock};
-use std::sync::MutexGuard;
+use super::list::inside_routine;
+use super::list::{ExecList, Lent, Routine};
+use super::module::SampleContext;
+use super::requests::Request;
+use super::runtime::{Runtime, check_name, lock, refuse_inside_routine};
+
+/// Which group each category has active (`None`: none).
+type ActiveGroups = BTreeMap<String, Option<String>>;
+
+/// One affected habitat's part of a switch.
+struct Plan {
+    habitat: Habitat,
+    next: Vec<bool>,
+    order: Vec<usize>,
+    entering: Vec<usize>,
+    lent: Vec<Lent>,
+    ctx: SampleContext,
+}
 
 impl Runtime {
     /// Creates module group `group` in `category` with `modules` (which may be installed
     /// later). The first group of a category becomes its active group.
     pub fn group(&self, category: &str, group: &str, modules: &[&str]) -> Result<(), RuntimeError> {
+        refuse_inside_routine("group")?;
         check_name(ObjectKind::Category, category)?;
         check_name(ObjectKind::Group, group)?;
+        let _structure = self.inner.structure();
         let mut db = self.db();
         if db.groups.contains_key(group) {
             return Err(RuntimeError::Duplicate {
@@ -37,7 +69,9 @@ impl Runtime {
             entry.active = Some(group.to_owned());
         }
         let after = db.active_groups();
-        if let Err(err) = self.apply(&mut db, &after) {
+        drop(db);
+        if let Err(err) = self.apply(&after) {
+            let mut db = self.db();
             db.groups.remove(group);
             let entry = db.categories.entry(category.to_owned()).or_default();
             entry.groups.retain(|g| g != group);
@@ -57,6 +91,7 @@ impl Runtime {
         name: &str,
         selections: &[(&str, &str)],
     ) -> Result<(), RuntimeError> {
+        refuse_inside_routine("configuration")?;
         check_name(ObjectKind::Configuration, name)?;
         let mut db = self.db();
         if db.configurations.contains_key(name) {
@@ -81,38 +116,34 @@ impl Runtime {
         Ok(())
     }
 
-    /// Switches to configuration `name`, atomically at each habitat's next sample boundary:
-    /// the leaving modules' `disable`, then the entering modules' `enable` (which can still
-    /// read the leaving modules' outputs), then the lists are re-sorted. If the new active
-    /// set cannot be sorted nothing changes.
+    /// Switches to configuration `name`: each affected habitat swaps in its prepared list at
+    /// its next sample boundary (see the module doc for the steps, and where `enable` and
+    /// `disable` run). If the new active set cannot be sorted nothing changes. Called from
+    /// inside a module's routine, the switch is queued and carried out after the routine.
     pub fn switch(&self, name: &str) -> Result<(), RuntimeError> {
-        let mut db = self.db();
-        let selections =
-            db.configurations
+        if inside_routine() {
+            self.inner.request(Request::Switch(name.to_owned()));
+            return Ok(());
+        }
+        let _structure = self.inner.structure();
+        let active = {
+            let db = self.db();
+            let selections = db
+                .configurations
                 .get(name)
-                .cloned()
                 .ok_or_else(|| RuntimeError::Unknown {
                     kind: ObjectKind::Configuration,
                     name: name.to_owned(),
                 })?;
-        let mut active = db.active_groups();
-        for (category, group) in &selections {
-            Self::check_group(&db, category, group)?;
-            active.insert(category.clone(), Some(group.clone()));
-        }
-        self.apply(&mut db, &active)?;
-        db.current = Some(name.to_owned());
-        Ok(())
-    }
-
-    /// Makes `group` the active group of `category` (the configuration becomes unnamed).
-    pub fn activate_group(&self, category: &str, group: &str) -> Result<(), RuntimeError> {
-        let mut db = self.db();
-        Self::check_group(&db, category, group)?;
-        let mut active = db.active_groups();
-        active.insert(category.to_owned(), Some(group.to_owned()));
-        self.apply(&mut db, &active)?;
-        db.current = None;
+            let mut active = db.active_groups();
+            for (category, group) in selections {
+                Self::check_group(&db, category, group)?;
+                active.insert(category.clone(), Some(group.clone()));
+            }
+            active
+        };
+        self.apply(&active)?;
+        self.db().current = Some(name.to_owned());
         Ok(())
     }
 
@@ -145,72 +176,77 @@ impl Runtime {
             .collect()
     }
 
-    /// Applies a new set of active groups to every habitat, all or nothing.
-    fn apply(
-        &self,
-        db: &mut Database,
-        active: &BTreeMap<String, Option<String>>,
-    ) -> Result<(), RuntimeError> {
-        // Writers in different habitats, from the database (no lock needed); writers in one
-        // habitat are the sort's to refuse, with its own error.
-        let mut writers: BTreeMap<&str, (&str, &str)> = BTreeMap::new();
-        for (name, entry) in &db.modules {
-            if !db.is_active_with(name, active) {
-                continue;
-            }
-            for mat in entry.interface.output_names() {
-                match writers.get(mat) {
-                    Some((first, habitat)) if *habitat != entry.habitat => {
-                        return Err(RuntimeError::DoubleWriter {
-                            mat: mat.to_owned(),
-                            first: (*first).to_owned(),
-                            second: name.clone(),
-                        });
-                    }
-                    Some(_) => {}
-                    None => {
-                        writers.insert(mat, (name, &entry.habitat));
-                    }
-                }
+    /// Applies a new set of active groups to every habitat, all or nothing. The caller holds
+    /// the structure lock and not the database's.
+    fn apply(&self, active: &ActiveGroups) -> Result<(), RuntimeError> {
+        let mut plans = self.plan_switch(active)?;
+        for plan in &mut plans {
+            lend_entering(plan);
+            let ctx = plan.ctx;
+            for lent in &mut plan.lent {
+                lent.call(Routine::Enable, &ctx);
             }
         }
-        // Only the habitats whose active set changes are locked (each at its next sample
-        // boundary, all together, in name order), so a switch never waits on the others.
-        let affected: Vec<Habitat> = db
-            .habitats
-            .values()
-            .filter(|h| {
-                db.modules.iter().any(|(name, m)| {
-                    m.habitat == h.name() && m.active != db.is_active_with(name, active)
-                })
-            })
-            .cloned()
-            .collect();
-        let mut lists: Vec<MutexGuard<'_, ExecList>> =
-            affected.iter().map(|h| lock(&h.shared.list)).collect();
-        let mut plans = Vec::with_capacity(lists.len());
-        for (habitat, list) in affected.iter().zip(&lists) {
-            let next: Vec<bool> = list
-                .slots
-                .iter()
-                .map(|slot| db.is_active_with(&slot.name, active))
+        let mut leaving = swap_at_boundaries(&mut plans);
+        for (plan, lent) in plans.iter().zip(&mut leaving) {
+            let ctx = plan.ctx;
+            for module in lent.iter_mut() {
+                module.call(Routine::Disable, &ctx);
+            }
+        }
+        for (plan, lent) in plans.iter().zip(leaving) {
+            lock(&plan.habitat.shared.list).restore(lent);
+        }
+        self.commit(active);
+        Ok(())
+    }
+
+    /// Step 1: the checks, and each affected habitat's next order (nothing changes yet).
+    fn plan_switch(&self, active: &ActiveGroups) -> Result<Vec<Plan>, RuntimeError> {
+        let (affected, next_of) = {
+            let db = self.db();
+            check_writers(&db, active)?;
+            let next_of: BTreeMap<String, bool> = db
+                .modules
+                .keys()
+                .map(|name| (name.clone(), db.is_active_with(name, active)))
                 .collect();
-            let order = list
-                .plan(|i| next[i])
+            (affected_habitats(&db, &next_of), next_of)
+        };
+        let mut plans = Vec::with_capacity(affected.len());
+        for habitat in affected {
+            let (layout, ctx) = {
+                let list = lock(&habitat.shared.list);
+                (list.layout(), list.ctx)
+            };
+            let next: Vec<bool> = layout
+                .names()
+                .map(|name| next_of.get(name).copied().unwrap_or(false))
+                .collect();
+            let order = layout
+                .plan(|i, _| next[i])
                 .map_err(|source| RuntimeError::Sort {
                     habitat: habitat.name().to_owned(),
                     source,
                 })?;
-            plans.push((next, order));
+            let entering = (0..next.len())
+                .filter(|&i| next[i] && !layout.is_active(i))
+                .collect();
+            plans.push(Plan {
+                habitat,
+                next,
+                order,
+                entering,
+                lent: Vec::new(),
+                ctx,
+            });
         }
-        drop(writers);
-        for (list, (next, _)) in lists.iter_mut().zip(&plans) {
-            list.leave(next);
-        }
-        for (list, (next, order)) in lists.iter_mut().zip(plans) {
-            list.enter(&next, order);
-        }
-        drop(lists);
+        Ok(plans)
+    }
+
+    /// Records the new active set in the database.
+    fn commit(&self, active: &ActiveGroups) {
+        let mut db = self.db();
         let flags: Vec<(String, bool)> = db
             .modules
             .keys()
@@ -234,6 +270,112 @@ impl Runtime {
                 );
             }
         }
-        Ok(())
     }
+}
+
+/// A CSMat written by active modules of two habitats (writers in one habitat are the sort's
+/// to refuse, with its own error).
+fn check_writers(db: &Database, active: &ActiveGroups) -> Result<(), RuntimeError> {
+    let mut writers: BTreeMap<&str, (&str, &str)> = BTreeMap::new();
+    for (name, entry) in &db.modules {
+        if !db.is_active_with(name, active) {
+            continue;
+        }
+        for mat in entry.interface.output_names() {
+            match writers.get(mat) {
+                Some((first, habitat)) if *habitat != entry.habitat => {
+                    return Err(RuntimeError::DoubleWriter {
+                        mat: mat.to_owned(),
+                        first: (*first).to_owned(),
+                        second: name.clone(),
+                    });
+                }
+                Some(_) => {}
+                None => {
+                    writers.insert(mat, (name, &entry.habitat));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The habitats whose active set changes (the others are not touched at all), by name.
+fn affected_habitats(db: &Database, next_of: &BTreeMap<String, bool>) -> Vec<Habitat> {
+    db.habitats
+        .values()
+        .filter(|h| {
+            db.modules
+                .iter()
+                .any(|(name, m)| m.habitat == h.name() && m.active != next_of[name])
+        })
+        .cloned()
+        .collect()
+}
+
+/// Step 2: lends a sampling habitat's entering modules out, for their `enable`.
+fn lend_entering(plan: &mut Plan) {
+    let mut list = lock(&plan.habitat.shared.list);
+    if list.sampling {
+        plan.lent = list.lend(&plan.entering);
+        plan.ctx = list.ctx;
+    }
+}
+
+/// Step 3: every affected list at once, each at its sample boundary; returns the modules
+/// that left, lent out for their `disable`.
+fn swap_at_boundaries(plans: &mut [Plan]) -> Vec<Vec<Lent>> {
+    let habitats: Vec<Habitat> = plans.iter().map(|p| p.habitat.clone()).collect();
+    let handles: Vec<&Habitat> = habitats.iter().collect();
+    let mut lists = lock_together(&handles);
+    plans
+        .iter_mut()
+        .zip(lists.iter_mut())
+        .map(|(plan, list)| {
+            let sampling = list.sampling;
+            let leaving = list.swap(
+                &plan.next,
+                std::mem::take(&mut plan.order),
+                std::mem::take(&mut plan.lent),
+            );
+            if sampling {
+                leaving
+            } else {
+                list_restore_now(list, leaving)
+            }
+        })
+        .collect()
+}
+
+/// A list that does not sample gets its leaving modules back at once (no `disable`).
+fn list_restore_now(list: &mut ExecList, leaving: Vec<Lent>) -> Vec<Lent> {
+    list.restore(leaving);
+    Vec::new()
+}
+
+/// Locks every list, each between two of its samples. With several, they are taken with
+/// `try_lock` together and released and retried if one is in a sample, so no habitat waits
+/// for another's sample; after about a second of that (a habitat sampling back to back), in
+/// name order.
+fn lock_together<'a>(habitats: &[&'a Habitat]) -> Vec<MutexGuard<'a, ExecList>> {
+    if habitats.len() > 1 {
+        for _ in 0..20_000 {
+            if let Some(all) = try_lock_all(habitats) {
+                return all;
+            }
+            std::thread::sleep(Duration::from_micros(50));
+        }
+    }
+    habitats.iter().map(|h| lock(&h.shared.list)).collect()
+}
+
+fn try_lock_all<'a>(habitats: &[&'a Habitat]) -> Option<Vec<MutexGuard<'a, ExecList>>> {
+    habitats
+        .iter()
+        .map(|h| match h.shared.list.try_lock() {
+            Ok(guard) => Some(guard),
+            Err(TryLockError::Poisoned(poisoned)) => Some(poisoned.into_inner()),
+            Err(TryLockError::WouldBlock) => None,
+        })
+        .collect()
 }

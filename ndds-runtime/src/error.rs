@@ -10,6 +10,14 @@ use ndds_client::error::DeclareError;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RuntimeError {
+    /// Called from inside a module's routine, where it cannot be carried out (it would wait
+    /// for the routine itself). `switch`, and a habitat's `start`, `stop`, `set_rate` and
+    /// `reset`, are queued instead.
+    #[error("{operation} cannot be called from inside a module's routine")]
+    InsideRoutine {
+        /// What was called.
+        operation: &'static str,
+    },
     /// A second object of one kind with one name.
     #[error("{kind} `{name}` already exists")]
     Duplicate {

@@ -12,7 +12,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use super::clock::{now_ns, ns, pin_to_cpu, set_realtime, sleep_until_ns, tighten_timer_slack};
-use super::list::ExecList;
+use super::list::{BoundaryTask, ExecList, inside_routine};
+use super::requests::Request;
 use super::stats::{HabitatStats, Timings, percentiles};
 use super::{Inner, VerifyReport};
 use ndds_client::error::DeclareError;
@@ -142,6 +143,15 @@ pub enum HabitatError {
         /// Why.
         source: DeclareError,
     },
+    /// Called from inside a module's routine, where it cannot be carried out (it would wait
+    /// for the routine itself); `start`, `stop`, `set_rate` and `reset` are queued instead.
+    #[error("habitat `{habitat}`: {operation} cannot be called from inside a module's routine")]
+    InsideRoutine {
+        /// The habitat.
+        habitat: String,
+        /// What was called.
+        operation: &'static str,
+    },
     /// The thread could not be spawned.
     #[error("habitat `{habitat}`: cannot spawn its thread: {source}")]
     Spawn {
@@ -235,9 +245,25 @@ impl Habitat {
         self.shared.sampling.load(Ordering::Acquire)
     }
 
-    /// The sample period now.
+    /// The sample period: the one last set (a rate change reaches the modules, with
+    /// `timing_changed`, at the next sample boundary).
     pub fn period(&self) -> Duration {
-        lock(&self.shared.list).ctx.period
+        match lock(&self.shared.options).as_ref() {
+            Some(options) => options.period,
+            None => lock(&self.shared.list).ctx.period,
+        }
+    }
+
+    /// Whether a thread of its own samples it now (a timer or topic clock): routines are then
+    /// called there, and other threads queue work for its sample boundary.
+    fn has_thread(&self) -> bool {
+        lock(&self.shared.thread).is_some()
+    }
+
+    /// Queues `request` to the runtime's request thread (for calls made inside a routine).
+    fn request(&self, request: Request) -> Result<(), HabitatError> {
+        self.runtime()?.request(request);
+        Ok(())
     }
 
     /// Names of the active modules in execution order.
@@ -261,13 +287,20 @@ impl Habitat {
     /// Begins sampling: verifies the whole runtime (refusing to start if any problem is
     /// found), calls every module's `startup`, then the active modules' `enable`, then starts
     /// the clock.
+    ///
+    /// Called from inside a module's routine, the start is queued to the runtime's request
+    /// thread and carried out after that routine (its outcome is logged).
     pub fn start(&self) -> Result<(), HabitatError> {
+        if inside_routine() {
+            return self.request(Request::Start(self.shared.name.clone()));
+        }
+        let runtime = self.runtime()?;
+        let _structure = runtime.structure();
         let _turn = lock(&self.shared.control);
         let name = &self.shared.name;
         let options = lock(&self.shared.options)
             .clone()
             .ok_or_else(|| HabitatError::NotCreated(name.clone()))?;
-        let runtime = self.runtime()?;
         if self.is_running() {
             return Err(HabitatError::AlreadyRunning(name.clone()));
         }
@@ -331,8 +364,22 @@ impl Habitat {
     }
 
     /// Ends sampling after the current sample: the active modules' `disable`, then every
-    /// module's `shutdown`. Does nothing if it is not sampling.
+    /// module's `shutdown`. Does nothing if it is not sampling. Called from inside a module's
+    /// routine, the stop is queued and carried out right after that routine's sample.
     pub fn stop(&self) {
+        if inside_routine() {
+            if let Err(err) = self.request(Request::Stop(self.shared.name.clone())) {
+                tracing::warn!(habitat = %self.shared.name, error = %err, "stop not queued");
+            }
+            return;
+        }
+        // Without its runtime (being dropped) nothing else can change the habitat.
+        let runtime = self.shared.runtime.upgrade();
+        let _structure = runtime.as_ref().map(|rt| rt.structure());
+        self.stop_now();
+    }
+
+    pub(crate) fn stop_now(&self) {
         let _turn = lock(&self.shared.control);
         self.shared.stop.store(true, Ordering::Release);
         let thread = lock(&self.shared.thread).take();
@@ -348,6 +395,12 @@ impl Habitat {
     /// Runs one sample of a [`Clock::Manual`] habitat, on the calling thread.
     pub fn step(&self) -> Result<(), HabitatError> {
         let name = &self.shared.name;
+        if inside_routine() {
+            return Err(HabitatError::InsideRoutine {
+                habitat: name.clone(),
+                operation: "step",
+            });
+        }
         let manual = lock(&self.shared.options)
             .as_ref()
             .map(|options| options.clock == Clock::Manual);
@@ -372,23 +425,49 @@ impl Habitat {
         Ok(())
     }
 
-    /// Changes the rate at the next sample boundary and calls every module's
-    /// `timing_changed`. A timer-clocked habitat starts its new phase at the next sample.
+    /// Changes the rate: at the next sample boundary the modules see the new period and
+    /// every module's `timing_changed` runs (on the habitat's thread when one samples it, at
+    /// once otherwise). A timer-clocked habitat starts its new phase at that sample. Called
+    /// from inside a module's routine, the change is queued to the runtime's request thread.
     pub fn set_rate(&self, hz: f64) -> Result<(), HabitatError> {
         let period = period_of(hz).ok_or_else(|| HabitatError::InvalidRate {
             habitat: self.shared.name.clone(),
             hz,
         })?;
+        if inside_routine() {
+            return self.request(Request::SetRate(self.shared.name.clone(), hz));
+        }
+        let runtime = self.shared.runtime.upgrade();
+        let _structure = runtime.as_ref().map(|rt| rt.structure());
         if let Some(options) = lock(&self.shared.options).as_mut() {
             options.period = period;
         }
-        lock(&self.shared.list).set_period(period);
+        self.at_boundary(BoundaryTask::Timing(period));
         Ok(())
     }
 
-    /// Calls every module's `reset` at the next sample boundary.
+    /// Calls every module's `reset` at the next sample boundary (at once when it is not
+    /// sampling; queued to the runtime's request thread when called inside a routine).
     pub fn reset(&self) {
-        lock(&self.shared.list).reset();
+        if inside_routine() {
+            if let Err(err) = self.request(Request::Reset(self.shared.name.clone())) {
+                tracing::warn!(habitat = %self.shared.name, error = %err, "reset not queued");
+            }
+            return;
+        }
+        let runtime = self.shared.runtime.upgrade();
+        let _structure = runtime.as_ref().map(|rt| rt.structure());
+        self.at_boundary(BoundaryTask::Reset);
+    }
+
+    /// Queues `task` for the next sample of a habitat with a thread of its own; otherwise
+    /// carries it out now, on this thread (holding the list's lock is then itself a sample
+    /// boundary: a manual habitat's `step` waits for it, and no thread of its own does).
+    fn at_boundary(&self, task: BoundaryTask) {
+        let threaded = self.has_thread();
+        let mut list = lock(&self.shared.list);
+        let now = !(threaded && list.sampling);
+        list.at_boundary(task, now);
     }
 
     /// Statistics: counters since sampling began, distributions over the last complete
@@ -397,7 +476,7 @@ impl Habitat {
         let (rate_hz, active, errors) = {
             let list = lock(&self.shared.list);
             (
-                1.0 / list.ctx.period.as_secs_f64(),
+                1.0 / self.period().as_secs_f64(),
                 list.order.len(),
                 list.module_errors,
             )
@@ -519,6 +598,9 @@ fn run_timer(shared: &Shared, options: &HabitatOptions) {
         let start = now_ns();
         {
             let mut list = lock(&shared.list);
+            if !list.boundary.is_empty() {
+                list.run_boundary_tasks();
+            }
             let p = ns(list.ctx.period).max(1);
             if p != period {
                 period = p;

@@ -73,6 +73,7 @@ mod mat;
 mod module;
 mod network;
 mod registry;
+mod requests;
 #[allow(clippy::module_inception)]
 mod runtime;
 mod sort;

@@ -1,16 +1,40 @@
 //! The execution list a habitat runs: its installed modules, which of them are active, and the
 //! dependency-sorted order of the active ones. Entry routines are called from here only.
+//!
+//! Who calls what, where (the contract `SampleModule`'s table documents):
+//! - The habitat's thread (or the caller of `step`) holds the list's lock for one sample and
+//!   runs `execute` and `state_update`; at the start of a sample it first carries out the
+//!   [`BoundaryTask`]s queued since the last one (`timing_changed`, `reset`).
+//! - Other threads take the lock only for short moves that run no user code and sort nothing
+//!   (lending modules out, swapping in a prepared order, installing a built module), so a
+//!   habitat never waits on a lock held while a routine runs elsewhere or a list is sorted.
+//! - `enable` and `disable` of a switch, and the routines of a module being installed into or
+//!   removed from a sampling habitat, run on the thread that asked, on modules lent out of
+//!   the list ([`ExecList::lend`]): the habitat keeps sampling meanwhile.
 
+use std::cell::Cell;
 use std::time::Duration;
 
 use super::module::{Interface, ModuleError, RoutineResult, SampleContext, SampleModule};
 use super::sort::{SortError, SortNode, sort};
 
+thread_local! {
+    /// Set while this thread runs a module's routine.
+    static IN_ROUTINE: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether the calling thread is inside a module's entry routine (requests to the runtime
+/// made there are queued, never carried out re-entrantly).
+pub(crate) fn inside_routine() -> bool {
+    IN_ROUTINE.with(Cell::get)
+}
+
 /// One installed module.
 pub(crate) struct Slot {
     pub(crate) name: String,
     pub(crate) interface: Interface,
-    module: Box<dyn SampleModule>,
+    /// `None` while lent out to a thread running its `enable` or `disable`.
+    module: Option<Box<dyn SampleModule>>,
     pub(crate) active: bool,
     errors: u64,
 }
@@ -20,16 +44,23 @@ impl Slot {
         Self {
             name,
             interface,
-            module,
+            module: Some(module),
             active: false,
             errors: 0,
         }
+    }
+
+    /// The module, while it is not lent out (a slot being installed always has it).
+    pub(crate) fn module_mut(&mut self) -> &mut dyn SampleModule {
+        self.module
+            .as_deref_mut()
+            .expect("a slot being installed holds its module")
     }
 }
 
 /// Which routine failed (for the log).
 #[derive(Clone, Copy, Debug)]
-enum Routine {
+pub(crate) enum Routine {
     Execute,
     StateUpdate,
     Enable,
@@ -40,8 +71,78 @@ enum Routine {
     Reset,
 }
 
-/// A habitat's modules. Every method is called with the habitat's list lock held, so routines
-/// of one habitat never run concurrently and changes land between two samples.
+/// Work a habitat does at its next sample boundary, on its own thread, before the sample.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum BoundaryTask {
+    /// Adopt this period and call every module's `timing_changed`.
+    Timing(Duration),
+    /// Call every module's `reset`.
+    Reset,
+}
+
+/// A module lent out of its list, with the outcome of the routines run on it meanwhile.
+pub(crate) struct Lent {
+    index: usize,
+    module: Box<dyn SampleModule>,
+    failures: Vec<(Routine, ModuleError)>,
+}
+
+impl Lent {
+    /// Runs `routine` on the lent module (no list lock is held).
+    pub(crate) fn call(&mut self, routine: Routine, ctx: &SampleContext) {
+        if let Err(err) = run_routine(self.module.as_mut(), routine, ctx) {
+            self.failures.push((routine, err));
+        }
+    }
+}
+
+/// The part of a list a plan is made from (cloned under the lock, sorted without it).
+pub(crate) struct Layout {
+    slots: Vec<(String, Interface, bool)>,
+}
+
+impl Layout {
+    /// The slots for which `active(index, name)` holds, in execution order, or why they
+    /// cannot be ordered.
+    pub(crate) fn plan(
+        &self,
+        active: impl Fn(usize, &str) -> bool,
+    ) -> Result<Vec<usize>, SortError> {
+        let members: Vec<usize> = (0..self.slots.len())
+            .filter(|&i| active(i, &self.slots[i].0))
+            .collect();
+        let nodes: Vec<SortNode<'_>> = members
+            .iter()
+            .map(|&i| {
+                let (name, iface, _) = &self.slots[i];
+                SortNode {
+                    module: name,
+                    reads: iface.feedthrough_names().collect(),
+                    writes: iface.output_names().collect(),
+                }
+            })
+            .collect();
+        Ok(sort(&nodes)?.into_iter().map(|k| members[k]).collect())
+    }
+
+    /// The slots' names, in installation order.
+    pub(crate) fn names(&self) -> impl Iterator<Item = &str> {
+        self.slots.iter().map(|(name, _, _)| name.as_str())
+    }
+
+    /// Whether slot `i` is active now.
+    pub(crate) fn is_active(&self, i: usize) -> bool {
+        self.slots[i].2
+    }
+
+    /// Adds a slot at the end (the plan for an install).
+    pub(crate) fn push(&mut self, name: &str, interface: Interface) {
+        self.slots.push((name.to_owned(), interface, false));
+    }
+}
+
+/// A habitat's modules. The habitat's list lock guards it; see the module doc for who holds
+/// that lock when.
 pub(crate) struct ExecList {
     pub(crate) slots: Vec<Slot>,
     /// Indices of the active slots, in execution order.
@@ -49,6 +150,8 @@ pub(crate) struct ExecList {
     pub(crate) sampling: bool,
     pub(crate) ctx: SampleContext,
     pub(crate) module_errors: u64,
+    /// Carried out at the start of the next sample.
+    pub(crate) boundary: Vec<BoundaryTask>,
 }
 
 impl ExecList {
@@ -63,6 +166,7 @@ impl ExecList {
                 time: Duration::ZERO,
             },
             module_errors: 0,
+            boundary: Vec::new(),
         }
     }
 
@@ -70,40 +174,42 @@ impl ExecList {
         self.slots.iter().position(|slot| slot.name == name)
     }
 
-    /// The execution order if `active(i)` said which slots are active.
-    pub(crate) fn plan(&self, active: impl Fn(usize) -> bool) -> Result<Vec<usize>, SortError> {
-        let members: Vec<usize> = (0..self.slots.len()).filter(|&i| active(i)).collect();
-        let nodes: Vec<SortNode<'_>> = members
-            .iter()
-            .map(|&i| {
-                let iface = &self.slots[i].interface;
-                SortNode {
-                    module: &self.slots[i].name,
-                    reads: iface.feedthrough_names().collect(),
-                    writes: iface.output_names().collect(),
-                }
-            })
-            .collect();
-        Ok(sort(&nodes)?.into_iter().map(|k| members[k]).collect())
+    /// What a plan is made from (cheap clones: names and interfaces).
+    pub(crate) fn layout(&self) -> Layout {
+        Layout {
+            slots: self
+                .slots
+                .iter()
+                .map(|s| (s.name.clone(), s.interface.clone(), s.active))
+                .collect(),
+        }
     }
 
-    /// Runs one sample: every active module's `execute`, then every `state_update`.
+    /// Runs one sample: the queued boundary tasks, then every active module's `execute`, then
+    /// every `state_update`.
     pub(crate) fn run_sample(&mut self) {
+        if !self.boundary.is_empty() {
+            self.run_boundary_tasks();
+        }
         let ctx = self.ctx;
         for k in 0..self.order.len() {
-            let i = self.order[k];
-            let module = &mut self.slots[i].module;
-            let result = guarded(|| module.execute(&ctx));
-            self.check(i, Routine::Execute, result);
+            self.call(self.order[k], Routine::Execute, &ctx);
         }
         for k in 0..self.order.len() {
-            let i = self.order[k];
-            let module = &mut self.slots[i].module;
-            let result = guarded(|| module.state_update(&ctx));
-            self.check(i, Routine::StateUpdate, result);
+            self.call(self.order[k], Routine::StateUpdate, &ctx);
         }
         self.ctx.sample += 1;
         self.ctx.time = self.ctx.time.saturating_add(ctx.period);
+    }
+
+    #[cold]
+    pub(crate) fn run_boundary_tasks(&mut self) {
+        for task in std::mem::take(&mut self.boundary) {
+            match task {
+                BoundaryTask::Timing(period) => self.set_period(period),
+                BoundaryTask::Reset => self.call_all(Routine::Reset),
+            }
+        }
     }
 
     /// Sampling begins: startups (list order), then enables (execution order).
@@ -111,11 +217,11 @@ impl ExecList {
         self.ctx.sample = 0;
         self.ctx.time = Duration::ZERO;
         self.sampling = true;
-        for i in 0..self.slots.len() {
-            self.call(i, Routine::Startup);
-        }
+        self.run_boundary_tasks();
+        self.call_all(Routine::Startup);
+        let ctx = self.ctx;
         for k in 0..self.order.len() {
-            self.call(self.order[k], Routine::Enable);
+            self.call(self.order[k], Routine::Enable, &ctx);
         }
     }
 
@@ -124,91 +230,114 @@ impl ExecList {
         if !self.sampling {
             return;
         }
+        let ctx = self.ctx;
         for k in 0..self.order.len() {
-            self.call(self.order[k], Routine::Disable);
+            self.call(self.order[k], Routine::Disable, &ctx);
         }
-        for i in 0..self.slots.len() {
-            self.call(i, Routine::Shutdown);
-        }
+        self.call_all(Routine::Shutdown);
         self.sampling = false;
     }
 
-    /// First half of a switch: disables the active modules that `next_active` drops.
-    pub(crate) fn leave(&mut self, next_active: &[bool]) {
-        for k in 0..self.order.len() {
-            let i = self.order[k];
-            if !next_active[i] && self.sampling {
-                self.call(i, Routine::Disable);
+    /// Takes the modules of slots `indices` out of the list, for routines to run on them
+    /// without the lock. None of them may be active (the habitat would skip them).
+    pub(crate) fn lend(&mut self, indices: &[usize]) -> Vec<Lent> {
+        indices
+            .iter()
+            .filter_map(|&index| {
+                debug_assert!(
+                    !self.order.contains(&index),
+                    "an active module is never lent"
+                );
+                let module = self.slots[index].module.take()?;
+                Some(Lent {
+                    index,
+                    module,
+                    failures: Vec::new(),
+                })
+            })
+            .collect()
+    }
+
+    /// Puts lent modules back and counts the failures of what ran on them.
+    pub(crate) fn restore(&mut self, lent: Vec<Lent>) {
+        for Lent {
+            index,
+            module,
+            failures,
+        } in lent
+        {
+            self.slots[index].module = Some(module);
+            for (routine, err) in failures {
+                self.note_error(index, routine, &err);
             }
         }
     }
 
-    /// Second half: enables the modules that join, in the new order, and adopts it.
-    pub(crate) fn enter(&mut self, next_active: &[bool], order: Vec<usize>) {
-        for &i in &order {
-            if !self.slots[i].active && self.sampling {
-                self.call(i, Routine::Enable);
-            }
-        }
+    /// Adopts a prepared switch at this sample boundary: `next_active` says which slots are
+    /// active, `order` is their execution order (already sorted). `entering` (lent, enabled)
+    /// come back; the modules that leave the active set are lent out and returned, for their
+    /// `disable` to run without the lock.
+    pub(crate) fn swap(
+        &mut self,
+        next_active: &[bool],
+        order: Vec<usize>,
+        entering: Vec<Lent>,
+    ) -> Vec<Lent> {
+        self.restore(entering);
+        let leaving: Vec<usize> = self
+            .order
+            .iter()
+            .copied()
+            .filter(|&i| !next_active[i])
+            .collect();
         for (slot, &active) in self.slots.iter_mut().zip(next_active) {
             slot.active = active;
         }
         self.order = order;
+        self.lend(&leaving)
     }
 
-    /// Adds a module (already built); `active` says whether it joins the active set.
-    pub(crate) fn install(&mut self, slot: Slot, active: bool) -> Result<(), SortError> {
-        let n = self.slots.len();
+    /// Adds a module (already built, and if sampling already started and enabled) with its
+    /// prepared execution order, counting the failures of the routines run on it before.
+    pub(crate) fn install(
+        &mut self,
+        mut slot: Slot,
+        active: bool,
+        order: Vec<usize>,
+        failures: Vec<(Routine, ModuleError)>,
+    ) {
+        slot.active = active;
         self.slots.push(slot);
-        let order = match self.plan(|i| if i == n { active } else { self.slots[i].active }) {
-            Ok(order) => order,
-            Err(err) => {
-                if let Some(mut slot) = self.slots.pop() {
-                    slot.module.terminate();
-                }
-                return Err(err);
-            }
-        };
-        if self.sampling {
-            self.call(n, Routine::Startup);
+        self.order = order;
+        let index = self.slots.len() - 1;
+        for (routine, err) in failures {
+            self.note_error(index, routine, &err);
         }
-        let mut next: Vec<bool> = self.slots.iter().map(|s| s.active).collect();
-        next[n] = active;
-        self.enter(&next, order);
-        Ok(())
     }
 
-    /// Removes a module: disable (if active and sampling), shutdown (if sampling), terminate.
-    pub(crate) fn remove(&mut self, index: usize) {
-        if self.sampling {
-            if self.slots[index].active {
-                self.call(index, Routine::Disable);
-            }
-            self.call(index, Routine::Shutdown);
-        }
+    /// Takes slot `index` out of the list (a removal); the caller runs its last routines.
+    pub(crate) fn take(&mut self, index: usize) -> Option<(Slot, Box<dyn SampleModule>)> {
         let mut slot = self.slots.remove(index);
-        let _ = guarded(|| {
-            slot.module.terminate();
-            Ok(())
-        });
         self.order.retain(|&i| i != index);
         for i in &mut self.order {
             if *i > index {
                 *i -= 1;
             }
         }
+        let module = slot.module.take()?;
+        Some((slot, module))
     }
 
-    pub(crate) fn set_period(&mut self, period: Duration) {
+    fn set_period(&mut self, period: Duration) {
         self.ctx.period = period;
-        for i in 0..self.slots.len() {
-            self.call(i, Routine::TimingChanged);
-        }
+        self.call_all(Routine::TimingChanged);
     }
 
-    pub(crate) fn reset(&mut self) {
-        for i in 0..self.slots.len() {
-            self.call(i, Routine::Reset);
+    /// Carries out `task` now (no habitat thread samples), or queues it for the next sample.
+    pub(crate) fn at_boundary(&mut self, task: BoundaryTask, now: bool) {
+        self.boundary.push(task);
+        if now {
+            self.run_boundary_tasks();
         }
     }
 
@@ -216,10 +345,9 @@ impl ExecList {
     pub(crate) fn terminate(&mut self) {
         self.stop();
         for slot in &mut self.slots {
-            let _ = guarded(|| {
-                slot.module.terminate();
-                Ok(())
-            });
+            if let Some(module) = slot.module.as_deref_mut() {
+                terminate(module);
+            }
         }
         self.slots.clear();
         self.order.clear();
@@ -233,24 +361,19 @@ impl ExecList {
             .collect()
     }
 
-    fn call(&mut self, i: usize, routine: Routine) {
+    fn call_all(&mut self, routine: Routine) {
         let ctx = self.ctx;
-        let module = &mut self.slots[i].module;
-        let result = guarded(|| match routine {
-            Routine::Execute => module.execute(&ctx),
-            Routine::StateUpdate => module.state_update(&ctx),
-            Routine::Enable => module.enable(&ctx),
-            Routine::Disable => module.disable(&ctx),
-            Routine::Startup => module.startup(&ctx),
-            Routine::Shutdown => module.shutdown(&ctx),
-            Routine::TimingChanged => module.timing_changed(&ctx),
-            Routine::Reset => module.reset(&ctx),
-        });
-        self.check(i, routine, result);
+        for i in 0..self.slots.len() {
+            self.call(i, routine, &ctx);
+        }
     }
 
-    fn check(&mut self, i: usize, routine: Routine, result: RoutineResult) {
-        if let Err(err) = result {
+    #[inline]
+    fn call(&mut self, i: usize, routine: Routine, ctx: &SampleContext) {
+        let Some(module) = self.slots[i].module.as_mut() else {
+            return;
+        };
+        if let Err(err) = run_routine(module.as_mut(), routine, ctx) {
             self.note_error(i, routine, &err);
         }
     }
@@ -265,6 +388,38 @@ impl ExecList {
                 "module routine failed (counted in the habitat's module_errors; later failures of this module are only counted)");
         }
     }
+}
+
+/// Runs one routine of `module`, marked as inside a routine for the thread's duration.
+#[inline]
+pub(crate) fn run_routine(
+    module: &mut dyn SampleModule,
+    routine: Routine,
+    ctx: &SampleContext,
+) -> RoutineResult {
+    let outer = IN_ROUTINE.with(|flag| flag.replace(true));
+    let result = guarded(|| match routine {
+        Routine::Execute => module.execute(ctx),
+        Routine::StateUpdate => module.state_update(ctx),
+        Routine::Enable => module.enable(ctx),
+        Routine::Disable => module.disable(ctx),
+        Routine::Startup => module.startup(ctx),
+        Routine::Shutdown => module.shutdown(ctx),
+        Routine::TimingChanged => module.timing_changed(ctx),
+        Routine::Reset => module.reset(ctx),
+    });
+    IN_ROUTINE.with(|flag| flag.set(outer));
+    result
+}
+
+/// Unloads a module (`terminate`), a panic in it caught.
+pub(crate) fn terminate(module: &mut dyn SampleModule) {
+    let outer = IN_ROUTINE.with(|flag| flag.replace(true));
+    let _ = guarded(|| {
+        module.terminate();
+        Ok(())
+    });
+    IN_ROUTINE.with(|flag| flag.set(outer));
 }
 
 /// Runs a routine; a panic becomes an error (counted like any failure) instead of taking the

@@ -4,7 +4,8 @@
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::mpsc::Sender;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 use std::thread::JoinHandle;
 
 use super::binding::{InputStatus, Reception, Subscriber};
@@ -14,16 +15,45 @@ use super::error::RuntimeError;
 use super::habitat::{
     Habitat, HabitatError, HabitatOptions, period_is_usable, stats_interval_is_usable,
 };
-use super::list::Slot;
+use super::list::{Routine, Slot, inside_routine, run_routine};
 use super::mat::Mat;
 use super::module::{Binder, Interface, ModuleError, SampleModule};
 use super::registry::{Params, Registry};
+use super::requests::{self, Request};
 use super::stats::HabitatStats;
 use super::verify::{VerifyReport, verify};
 use ndds_client::{CallbackConsumer, Participant};
 
 pub(crate) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Refuses a call made inside a module's routine that cannot be queued.
+pub(crate) fn refuse_inside_routine(operation: &'static str) -> Result<(), RuntimeError> {
+    if inside_routine() {
+        return Err(RuntimeError::InsideRoutine { operation });
+    }
+    Ok(())
+}
+
+/// What a failed install undoes: the CSMats its declarations bound, the placeholders it
+/// added, its shape-following entries.
+struct Undo {
+    created: Vec<Mat>,
+    new_names: Vec<String>,
+    follows_before: usize,
+}
+
+impl Undo {
+    fn apply(&self, db: &mut Database) {
+        for mat in &self.created {
+            mat.unbind();
+        }
+        for name in &self.new_names {
+            db.mats.remove(name);
+        }
+        db.follows.truncate(self.follows_before);
+    }
 }
 
 /// The runtime's shared state.
@@ -36,6 +66,16 @@ pub(crate) struct Inner {
     /// Subscribed CSMats by module (`subscribe:<topic>`): habitat and what it records. Never
     /// locked by a habitat thread.
     inputs: Mutex<BTreeMap<String, (String, Arc<Reception>)>>,
+    /// Held for the whole of every change to habitats and their lists (install, remove,
+    /// switch, start, stop, rate, reset), including the routines those run off the habitat
+    /// threads. Never taken by a habitat thread or inside a routine, so changes take turns
+    /// without a habitat ever waiting for one. Lock order: `structure`, then `db`, then a
+    /// list; `db` is never held while waiting for a list.
+    structure: Mutex<()>,
+    /// The request thread's queue (started with the first request, see `requests.rs`).
+    requests: Mutex<Option<Sender<Request>>>,
+    /// This runtime, for the request thread.
+    this: Weak<Inner>,
 }
 
 pub(crate) struct Services {
@@ -49,6 +89,30 @@ pub(crate) struct Services {
 impl Inner {
     pub(crate) fn verify(&self) -> VerifyReport {
         verify(&lock(&self.db))
+    }
+
+    /// Takes the structure lock (see the field).
+    pub(crate) fn structure(&self) -> MutexGuard<'_, ()> {
+        lock(&self.structure)
+    }
+
+    /// Queues a request made inside a routine (see `requests.rs`).
+    pub(crate) fn request(&self, request: Request) {
+        let mut queue = lock(&self.requests);
+        if queue.is_none() {
+            match requests::spawn(Weak::clone(&self.this)) {
+                Ok(tx) => *queue = Some(tx),
+                Err(error) => {
+                    tracing::error!(runtime = %self.name, ?request, %error,
+                        "cannot start the request thread; request dropped");
+                    return;
+                }
+            }
+        }
+        if let Some(tx) = queue.as_ref() {
+            // The receiver lives as long as the runtime: a send cannot fail while `self` does.
+            let _ = tx.send(request);
+        }
     }
 }
 
@@ -135,15 +199,22 @@ impl Runtime {
     fn build(name: &str, participant: Option<Participant>) -> Self {
         let registry = Registry::empty();
         Self {
-            inner: Arc::new(Inner {
+            inner: Arc::new_cyclic(|this| Inner {
                 name: name.to_owned(),
                 db: Mutex::new(Database::default()),
                 participant,
                 registry: Mutex::new(registry),
                 services: Mutex::new(None),
                 inputs: Mutex::new(BTreeMap::new()),
+                structure: Mutex::new(()),
+                requests: Mutex::new(None),
+                this: Weak::clone(this),
             }),
         }
+    }
+
+    pub(crate) fn from_inner(inner: Arc<Inner>) -> Self {
+        Self { inner }
     }
 
     /// A runtime on the network: CSMats can be bound to topics, each habitat's statistics are
@@ -393,8 +464,32 @@ impl Runtime {
         module: &str,
         build: impl FnOnce(&mut Binder<'_>) -> Result<Box<dyn SampleModule>, ModuleError>,
     ) -> Result<(), RuntimeError> {
+        refuse_inside_routine("install")?;
         check_name(ObjectKind::Module, module)?;
         check_name(ObjectKind::Habitat, habitat)?;
+        let _structure = self.inner.structure();
+        let (target, built, active, undo) = self.build_module(habitat, module, build)?;
+        // The database knows the module now; the list gets it without the database lock.
+        let installed = self.insert_into_list(&target, module, built, active);
+        if let Err(source) = installed {
+            let mut db = self.db();
+            db.modules.remove(module);
+            undo.apply(&mut db);
+            return Err(RuntimeError::Sort {
+                habitat: habitat.to_owned(),
+                source,
+            });
+        }
+        Ok(())
+    }
+
+    /// Builds `module` against the database and records it there (active or not).
+    fn build_module(
+        &self,
+        habitat: &str,
+        module: &str,
+        build: impl FnOnce(&mut Binder<'_>) -> Result<Box<dyn SampleModule>, ModuleError>,
+    ) -> Result<(Habitat, Slot, bool, Undo), RuntimeError> {
         let mut db = self.db();
         if db.modules.contains_key(module) {
             return Err(RuntimeError::Duplicate {
@@ -403,33 +498,29 @@ impl Runtime {
             });
         }
         let target = self.habitat_in(&mut db, habitat);
-        let follows_before = db.follows.len();
-        let mut new_names: Vec<String> = Vec::new();
-        let created: Vec<Mat>;
+        let mut undo = Undo {
+            created: Vec::new(),
+            new_names: Vec::new(),
+            follows_before: db.follows.len(),
+        };
         let built = {
             let db_ref: &mut Database = &mut db;
-            let new_names = &mut new_names;
+            let new_names = &mut undo.new_names;
             let mut lookup = |name: &str| {
                 if !db_ref.mats.contains_key(name) {
                     new_names.push(name.to_owned());
                 }
                 db_ref.mat(name)
             };
-            let mut binder = Binder {
-                lookup: &mut lookup,
-                module: module.to_owned(),
-                interface: Interface::default(),
-                follows: Vec::new(),
-                created: Vec::new(),
-            };
+            let mut binder = Binder::detached(module, &mut lookup);
             let result = build(&mut binder);
             let Binder {
                 interface,
                 follows,
-                created: made,
+                created,
                 ..
             } = binder;
-            created = made;
+            undo.created = created;
             result.map(|built| (interface, built, follows))
         };
         let (interface, built) = match built {
@@ -438,7 +529,7 @@ impl Runtime {
                 (interface, built)
             }
             Err(source) => {
-                Self::undo(&mut db, &created, &new_names, follows_before);
+                undo.apply(&mut db);
                 return Err(RuntimeError::Build {
                     module: module.to_owned(),
                     source,
@@ -447,20 +538,11 @@ impl Runtime {
         };
         let active = db.is_active_with(module, &db.active_groups());
         if active && let Some((mat, other)) = Self::writer_elsewhere(&db, habitat, &interface) {
-            Self::undo(&mut db, &created, &new_names, follows_before);
+            undo.apply(&mut db);
             return Err(RuntimeError::DoubleWriter {
                 mat,
                 first: other,
                 second: module.to_owned(),
-            });
-        }
-        let slot = Slot::new(module.to_owned(), interface.clone(), built);
-        let installed = lock(&target.shared.list).install(slot, active);
-        if let Err(source) = installed {
-            Self::undo(&mut db, &created, &new_names, follows_before);
-            return Err(RuntimeError::Sort {
-                habitat: habitat.to_owned(),
-                source,
             });
         }
         db.propagate_shapes();
@@ -468,10 +550,52 @@ impl Runtime {
             module.to_owned(),
             ModuleEntry {
                 habitat: habitat.to_owned(),
-                interface,
+                interface: interface.clone(),
                 active,
             },
         );
+        let slot = Slot::new(module.to_owned(), interface, built);
+        Ok((target, slot, active, undo))
+    }
+
+    /// Puts a built module into its habitat's list: the new order is sorted without the
+    /// list's lock, and a sampling habitat's new module gets `startup` (and `enable` if
+    /// active) on this thread before it joins, so the habitat never waits for them.
+    fn insert_into_list(
+        &self,
+        target: &Habitat,
+        module: &str,
+        mut slot: Slot,
+        active: bool,
+    ) -> Result<(), crate::SortError> {
+        let (mut layout, sampling, ctx) = {
+            let list = lock(&target.shared.list);
+            (list.layout(), list.sampling, list.ctx)
+        };
+        let n = layout.names().count();
+        layout.push(module, slot.interface.clone());
+        let order = match layout.plan(|i, _| if i == n { active } else { layout.is_active(i) }) {
+            Ok(order) => order,
+            Err(err) => {
+                // Refused: the module was built, so it is unloaded.
+                crate::list::terminate(slot.module_mut());
+                return Err(err);
+            }
+        };
+        let mut failures = Vec::new();
+        if sampling {
+            let routines: &[Routine] = if active {
+                &[Routine::Startup, Routine::Enable]
+            } else {
+                &[Routine::Startup]
+            };
+            for &routine in routines {
+                if let Err(err) = run_routine(slot.module_mut(), routine, &ctx) {
+                    failures.push((routine, err));
+                }
+            }
+        }
+        lock(&target.shared.list).install(slot, active, order, failures);
         Ok(())
     }
 
@@ -494,33 +618,36 @@ impl Runtime {
         })
     }
 
-    /// Undoes what a failed install created: the CSMats its declarations bound, the
-    /// placeholders it added, its shape-following entries.
-    fn undo(db: &mut Database, created: &[Mat], new_names: &[String], follows_before: usize) {
-        for mat in created {
-            mat.unbind();
-        }
-        for name in new_names {
-            db.mats.remove(name);
-        }
-        db.follows.truncate(follows_before);
-    }
-
-    /// Unloads a module: `disable` and `shutdown` if its habitat samples, then `terminate`.
+    /// Unloads a module: `disable` and `shutdown` if its habitat samples, then `terminate`
+    /// (on this thread, after the module has left the list).
     pub fn remove(&self, module: &str) -> Result<(), RuntimeError> {
-        let mut db = self.db();
-        let entry = db
-            .modules
-            .remove(module)
-            .ok_or_else(|| RuntimeError::Unknown {
-                kind: ObjectKind::Module,
-                name: module.to_owned(),
-            })?;
-        lock(&self.inner.inputs).remove(module);
-        let habitat = self.habitat_in(&mut db, &entry.habitat);
-        let mut list = lock(&habitat.shared.list);
-        if let Some(index) = list.position(module) {
-            list.remove(index);
+        refuse_inside_routine("remove")?;
+        let _structure = self.inner.structure();
+        let habitat = {
+            let mut db = self.db();
+            let entry = db
+                .modules
+                .remove(module)
+                .ok_or_else(|| RuntimeError::Unknown {
+                    kind: ObjectKind::Module,
+                    name: module.to_owned(),
+                })?;
+            lock(&self.inner.inputs).remove(module);
+            self.habitat_in(&mut db, &entry.habitat)
+        };
+        let (taken, sampling, ctx) = {
+            let mut list = lock(&habitat.shared.list);
+            let taken = list.position(module).and_then(|index| list.take(index));
+            (taken, list.sampling, list.ctx)
+        };
+        if let Some((slot, mut built)) = taken {
+            if sampling {
+                if slot.active {
+                    let _ = run_routine(built.as_mut(), Routine::Disable, &ctx);
+                }
+                let _ = run_routine(built.as_mut(), Routine::Shutdown, &ctx);
+            }
+            crate::list::terminate(built.as_mut());
         }
         Ok(())
     }

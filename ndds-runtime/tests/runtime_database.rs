@@ -997,10 +997,11 @@ fn a_switch_that_would_make_a_double_writer_changes_nothing() -> TestResult {
     assert_eq!(rt.current_configuration(), None);
     h.step()?;
 
-    // A valid switch does disable and enable.
+    // A valid switch enables the entering module (prepared while the old set samples), then
+    // disables the leaving one after its last sample.
     let mark = calls(&log).len();
     rt.switch("swap")?;
-    assert_eq!(calls(&log)[mark..], ["w1.disable", "w3.enable"]);
+    assert_eq!(calls(&log)[mark..], ["w3.enable", "w1.disable"]);
     assert_eq!(h.order(), ["w3", "reader"]);
     assert_eq!(rt.current_configuration().as_deref(), Some("swap"));
     Ok(())

@@ -197,19 +197,20 @@ fn switching_configurations_calls_the_right_routines_at_a_sample_boundary() {
     );
     let force_before = rt.mat("force").value(0, 0);
 
-    // The switch: leaving modules disabled in execution order, entering ones enabled in the
-    // new order, all between sample 599 and sample 600.
+    // The switch: entering modules enabled in the new order (prepared while the old set
+    // samples), then leaving ones disabled in execution order after their last sample, all
+    // between sample 599 and sample 600 (a manual habitat is stepped by this thread).
     rt.switch("endptLQG").unwrap();
     let switch = take(&log);
     assert_eq!(
         calls(&switch),
         strs(&[
-            "disable joint_sensor",
-            "disable pd_filter",
-            "disable pd",
             "enable endpoint_sensor",
             "enable estimator",
             "enable lqr",
+            "disable joint_sensor",
+            "disable pd_filter",
+            "disable pd",
         ])
     );
     assert!(switch.iter().all(|(_, _, sample)| *sample == 600));
@@ -267,12 +268,12 @@ fn switching_configurations_calls_the_right_routines_at_a_sample_boundary() {
     assert_eq!(
         calls(&take(&log)),
         strs(&[
-            "disable endpoint_sensor",
-            "disable estimator",
-            "disable lqr",
             "enable joint_sensor",
             "enable pd_filter",
             "enable pd",
+            "disable endpoint_sensor",
+            "disable estimator",
+            "disable lqr",
         ])
     );
 
@@ -337,30 +338,34 @@ fn switching_while_sampling_never_mixes_two_configurations_in_one_sample() {
         previous = Some(set);
     }
     assert_eq!(changes, 6, "one change of active set per switch");
-    // Every enable and disable of a switch happened between two samples: all of a switch's
-    // calls carry the index of the first sample that runs the new set.
+    // A module executes only while enabled: its `enable` (run off the habitat thread while
+    // the old set samples) comes before its first sample, its `disable` after its last.
+    let mut enabled: BTreeSet<&str> = BTreeSet::new();
+    let mut enables = 0;
     for (module, routine, sample) in &entries {
-        if *routine == "enable" || *routine == "disable" {
-            let before = per_sample.range(..*sample).next_back().map(|(_, s)| s);
-            let after = per_sample.get(sample);
-            if *routine == "disable"
-                && let Some(before) = before
-            {
+        match *routine {
+            "enable" => {
+                assert!(enabled.insert(module.as_str()), "{module} enabled twice");
+                enables += 1;
+            }
+            "disable" => {
                 assert!(
-                    before.contains(module.as_str()),
-                    "{module} disabled at {sample}"
+                    enabled.remove(module.as_str()),
+                    "{module} disabled while not enabled"
                 );
             }
-            if *routine == "enable"
-                && let Some(after) = after
-            {
-                assert!(
-                    after.contains(module.as_str()),
-                    "{module} enabled at {sample}"
-                );
-            }
+            "execute" => assert!(
+                enabled.contains(module.as_str()),
+                "{module} executed in sample {sample} while not enabled"
+            ),
+            _ => {}
         }
     }
+    assert_eq!(
+        enables,
+        4 + 6 * 3,
+        "the start's four, then three per switch"
+    );
     // Ended in JointPD after 1.5 s: settled near the PD value.
     let tip = rt.mat("tip").value(0, 0);
     assert!((tip - 0.099).abs() < 0.005, "settled at {tip}");
