@@ -22,10 +22,28 @@ fn main() -> std::process::ExitCode {
         // `ndds topics | head -1`: the reader has all it wanted.
         Err(err) if out::is_closed(&err) => std::process::ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("ndds: {err:#}");
+            eprintln!("ndds: {}", describe(&err));
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes, each once: library errors often say their cause in their own
+/// message already (`habitat `h`: CSMat `u` has two writers ...`), and anyhow's `{:#}` would
+/// repeat it.
+fn describe(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.contains(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
 }
 
 /// Library warnings (incompatible types, undecodable samples, a lost daemon) go to stderr;

@@ -9,16 +9,23 @@
 //!    each sample started against its absolute deadline, how far each period was from the
 //!    nominal one, and execution times. `--load N` runs N busy threads meanwhile (pinned to
 //!    `--load-cpu`), `--cpu` pins the habitat, `--fifo` asks for `SCHED_FIFO`.
+//! 3. **Switch under load**: the same timer habitat again, now with a configuration switch
+//!    every `--switch-every` between two groups: a 1 × 1 gain, and a controller whose
+//!    `enable` designs an LQR gain for a `--design-states`-state model (a Riccati iteration,
+//!    as the LQG component's design). Its start latency (p99, max) and overruns are printed
+//!    beside the run without switches, with the ratio of the two p99s.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use hdrhistogram::Histogram;
-use ndds_components::Gain;
+use nalgebra::DMatrix;
+use ndds_components::{Gain, dlqr};
 use ndds_runtime::{
-    Clock, CsMat, HabitatOptions, HabitatStats, Percentiles, Runtime, SampleModule, pin_to_cpu,
+    Clock, CsMat, HabitatOptions, HabitatStats, Mat, ModuleError, Percentiles, RoutineResult,
+    Runtime, SampleContext, SampleModule, pin_to_cpu,
 };
 use serde_json::json;
 
@@ -54,6 +61,12 @@ pub struct Args {
     /// Skip the overhead measurement.
     #[arg(long)]
     jitter_only: bool,
+    /// Seconds between configuration switches in the switch-under-load run (0 skips it).
+    #[arg(long, value_parser = crate::seconds::parse, default_value = "0.1")]
+    switch_every: Duration,
+    /// States of the model the switched-in controller designs its gain for in `enable`.
+    #[arg(long, default_value_t = 24)]
+    design_states: usize,
     /// One JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -79,6 +92,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ))
     };
     let jitter = jitter(args)?;
+    let switching = if args.switch_every.is_zero() {
+        None
+    } else {
+        Some(switching(args)?)
+    };
     if args.json {
         let mut value = json!({
             "modules": args.modules,
@@ -100,6 +118,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some((nop, gain)) = &overhead {
             value["overhead"] = json!({ "nop": nop.json(), "gain": gain.json() });
         }
+        if let Some(run) = &switching {
+            value["switching"] = run.json(&jitter);
+        }
         outln!("{value}")?;
     } else {
         if let Some((nop, gain)) = &overhead {
@@ -107,6 +128,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             gain.print("1x1 gains (three CSMat locks: gain, input, output; two copies)")?;
         }
         print_jitter(args, &jitter)?;
+        if let Some(run) = &switching {
+            run.print(args, &jitter)?;
+        }
     }
     Ok(())
 }
@@ -212,6 +236,146 @@ fn jitter(args: &Args) -> anyhow::Result<HabitatStats> {
         let _ = thread.join();
     }
     Ok(habitat.stats_total())
+}
+
+/// A controller whose `enable` designs its gain: an LQR for an `n`-state chain of coupled
+/// first-order lags (`x⁺ = A·x + B·u`, the input on the last one), the kind of work the LQG
+/// component does when it is designed.
+struct Designer {
+    input: Mat,
+    output: Mat,
+    n: usize,
+    gain: f64,
+    design_ns: Arc<AtomicU64>,
+}
+
+impl SampleModule for Designer {
+    fn enable(&mut self, _: &SampleContext) -> RoutineResult {
+        let start = Instant::now();
+        let n = self.n;
+        let a = DMatrix::from_fn(n, n, |i, j| match j.cmp(&i) {
+            std::cmp::Ordering::Equal => 0.95,
+            std::cmp::Ordering::Greater if j == i + 1 => 0.05,
+            _ => 0.0,
+        });
+        let b = DMatrix::from_fn(n, 1, |i, _| if i + 1 == n { 0.1 } else { 0.0 });
+        let k = dlqr(&a, &b, &DMatrix::identity(n, n), &DMatrix::identity(1, 1))
+            .ok_or_else(|| ModuleError::Failed("no LQR design".into()))?;
+        self.gain = k[(0, 0)];
+        self.design_ns
+            .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+        let x = self.input.value(0, 0);
+        self.output.write().set(0, 0, -self.gain * x)?;
+        Ok(())
+    }
+}
+
+/// The switch-under-load run.
+struct Switching {
+    stats: HabitatStats,
+    switches: u64,
+    designs: u64,
+    design_ns: u64,
+}
+
+impl Switching {
+    fn ratio(&self, idle: &HabitatStats) -> f64 {
+        self.stats.latency.p99_us / idle.latency.p99_us.max(0.001)
+    }
+
+    fn json(&self, idle: &HabitatStats) -> serde_json::Value {
+        json!({
+            "switches": self.switches,
+            "designs": self.designs,
+            "mean_design_ms": self.mean_design_ms(),
+            "samples": self.stats.samples,
+            "overruns": self.stats.overruns,
+            "latency_us": percentiles(&self.stats.latency),
+            "exec_us": percentiles(&self.stats.exec),
+            "latency_p99_ratio_to_idle": self.ratio(idle),
+        })
+    }
+
+    fn mean_design_ms(&self) -> f64 {
+        self.design_ns as f64 / self.designs.max(1) as f64 / 1e6
+    }
+
+    fn print(&self, args: &Args, idle: &HabitatStats) -> anyhow::Result<()> {
+        outln!(
+            "switch under load: {} switches (one every {:?}, {} LQR designs of {} states in enable, {:.2} ms each), {} samples, {} overruns (without switches: {})",
+            self.switches,
+            args.switch_every,
+            self.designs,
+            args.design_states,
+            self.mean_design_ms(),
+            self.stats.samples,
+            self.stats.overruns,
+            idle.overruns
+        )?;
+        outln!(
+            "  start latency: p99 {:.1} us, max {:.1} us; without switches p99 {:.1} us, max {:.1} us (p99 ratio {:.2})",
+            self.stats.latency.p99_us,
+            self.stats.latency.max_us,
+            idle.latency.p99_us,
+            idle.latency.max_us,
+            self.ratio(idle)
+        )?;
+        Ok(())
+    }
+}
+
+/// The timer habitat of [`jitter`] with a switch every `--switch-every` between a gain and
+/// a [`Designer`].
+fn switching(args: &Args) -> anyhow::Result<Switching> {
+    let rt = Runtime::new("perf");
+    let mut options = HabitatOptions::rate(args.rate);
+    options.cpu = args.cpu;
+    options.realtime_priority = args.fifo;
+    rt.create_habitat("bench", options)?;
+    install_gains(&rt, args.modules)?;
+    let end = format!("c{}", args.modules);
+    // Groups first: the two controllers write `u` and are never active together.
+    rt.group("control", "plain", &["plain"])?;
+    rt.group("control", "designed", &["designed"])?;
+    rt.configuration("Plain", &[("control", "plain")])?;
+    rt.configuration("Designed", &[("control", "designed")])?;
+    rt.install("bench", "plain", |b| Gain::new(b, &end, "u", -1.0))?;
+    let design_ns = Arc::new(AtomicU64::new(0));
+    let (n, ns) = (args.design_states.max(1), Arc::clone(&design_ns));
+    rt.install("bench", "designed", |b| {
+        Ok(Designer {
+            input: b.input(&end, (1, 1)),
+            output: b.output("u", (1, 1)),
+            n,
+            gain: 0.0,
+            design_ns: ns,
+        })
+    })?;
+    let habitat = rt.habitat("bench");
+    habitat.start().context("starting the timer habitat")?;
+    let started = Instant::now();
+    let mut switches = 0u64;
+    while started.elapsed().as_secs_f64() < args.seconds {
+        std::thread::sleep(args.switch_every);
+        let next = if switches % 2 == 0 {
+            "Designed"
+        } else {
+            "Plain"
+        };
+        rt.switch(next)?;
+        switches += 1;
+    }
+    habitat.stop();
+    Ok(Switching {
+        stats: habitat.stats_total(),
+        switches,
+        designs: switches.div_ceil(2),
+        design_ns: design_ns.load(Ordering::Relaxed),
+    })
 }
 
 fn busy(stop: &AtomicBool, cpu: Option<usize>) {
