@@ -82,13 +82,11 @@ fn announced_producer() -> EndpointInfo {
     }
 }
 
+/// `Pose` under the explicit name the document shows (its derived name would be `Pose`).
 fn pose_description() -> TypeDescription {
-    TypeDescription {
-        name: "demo::Pose".to_owned(),
-        layout: TypeDescription::try_of::<Pose>()
-            .expect("Pose is traceable")
-            .layout,
-    }
+    let desc = TypeDescription::named::<Pose>("demo::Pose");
+    assert!(desc.layout.is_some(), "Pose is traceable");
+    desc
 }
 
 /// The metadata of sample `seq` of the data-plane examples' reliable producer.

@@ -4,9 +4,10 @@
 use std::sync::OnceLock;
 
 use ndds_client::TypeDescription;
+use ndds_core::types::builtin;
 use ndds_runtime::CsMat;
 
-/// Names accepted by `--type`, with the Rust type each stands for.
+/// Names accepted by `--type`, with the name each type is announced under.
 pub const NAMES: &[(&str, &str)] = &[
     ("bool", "bool"),
     ("i8", "i8"),
@@ -21,7 +22,7 @@ pub const NAMES: &[(&str, &str)] = &[
     ("f64", "f64"),
     ("string", "String"),
     ("bytes", "Vec<u8>"),
-    ("csmat", "ndds_runtime::CsMat"),
+    ("csmat", builtin::CSMAT),
 ];
 
 /// The description of a built-in type, or `None` for an unknown name.
@@ -40,7 +41,7 @@ pub fn describe(name: &str) -> Option<TypeDescription> {
         "f64" => TypeDescription::of::<f64>(),
         "string" => TypeDescription::of::<String>(),
         "bytes" => TypeDescription::of::<Vec<u8>>(),
-        "csmat" => TypeDescription::of::<CsMat>(),
+        "csmat" => TypeDescription::named::<CsMat>(builtin::CSMAT),
         _ => return None,
     })
 }
@@ -75,9 +76,10 @@ mod tests {
 
     #[test]
     fn every_listed_name_is_described() {
-        for (name, _) in NAMES {
+        for (name, announced) in NAMES {
             let desc = describe(name).unwrap();
             assert!(desc.layout.is_some(), "{name} has a layout");
+            assert_eq!(desc.name, *announced, "{name} is announced as listed");
         }
         assert!(describe("quaternion").is_none());
     }
@@ -87,7 +89,7 @@ mod tests {
         let csmat = describe("csmat").unwrap();
         assert!(is_csmat(&csmat));
         assert!(!is_csmat(&describe("f64").unwrap()));
-        assert!(!is_csmat(&TypeDescription::opaque("ndds_runtime::CsMat")));
+        assert!(!is_csmat(&TypeDescription::opaque(builtin::CSMAT)));
         let good = CsMat::from_row_slice("x", 2, 1, &[1.0, 2.0]).unwrap();
         check_csmat(&postcard::to_allocvec(&good).unwrap()).unwrap();
         let err = check_csmat(&[1, b'x', 2, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]).unwrap_err();

@@ -138,13 +138,7 @@ fn type_list(topic: &Topic<'_>) -> String {
     topic
         .types()
         .iter()
-        .map(|(t, f)| {
-            format!(
-                "{} ({})",
-                ndds_core::types::short_name(t),
-                fingerprint_hex(*f)
-            )
-        })
+        .map(|(t, f)| format!("{t} ({})", fingerprint_hex(*f)))
         .collect::<Vec<_>>()
         .join(", ")
 }

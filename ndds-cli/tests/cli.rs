@@ -62,13 +62,8 @@ fn fingerprint_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
     format!("{:016x}", TypeDescription::of::<T>().fingerprint())
 }
 
-/// The short type name that text output shows (`Pose`).
+/// The type name that text and `--json` output show alike (`Pose`: no module path).
 fn type_name_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
-    TypeDescription::of::<T>().short_name()
-}
-
-/// The full type name that `--json` output keeps (`cli::Pose`).
-fn full_type_name_of<T: Serialize + serde::de::DeserializeOwned>() -> String {
     TypeDescription::of::<T>().name
 }
 
@@ -221,12 +216,9 @@ fn topics_lists_a_typed_producer_and_consumer() {
     assert!(is_hex16(topic["types"][0]["fingerprint"].as_str().unwrap()));
     assert_eq!(
         topic["types"],
-        json!([{ "name": full_type_name_of::<Pose>(), "fingerprint": fingerprint }])
+        json!([{ "name": type_name_of::<Pose>(), "fingerprint": fingerprint }])
     );
-    assert!(
-        full_type_name_of::<Pose>().ends_with("Pose"),
-        "the type name is the Rust path: {run}"
-    );
+    assert_eq!(type_name_of::<Pose>(), "Pose", "no module path: {run}");
 
     let producers = topic["producers"].as_array().unwrap();
     let consumers = topic["consumers"].as_array().unwrap();
@@ -236,7 +228,7 @@ fn topics_lists_a_typed_producer_and_consumer() {
         assert_eq!(endpoint["host"], host.as_str());
         assert_eq!(endpoint["node"], node.as_str());
         assert_eq!(endpoint["process"], "topics-test");
-        assert_eq!(endpoint["type_name"], full_type_name_of::<Pose>());
+        assert_eq!(endpoint["type_name"], type_name_of::<Pose>());
         assert_eq!(endpoint["fingerprint"], fingerprint.as_str());
         let guid = endpoint["guid"].as_str().unwrap();
         assert!(
@@ -307,6 +299,79 @@ fn topics_drops_an_endpoint_as_soon_as_it_is_closed() {
     );
 }
 
+/// Types are named without module paths, the same in text and JSON: the workspace's own by
+/// their `ndds::` names, the others by their Rust names.
+#[test]
+fn topics_names_types_without_module_paths() {
+    use ndds_runtime::{HabitatOptions, Runtime};
+
+    let world = World::start();
+    let participant = world.participant("names-test");
+    let rt = Runtime::with_participant("names-rt", &participant).unwrap();
+    let mut options = HabitatOptions::rate(100.0);
+    options.stats_interval = Duration::from_millis(200);
+    rt.create_habitat("loop", options).unwrap();
+    rt.create_mat(CsMat::from_row_slice("gain", 1, 1, &[1.0]).unwrap())
+        .unwrap();
+    rt.publish("loop", "gain", "arm/gain", ProducerQos::default())
+        .unwrap();
+    rt.start_all().unwrap();
+    let _note = participant
+        .producer::<String>("arm/note", ProducerQos::default())
+        .unwrap();
+    let _stamps = participant
+        .consumer::<Vec<Option<f64>>>("arm/stamps", ConsumerQos::default())
+        .unwrap();
+    assert!(world.graph_until(&participant, |g| {
+        g.endpoints
+            .iter()
+            .any(|e| e.info.topic == "cs/names-rt/loop/stats")
+    }));
+
+    let run = world.ndds(&["topics"]);
+    let text = run.ok();
+    for shown in [
+        "  type ndds::CsMat (",
+        "  type String (",
+        "  type Vec<Option<f64>> (",
+    ] {
+        assert!(text.contains(shown), "{shown:?}: {run}");
+    }
+    let run = world.ndds(&["topics", "--all", "--json"]);
+    let listing = run.json();
+    let mut names = BTreeMap::new();
+    for topic in listing["topics"].as_array().unwrap() {
+        let name = topic["types"][0]["name"].as_str().unwrap().to_owned();
+        for endpoint in topic["producers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .chain(topic["consumers"].as_array().unwrap())
+        {
+            assert_eq!(endpoint["type_name"], name.as_str(), "{run}");
+        }
+        assert!(
+            !name.contains("::") || name.starts_with("ndds::"),
+            "{name}: {run}"
+        );
+        names.insert(topic["name"].as_str().unwrap().to_owned(), name);
+    }
+    let name = |topic: &str| names.get(topic).map(String::as_str);
+    assert_eq!(name("arm/gain"), Some("ndds::CsMat"), "{run}");
+    assert_eq!(name("arm/note"), Some("String"), "{run}");
+    assert_eq!(name("cs/names-rt/configure"), Some("String"), "{run}");
+    assert_eq!(
+        name("cs/names-rt/loop/stats"),
+        Some("ndds::HabitatStats"),
+        "{run}"
+    );
+    let owner = names
+        .iter()
+        .find(|(topic, _)| topic.starts_with("port/") && topic.ends_with("/owner"))
+        .map(|(_, name)| name.as_str());
+    assert_eq!(owner, Some("ndds::port::OwnerInfo"), "{run}");
+}
+
 #[test]
 fn topics_on_an_empty_domain() {
     let world = World::start();
@@ -340,11 +405,7 @@ fn incompatible_types_are_flagged_and_echo_needs_a_fingerprint() {
     assert_eq!(topic["incompatible"], true, "{run}");
     let types = topic["types"].as_array().unwrap();
     assert_eq!(types.len(), 2, "{run}");
-    let full = [
-        full_type_name_of::<Pose>(),
-        full_type_name_of::<Temperature>(),
-    ];
-    for (name, fp) in [(&full[0], &pose_fp), (&full[1], &temp_fp)] {
+    for (name, fp) in [(&pose_type, &pose_fp), (&temp_type, &temp_fp)] {
         assert!(
             types.contains(&json!({ "name": name, "fingerprint": fp })),
             "{name} listed: {run}"

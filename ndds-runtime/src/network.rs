@@ -13,7 +13,8 @@ use super::error::RuntimeError;
 use super::module::ModuleError;
 use super::runtime::{Inner, Runtime, Services, lock};
 use super::stats::HabitatStats;
-use ndds_client::{ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+use ndds_client::{ConsumerQos, Participant, Producer, ProducerQos, Reliability, TypeDescription};
+use ndds_core::types::builtin;
 
 impl Runtime {
     pub(crate) fn start_services(&self, participant: &Participant) -> Result<(), RuntimeError> {
@@ -88,13 +89,13 @@ impl Runtime {
         topic: &str,
         qos: ProducerQos,
     ) -> Result<(), RuntimeError> {
-        let producer: Producer<CsMat> =
-            self.participant_or_err()?
-                .producer(topic, qos)
-                .map_err(|source| RuntimeError::Declare {
-                    topic: topic.to_owned(),
-                    source,
-                })?;
+        let producer: Producer<CsMat> = self
+            .participant_or_err()?
+            .producer_with_type(topic, TypeDescription::named::<CsMat>(builtin::CSMAT), qos)
+            .map_err(|source| RuntimeError::Declare {
+                topic: topic.to_owned(),
+                source,
+            })?;
         self.install(habitat, &format!("publish:{topic}"), |b| {
             Ok(Publisher::new(b, mat, producer))
         })
@@ -114,7 +115,7 @@ impl Runtime {
         let shape = shape.into();
         let consumer = self
             .participant_or_err()?
-            .raw_consumer(topic, ndds_client::TypeDescription::of::<CsMat>(), qos)
+            .raw_consumer(topic, TypeDescription::named::<CsMat>(builtin::CSMAT), qos)
             .map_err(|source| RuntimeError::Declare {
                 topic: topic.to_owned(),
                 source,
@@ -178,7 +179,11 @@ fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
             let name = habitat.name().to_owned();
             if !producers.contains_key(&name) {
                 let topic = format!("cs/{}/{}/stats", rt.inner.name, name);
-                match participant.producer::<HabitatStats>(&topic, ProducerQos::default()) {
+                match participant.producer_with_type::<HabitatStats>(
+                    &topic,
+                    TypeDescription::named::<HabitatStats>(builtin::HABITAT_STATS),
+                    ProducerQos::default(),
+                ) {
                     Ok(p) => {
                         producers.insert(name.clone(), p);
                     }

@@ -9,12 +9,13 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use ndds_client::ports::{PortError, PortUser};
-use ndds_client::{ConsumerQos, Participant};
+use ndds_client::{ConsumerQos, Participant, TypeDescription};
 use ndds_runtime::fsm::{CommandReply, MachineState, Stimulus, command_port};
 
 use crate::connect::{DaemonArgs, connect};
 use crate::{outln, seconds};
 use ndds_core::suggest;
+use ndds_core::types::builtin;
 
 /// Options of `ndds fsm`.
 #[derive(Debug, clap::Args)]
@@ -149,7 +150,11 @@ fn machines(participant: &Participant) -> Vec<String> {
 fn show(daemon: &DaemonArgs, machine: &str, json: bool, wait: Duration) -> anyhow::Result<()> {
     let participant = connect(daemon)?;
     let topic = format!("fsm/{machine}/state");
-    let consumer = participant.consumer::<MachineState>(&topic, ConsumerQos::default())?;
+    let consumer = participant.consumer_with_type::<MachineState>(
+        &topic,
+        TypeDescription::named::<MachineState>(builtin::FSM_STATE),
+        ConsumerQos::default(),
+    )?;
     let sample = match consumer.recv_timeout(wait) {
         Ok(sample) => sample,
         Err(err) if err.is_timeout() => {

@@ -123,11 +123,7 @@ fn print_topic(name: &str, topic: &Topic<'_>, verbose: bool) -> anyhow::Result<(
     )?;
     let types = topic.types();
     for (type_name, fingerprint) in &types {
-        outln!(
-            "  type {} ({})",
-            ndds_core::types::short_name(type_name),
-            fingerprint_hex(*fingerprint)
-        )?;
+        outln!("  type {} ({})", type_name, fingerprint_hex(*fingerprint))?;
     }
     if types.len() > 1 {
         outln!("  INCOMPATIBLE: endpoints of different types do not exchange samples")?;

@@ -28,6 +28,7 @@ mod wire;
 
 use std::time::Duration;
 
+use ndds_core::types::builtin;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -124,37 +125,64 @@ fn spawn_error(port: &str, thread: &str) -> impl FnOnce(std::io::Error) -> PortE
 }
 
 /// The message types ports put on the network, with the type description each is announced
-/// with (tools decode them from it).
+/// with (tools decode them from it), under its `ndds::port::` name.
 pub trait PortWire: Serialize + DeserializeOwned {
+    /// The announced name ([`builtin`]).
+    const TYPE_NAME: &'static str;
+
     /// The announced type description.
     fn description() -> TypeDescription {
-        TypeDescription::of::<Self>()
+        TypeDescription::named::<Self>(Self::TYPE_NAME)
     }
 }
 
-impl PortWire for Request {}
-impl PortWire for Reply {}
-impl PortWire for Arrival {}
-impl PortWire for Broadcast {}
-impl PortWire for BroadcastReply {}
+impl PortWire for Request {
+    const TYPE_NAME: &'static str = builtin::PORT_REQUEST;
+}
+
+impl PortWire for Reply {
+    const TYPE_NAME: &'static str = builtin::PORT_REPLY;
+}
+
+impl PortWire for Arrival {
+    const TYPE_NAME: &'static str = builtin::PORT_ARRIVAL;
+}
+
+impl PortWire for Broadcast {
+    const TYPE_NAME: &'static str = builtin::PORT_BROADCAST;
+}
+
+impl PortWire for BroadcastReply {
+    const TYPE_NAME: &'static str = builtin::PORT_BROADCAST_REPLY;
+}
 
 impl PortWire for OwnerInfo {
+    const TYPE_NAME: &'static str = builtin::PORT_OWNER_INFO;
+
     fn description() -> TypeDescription {
         // Its enums sit behind a Vec and an Option, where tracing cannot see their variants.
         TypeDescription::describer()
             .with::<Usage>()
             .with::<Filter>()
             .describe::<OwnerInfo>()
-            .unwrap_or_else(|_| TypeDescription::of::<OwnerInfo>())
+            .map_or_else(
+                |_| TypeDescription::named::<OwnerInfo>(Self::TYPE_NAME),
+                |desc| desc.with_name(Self::TYPE_NAME),
+            )
     }
 }
 
 impl PortWire for UserInfo {
+    const TYPE_NAME: &'static str = builtin::PORT_USER_INFO;
+
     fn description() -> TypeDescription {
         TypeDescription::describer()
             .with::<Usage>()
             .describe::<UserInfo>()
-            .unwrap_or_else(|_| TypeDescription::of::<UserInfo>())
+            .map_or_else(
+                |_| TypeDescription::named::<UserInfo>(Self::TYPE_NAME),
+                |desc| desc.with_name(Self::TYPE_NAME),
+            )
     }
 }
 

@@ -12,17 +12,17 @@ use serde_reflection::{
 };
 
 use super::TypeDescription;
-use super::display::short_name;
 use super::layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
+use super::name::stable_name;
 
 /// Why a type could not be described structurally.
 #[derive(Debug, thiserror::Error)]
 pub enum DescribeError {
     /// serde-reflection could not trace the type (untagged enums, `flatten`, custom
     /// deserializers that reject default values, ...).
-    #[error("serde-reflection cannot trace {}: {reason}", short_name(type_name))]
+    #[error("serde-reflection cannot trace {}: {reason}", stable_name(type_name))]
     Trace {
         /// The Rust type.
         type_name: &'static str,
@@ -36,7 +36,7 @@ pub enum DescribeError {
          cannot see all their variants; describe the type with \
          `TypeDescription::describer().with::<TheEnum>().describe::<{short}>()` and declare it \
          with `producer_with_type` / `consumer_with_type`",
-        short = short_name(type_name)
+        short = stable_name(type_name)
     )]
     IncompleteEnum {
         /// The Rust type.
@@ -47,7 +47,7 @@ pub enum DescribeError {
     /// The traced layout breaks a limit of the protocol (too deep, too many nodes, ...).
     #[error(
         "the layout of {} is not representable: {source}",
-        short_name(type_name)
+        stable_name(type_name)
     )]
     Layout {
         /// The Rust type.
@@ -182,7 +182,7 @@ fn build(
         .validate()
         .map_err(|source| DescribeError::Layout { type_name, source })?;
     Ok(TypeDescription {
-        name: type_name.to_owned(),
+        name: stable_name(type_name),
         layout: Some(layout),
     })
 }

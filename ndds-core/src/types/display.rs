@@ -1,9 +1,10 @@
-//! How type names and shapes are shown to people: short names (`String`, `Vec<Pose>`), never
-//! full paths (`alloc::string::String`, `my_crate::msg::Pose`), and a one-line shape
-//! (`Pose{x: f64, y: f64}`) that says why two types differ.
+//! How types are shown to people when two of them differ: a one-line shape
+//! (`Pose{x: f64, y: f64}`) that says why.
 //!
-//! Display only: what matches is the fingerprint ([`super::canonical`]), which these functions
-//! never touch. [`TypeDescription::name`] keeps the full path.
+//! Names are not shortened here: [`TypeDescription::name`] is already free of module paths
+//! where the description is made ([`super::name`]), so every tool and message shows the same
+//! name. Display only: what matches is the fingerprint ([`super::canonical`]), which these
+//! functions never touch.
 
 use std::fmt::Write as _;
 
@@ -15,53 +16,26 @@ const MAX_SHAPE: usize = 240;
 /// Most fields, items or variants listed in one container before `…`.
 const MAX_LISTED: usize = 12;
 
-/// A Rust type path without its module paths, generics and tuples included:
-/// `alloc::vec::Vec<my_crate::Pose>` → `Vec<Pose>`, `(i32, alloc::string::String)` →
-/// `(i32, String)`.
-///
-/// ```
-/// assert_eq!(ndds_core::types::short_name("alloc::vec::Vec<app::msg::Pose>"), "Vec<Pose>");
-/// assert_eq!(ndds_core::types::short_name("[f64; 3]"), "[f64; 3]");
-/// ```
-pub fn short_name(path: &str) -> String {
-    let mut out = String::with_capacity(path.len());
-    // Where the path being written started in `out`: a `::` cuts back to it.
-    let mut segment_start = 0;
-    let mut rest = path;
-    while let Some(c) = rest.chars().next() {
-        if let Some(after) = rest.strip_prefix("::") {
-            out.truncate(segment_start);
-            rest = after;
-            continue;
-        }
-        if !(c.is_alphanumeric() || c == '_') {
-            out.push(c);
-            segment_start = out.len();
-        } else {
-            out.push(c);
-        }
-        rest = &rest[c.len_utf8()..];
-    }
-    out
-}
-
 impl TypeDescription {
-    /// The type's name without module paths (see [`short_name`]), as messages show it.
+    /// The name messages show: [`name`](TypeDescription::name) itself, which has no module
+    /// path to shorten (see [`super::name`]); an explicit name such as `ndds::CsMat` is shown
+    /// whole. Prefer `name`: this remains for callers written when names were shortened here.
     pub fn short_name(&self) -> String {
-        short_name(&self.name)
+        self.name.clone()
     }
 
     /// The type's shape on one line, as messages show it when two types differ: the root
-    /// container with its fields (`Pose{x: f64, y: f64}`), a primitive or standard type
-    /// (`f64`, `Vec<String>`), or the short name of an opaque type. Nested containers are
-    /// shown by name; long shapes are cut with `…`.
+    /// container under the description's [`name`](TypeDescription::name), with its fields
+    /// (`Pose{x: f64, y: f64}`, `ndds::CsMat{name: String, ..}`), a primitive or standard
+    /// type (`f64`, `Vec<String>`), or the name of an opaque type. Nested containers are
+    /// shown by their serde names; long shapes are cut with `…`.
     pub fn shape(&self) -> String {
         let Some(layout) = &self.layout else {
-            return self.short_name();
+            return self.name.clone();
         };
         let mut out = String::new();
         match layout.format(layout.root) {
-            Some(Format::Named(index)) => write_container(layout, *index, &mut out),
+            Some(Format::Named(index)) => write_container(layout, *index, &self.name, &mut out),
             _ => write_format(layout, layout.root, &mut out),
         }
         if out.len() > MAX_SHAPE {
@@ -76,12 +50,13 @@ impl TypeDescription {
     }
 }
 
-fn write_container(layout: &TypeLayout, index: u32, out: &mut String) {
+/// Writes the root container, labelled `name`, with its content.
+fn write_container(layout: &TypeLayout, index: u32, name: &str, out: &mut String) {
     let Some(container) = layout.container(index) else {
         out.push('?');
         return;
     };
-    out.push_str(&container.name);
+    out.push_str(name);
     match &container.shape {
         ContainerShape::UnitStruct => {}
         ContainerShape::NewType(item) => write_items(layout, std::slice::from_ref(item), out),
@@ -227,25 +202,22 @@ mod tests {
     }
 
     #[test]
-    fn short_names_drop_module_paths_everywhere() {
-        assert_eq!(short_name("alloc::string::String"), "String");
-        assert_eq!(short_name("my_crate::msg::Pose"), "Pose");
-        assert_eq!(
-            short_name("alloc::vec::Vec<core::option::Option<a::B>>"),
-            "Vec<Option<B>>"
-        );
-        assert_eq!(
-            short_name("(i32, alloc::string::String, [a::b::C; 4])"),
-            "(i32, String, [C; 4])"
-        );
-        assert_eq!(
-            short_name("std::collections::HashMap<alloc::string::String, f64>"),
-            "HashMap<String, f64>"
-        );
-        assert_eq!(short_name("f64"), "f64");
+    fn names_are_shown_as_made() {
         let desc = TypeDescription::try_of::<Vec<String>>().unwrap();
         assert_eq!(desc.short_name(), "Vec<String>");
-        assert!(desc.name.contains("alloc::"), "the full name is kept");
+        assert_eq!(desc.shape(), "Vec<String>");
+        let named = desc.with_name("ndds::Strings");
+        assert_eq!(
+            named.short_name(),
+            "ndds::Strings",
+            "an explicit name is not cut"
+        );
+        let pose = TypeDescription::named::<Pose>("demo::Pose");
+        assert_eq!(
+            pose.shape(),
+            "demo::Pose{x: f64, y: f64, label: Option<String>}",
+            "the root under the description's name"
+        );
     }
 
     #[test]
@@ -261,9 +233,9 @@ mod tests {
         );
         assert_eq!(TypeDescription::try_of::<f32>().unwrap().shape(), "f32");
         assert_eq!(
-            TypeDescription::opaque("my_crate::Blob").shape(),
-            "Blob",
-            "an opaque type by its short name"
+            TypeDescription::opaque("ndds::Blob").shape(),
+            "ndds::Blob",
+            "an opaque type by its name"
         );
     }
 

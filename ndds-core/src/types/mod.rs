@@ -1,44 +1,51 @@
 //! Type descriptions: what a topic's sample type looks like, so that producers and consumers
 //! of different types never match and tools can decode any topic without its Rust type.
 //!
-//! A [`TypeDescription`] is a display name plus an optional structural [`TypeLayout`] traced
+//! A [`TypeDescription`] is a [name] plus an optional structural [`TypeLayout`] traced
 //! from the type's serde implementation. Its [`fingerprint`](TypeDescription::fingerprint) is
 //! derived from the [canonical text](canonical) of the layout. Types that serde-reflection
 //! cannot trace are *opaque*: they still match by name, but tools show their bytes in hex.
-//! Messages show [short names and shapes](display) (`Pose{x: f64, y: f64}`), never full paths.
+//! The name never holds a module path (`Vec<Pose>`, not `alloc::vec::Vec<my_crate::Pose>`):
+//! it is made stable where the description is made, and the workspace's own types carry
+//! explicit `ndds::` names ([`builtin`]). Messages show it as it is, or the type's
+//! [shape](display) (`Pose{x: f64, y: f64}`).
 
 pub mod canonical;
 pub mod describe;
 pub mod display;
 pub mod layout;
+pub mod name;
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use describe::{DescribeError, Describer};
-pub use display::short_name;
 pub use layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
+pub use name::{builtin, stable_name};
 
 /// The description of a topic's sample type.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TypeDescription {
-    /// Display name, usually the full Rust type path. Not part of the fingerprint unless the
-    /// type is opaque.
+    /// The name tools and messages show: the Rust type without module paths (`Vec<Pose>`), or
+    /// a name given explicitly (`ndds::CsMat`); see [`name`]. Not part of the fingerprint
+    /// unless the type is opaque.
     pub name: String,
     /// Structural layout, or `None` for an opaque type.
     pub layout: Option<TypeLayout>,
 }
 
 impl TypeDescription {
-    /// Describes `T` by tracing it; an untraceable type becomes opaque (see the module docs).
+    /// Describes `T` by tracing it, named by its [stable name](stable_name); an untraceable
+    /// type becomes opaque (see the module docs).
     pub fn of<T: Serialize + DeserializeOwned>() -> Self {
         match describe::describe::<T>() {
             Ok(desc) => desc,
             Err(err) => {
-                tracing::warn!(error = %err, r#type = short_name(std::any::type_name::<T>()), "type is opaque: it still matches by name, but tools cannot decode it");
-                Self::opaque(std::any::type_name::<T>())
+                let name = stable_name(std::any::type_name::<T>());
+                tracing::warn!(error = %err, r#type = name, "type is opaque: it still matches by name, but tools cannot decode it");
+                Self::opaque(&name)
             }
         }
     }
@@ -53,7 +60,7 @@ impl TypeDescription {
         Describer::new()
     }
 
-    /// A description carrying only a name.
+    /// A description carrying only a name, taken as given.
     pub fn opaque(name: &str) -> Self {
         TypeDescription {
             name: name.to_owned(),
@@ -122,7 +129,7 @@ mod tests {
             desc.canonical_text(),
             r#"root="Pose";"Pose"=struct{"x":f64,"y":f64,"label":option<str>};"#
         );
-        assert!(desc.name.ends_with("Pose"));
+        assert_eq!(desc.name, "Pose");
     }
 
     #[test]

@@ -19,7 +19,10 @@ use super::verify::{FsmProblem, verify};
 use super::vocabulary::{Refusal, Vocabulary};
 use crate::Runtime;
 use ndds_client::ports::OwnerLocation;
-use ndds_client::{CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability};
+use ndds_client::{
+    CallbackConsumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability, TypeDescription,
+};
+use ndds_core::types::builtin;
 
 /// Stimuli waiting in a machine's queue at most; more are refused.
 pub const QUEUE_LIMIT: usize = 4096;
@@ -328,7 +331,11 @@ impl StateMachine {
                 };
                 let weak = Arc::downgrade(&shared);
                 let events = participant
-                    .consumer::<Stimulus>(&topic, qos)
+                    .consumer_with_type::<Stimulus>(
+                        &topic,
+                        TypeDescription::named::<Stimulus>(builtin::FSM_STIMULUS),
+                        qos,
+                    )
                     .map_err(|e| topic_error(&topic, e.to_string()))?
                     .on_sample(move |sample| {
                         if let Some(shared) = weak.upgrade()
@@ -344,7 +351,11 @@ impl StateMachine {
                     .map_err(|e| topic_error(&topic, e.to_string()))?;
                 let topic = format!("fsm/{name}/state");
                 let producer = participant
-                    .producer::<MachineState>(&topic, ProducerQos::default())
+                    .producer_with_type::<MachineState>(
+                        &topic,
+                        TypeDescription::named::<MachineState>(builtin::FSM_STATE),
+                        ProducerQos::default(),
+                    )
                     .map_err(|e| topic_error(&topic, e.to_string()))?;
                 (Some(events), Some(producer), Some(commands))
             }

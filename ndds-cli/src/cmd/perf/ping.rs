@@ -157,8 +157,11 @@ impl Pinger {
 fn ping_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Progress> {
     let run = &args.run;
     let participant = connect(daemon)?;
-    let producer = participant
-        .producer::<PerfSample>(&args.stream.topic("ping"), args.stream.producer_qos())?;
+    let producer = participant.producer_with_type::<PerfSample>(
+        &args.stream.topic("ping"),
+        perf_type(),
+        args.stream.producer_qos(),
+    )?;
     let consumer = participant.raw_consumer(
         &args.stream.topic("pong"),
         perf_type(),

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use ndds_client::{Batching, ProducerQos};
 
-use super::sample::{PerfSample, parse_size, wall_ns};
+use super::sample::{PerfSample, parse_size, perf_type, wall_ns};
 use super::throughput::{self, Published, Rate, parse_rate};
 use super::{Stream, connect, udp};
 use crate::connect::DaemonArgs;
@@ -94,7 +94,11 @@ fn publish_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Published> {
         batching: args.batching(),
         ..args.stream.producer_qos()
     };
-    let producer = participant.producer::<PerfSample>(&args.stream.topic("data"), qos)?;
+    let producer = participant.producer_with_type::<PerfSample>(
+        &args.stream.topic("data"),
+        perf_type(),
+        qos,
+    )?;
     if !producer.wait_for_consumers(1, args.wait) {
         anyhow::bail!(
             "no `ndds perf sub` matched topic {} within {} s",

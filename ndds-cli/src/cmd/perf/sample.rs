@@ -43,7 +43,7 @@ impl<'a> PerfView<'a> {
 
 /// The type description `PerfSample` is announced with.
 pub fn perf_type() -> ndds_client::TypeDescription {
-    ndds_client::TypeDescription::of::<PerfSample>()
+    ndds_client::TypeDescription::named::<PerfSample>(ndds_core::types::builtin::PERF_SAMPLE)
 }
 
 impl PerfSample {
