@@ -1,7 +1,8 @@
 //! The description-file reference, the component reference and the user guide against the
-//! code: the section table is the loader's, the component reference is generated from the
-//! components' own specs (`NDDS_BLESS=1 cargo test -p ndds-docs --test systems` rewrites it),
-//! every `toml system` block loads and runs, and every example file the docs name exists.
+//! code: the section table and the sections' key tables are the loader's, the component
+//! reference is generated from the components' own specs (`NDDS_BLESS=1 cargo test -p
+//! ndds-docs --test systems` rewrites it), every `toml system` block loads and runs, and every
+//! example file the docs name exists.
 
 use std::path::Path;
 
@@ -140,27 +141,38 @@ fn section_table_is_the_loaders() {
     for row in &table.rows {
         let section = plain(&row.cells[0]);
         let section = section.trim_matches(['[', ']']).to_owned();
+        let open = row.cells[1].contains("and the type's parameters");
         let keys: Vec<String> = row.cells[1]
             .split(',')
             .map(|k| plain(k).trim().to_owned())
             .filter(|k| !k.is_empty() && !k.starts_with("and the type"))
             .collect();
-        match SECTION_KEYS.iter().find(|(s, _)| *s == section) {
+        match loader_keys(&section) {
             None => problems.at(
                 &doc,
                 row.line,
                 format!("no section `{section}` in the loader"),
             ),
-            Some((_, code)) if *code != keys.as_slice() => problems.at(
+            Some((code, _)) if code != keys => problems.at(
                 &doc,
                 row.line,
                 format!("`{section}` lists {keys:?}; the loader takes {code:?}"),
+            ),
+            Some((_, true)) if !open => problems.at(
+                &doc,
+                row.line,
+                format!("`{section}` takes its type's parameters too: say so"),
+            ),
+            Some((_, false)) if open => problems.at(
+                &doc,
+                row.line,
+                format!("`{section}` takes no keys but its own"),
             ),
             Some(_) => {}
         }
         listed.push(section);
     }
-    let code: Vec<&str> = SECTION_KEYS.iter().map(|(s, _)| *s).collect();
+    let code: Vec<&str> = SECTION_KEYS.iter().map(|s| s.name).collect();
     if listed != code {
         problems.at(
             &doc,
@@ -168,6 +180,50 @@ fn section_table_is_the_loaders() {
             format!("sections {listed:?}; the loader has {code:?}"),
         );
     }
+    problems.finish("docs/description-files.md");
+}
+
+/// The loader's keys of `section` and whether it takes others too (`None`: no such section).
+fn loader_keys(section: &str) -> Option<(Vec<&'static str>, bool)> {
+    let found = SECTION_KEYS.iter().find(|s| s.name == section)?;
+    Some((found.key_names().collect(), found.open))
+}
+
+/// A section's own `| key | value |` table (under its `### [section]` heading) lists exactly
+/// the loader's keys, in its order.
+#[test]
+fn key_tables_are_the_loaders() {
+    let doc = Doc::load("description-files.md");
+    let mut problems = Problems::new();
+    let mut count = 0;
+    for table in doc
+        .tables()
+        .iter()
+        .filter(|t| t.starts_with(&["key", "value"]))
+    {
+        count += 1;
+        let heading = table
+            .heading
+            .as_ref()
+            .map(|h| plain(&h.text))
+            .unwrap_or_default();
+        let section = heading.trim_matches(['[', ']']);
+        let keys: Vec<String> = table.rows.iter().map(|row| row.plain(0)).collect();
+        match loader_keys(section) {
+            None => problems.at(
+                &doc,
+                table.line,
+                format!("no section `{heading}` in the loader"),
+            ),
+            Some((code, _)) if code != keys => problems.at(
+                &doc,
+                table.line,
+                format!("`{heading}` lists {keys:?}; the loader takes {code:?}"),
+            ),
+            Some(_) => {}
+        }
+    }
+    assert!(count >= 2, "the reference has key tables ({count})");
     problems.finish("docs/description-files.md");
 }
 

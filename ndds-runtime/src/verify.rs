@@ -211,22 +211,7 @@ pub(crate) fn verify(db: &Database) -> VerifyReport {
 }
 
 fn unbound(db: &Database, problems: &mut Vec<Problem>) {
-    for (name, entry) in &db.mats {
-        if entry.mat.is_bound() {
-            continue;
-        }
-        let mut referenced_by: Vec<String> = db.referrers_of_mat(name).into_iter().collect();
-        if entry.looked_up {
-            referenced_by.push("application".into());
-        }
-        if !referenced_by.is_empty() {
-            problems.push(Problem::Unbound {
-                kind: ObjectKind::Mat,
-                name: name.clone(),
-                referenced_by,
-            });
-        }
-    }
+    unbound_mats(db, problems);
     for (name, habitat) in &db.habitats {
         if !habitat.is_created() {
             let mut referenced_by: Vec<String> = db
@@ -290,6 +275,55 @@ fn unbound(db: &Database, problems: &mut Vec<Problem>) {
             referenced_by: configurations,
         });
     }
+}
+
+/// The unknown-CSMat rule of the runtime: a CSMat referenced (by a module or the application)
+/// but never created. It is the only check for a runtime built in Rust. A description file's
+/// names are checked by the loader first, where they were written (`system::decl::provided`),
+/// and a description reaches this only when that check found nothing: what is left here is
+/// what only the built runtime knows, a `<component>.<parameter>` CSMat its component did not
+/// create. One mistake, one message: a CSMat waiting for the shape of another that is itself
+/// unbound ([`Binder::output_same_as`](crate::Binder::output_same_as)) is not reported; it is
+/// created as soon as that one is.
+fn unbound_mats(db: &Database, problems: &mut Vec<Problem>) {
+    for (name, entry) in &db.mats {
+        if entry.mat.is_bound() || waits_for_unbound(db, name) {
+            continue;
+        }
+        let mut referenced_by: Vec<String> = db.referrers_of_mat(name).into_iter().collect();
+        if entry.looked_up {
+            referenced_by.push("application".into());
+        }
+        if !referenced_by.is_empty() {
+            problems.push(Problem::Unbound {
+                kind: ObjectKind::Mat,
+                name: name.clone(),
+                referenced_by,
+            });
+        }
+    }
+}
+
+/// Whether `name` waits for the shape of an unbound CSMat that is reported itself: the chain
+/// of unbound CSMats each waits for ends at one that waits for none (a cycle of them ends
+/// nowhere, and each is reported).
+fn waits_for_unbound(db: &Database, name: &str) -> bool {
+    let unbound = |mat: &str| db.mats.get(mat).is_none_or(|e| !e.mat.is_bound());
+    let leader_of = |mat: &str| {
+        db.follows
+            .iter()
+            .find(|(follower, leader)| follower == mat && unbound(leader))
+            .map(|(_, leader)| leader.as_str())
+    };
+    let mut seen = BTreeSet::from([name]);
+    let mut current = name;
+    while let Some(leader) = leader_of(current) {
+        if !seen.insert(leader) {
+            return false;
+        }
+        current = leader;
+    }
+    current != name
 }
 
 fn shapes(db: &Database, problems: &mut Vec<Problem>) {
@@ -409,5 +443,65 @@ fn active_set(
                 configuration: configuration.clone(),
             });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Problem;
+    use crate::{Clock, HabitatOptions, ObjectKind, RoutineResult, Runtime, SampleContext};
+    use crate::{SampleModule, Shape};
+
+    struct Idle;
+
+    impl SampleModule for Idle {
+        fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+            Ok(())
+        }
+    }
+
+    /// A runtime whose module `name` in habitat `habitat` writes `output` shaped like `input`.
+    fn copy(rt: &Runtime, habitat: &str, name: &str, input: &str, output: &str) {
+        if !rt.habitat(habitat).is_created() {
+            let options = HabitatOptions::rate(10.0).clock(Clock::Manual);
+            rt.create_habitat(habitat, options).unwrap();
+        }
+        rt.install(habitat, name, |b| {
+            let input = b.input(input, Shape::Any);
+            b.output_same_as(output, &input);
+            Ok(Idle)
+        })
+        .unwrap();
+    }
+
+    fn unbound(name: &str, by: &str) -> Problem {
+        Problem::Unbound {
+            kind: ObjectKind::Mat,
+            name: name.into(),
+            referenced_by: vec![by.into()],
+        }
+    }
+
+    #[test]
+    fn csmats_waiting_for_an_unbound_one_are_not_reported_too() {
+        let rt = Runtime::new("waiting");
+        copy(&rt, "h", "a", "x", "y");
+        copy(&rt, "h", "b", "y", "z");
+        assert_eq!(rt.verify().problems, [unbound("x", "a")]);
+    }
+
+    #[test]
+    fn csmats_waiting_for_each_other_are_all_reported() {
+        let rt = Runtime::new("circle");
+        copy(&rt, "h1", "a", "x", "y");
+        copy(&rt, "h2", "b", "y", "x");
+        let report = rt.verify();
+        let reported: Vec<&str> = (report.problems.iter())
+            .filter_map(|p| match p {
+                Problem::Unbound { name, .. } => Some(name.as_str()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(reported, ["x", "y"]);
     }
 }
