@@ -361,7 +361,7 @@ fn switching(args: &Args) -> anyhow::Result<Switching> {
     let mut switches = 0u64;
     while started.elapsed().as_secs_f64() < args.seconds {
         std::thread::sleep(args.switch_every);
-        let next = if switches % 2 == 0 {
+        let next = if switches.is_multiple_of(2) {
             "Designed"
         } else {
             "Plain"
