@@ -17,11 +17,12 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError, TryLockError};
 
-use super::sources::param_checks::whole_number;
 use ndds_runtime::Mat;
 use ndds_runtime::csmat::CsMat;
 use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
 use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+
+use crate::params::{failed, whole_number};
 
 /// Most values (samples × columns) one recorder holds: 1 GiB of `f64`.
 const MAX_VALUES: usize = 1 << 27;
@@ -189,14 +190,10 @@ impl Recorder {
         file: Option<&Path>,
     ) -> Result<Self, ModuleError> {
         if inputs.is_empty() {
-            return Err(ModuleError::Failed(
-                "parameter `inputs`: expected at least one CSMat".into(),
-            ));
+            return Err(ModuleError::param("inputs", "expected at least one CSMat"));
         }
         if capacity == 0 {
-            return Err(ModuleError::Failed(
-                "parameter `capacity`: expected at least 1 sample".into(),
-            ));
+            return Err(ModuleError::param("capacity", "expected at least 1 sample"));
         }
         let ring = Ring {
             capacity,
@@ -219,8 +216,9 @@ impl Recorder {
         RecorderHandle(Arc::clone(&self.shared))
     }
 
-    fn failed(&self, text: impl std::fmt::Display) -> ModuleError {
-        ModuleError::Failed(format!("recorder `{}`: {text}", self.name))
+    /// A failure worded "recorder `NAME`: TEXT".
+    fn error(&self, text: impl std::fmt::Display) -> ModuleError {
+        failed(format!("recorder `{}`: {text}", self.name))
     }
 
     /// Allocates the ring for the inputs' shapes now and empties it.
@@ -239,10 +237,10 @@ impl Recorder {
             .unwrap_or_else(PoisonError::into_inner);
         let (width, capacity) = (columns.len(), ring.capacity);
         let Some(size) = capacity.checked_mul(width) else {
-            return Err(self.failed("capacity × columns overflows"));
+            return Err(self.error("capacity × columns overflows"));
         };
         if size > MAX_VALUES {
-            return Err(self.failed(format_args!(
+            return Err(self.error(format_args!(
                 "{capacity} samples of {width} values exceed the recorder's limit of \
                  {MAX_VALUES} values (1 GiB); lower `capacity`"
             )));
@@ -250,7 +248,7 @@ impl Recorder {
         if ring.data.len() != size {
             ring.data = Vec::new();
             ring.data.try_reserve_exact(size).map_err(|err| {
-                self.failed(format_args!(
+                self.error(format_args!(
                     "cannot allocate {capacity} samples of {width} values: {err}"
                 ))
             })?;
@@ -269,7 +267,7 @@ impl Recorder {
     fn record(&self, ring: &mut Ring, time: f64) -> RoutineResult {
         let (width, next) = (ring.width, ring.next);
         if ring.data.len() < (next + 1) * width || width == 0 {
-            return Err(self.failed("not prepared: sampling has not begun"));
+            return Err(self.error("not prepared: sampling has not begun"));
         }
         let row = &mut ring.data[next * width..(next + 1) * width];
         row[0] = time;
@@ -277,7 +275,7 @@ impl Recorder {
         for (input, &shape) in self.inputs.iter().zip(&self.shapes) {
             let value = input.read();
             if value.shape() != shape {
-                return Err(self.failed(format_args!(
+                return Err(self.error(format_args!(
                     "input `{}` is {}x{} but was {}x{} when sampling began",
                     input.name(),
                     value.rows(),
@@ -324,12 +322,11 @@ impl SampleModule for Recorder {
         };
         self.handle()
             .write_csv(path)
-            .map_err(|err| self.failed(format_args!("writing `{}`: {err}", path.display())))
+            .map_err(|err| self.error(format_args!("writing `{}`: {err}", path.display())))
     }
 }
 
-/// `recorder`.
-pub const RECORDER: ComponentSpec = ComponentSpec {
+const RECORDER: ComponentSpec = ComponentSpec {
     name: "recorder",
     summary: "Records its inputs each sample (time, then every element) into a ring of the \
               last `capacity` samples, read from code through a RecorderHandle; with `file`, \
@@ -346,7 +343,7 @@ pub const RECORDER: ComponentSpec = ComponentSpec {
     ],
 };
 
-/// Registers this file's component types.
+/// Registers `recorder`.
 pub(crate) fn register(registry: &mut Registry) {
     registry.add(&RECORDER, |b, p| {
         let inputs = p.texts("inputs")?;
@@ -369,10 +366,8 @@ pub(crate) fn register(registry: &mut Registry) {
 #[cfg(test)]
 mod tests {
     use super::{Recorder, RecorderHandle};
+    use crate::testing::{Outcome, TestResult, assert_refuses, refusal};
     use ndds_runtime::{Clock, CsMat, HabitatOptions, Params, Runtime};
-
-    type TestResult = Result<(), Box<dyn std::error::Error>>;
-    type Outcome<T> = Result<T, Box<dyn std::error::Error>>;
 
     /// A 100 Hz manual habitat `h` with a ramp `y = t` and a constant `pair = [1, 2]` with
     /// named rows, recorded by `rec` keeping `capacity` samples.
@@ -492,17 +487,14 @@ mod tests {
         rt.create_habitat("h", HabitatOptions::rate(100.0).clock(Clock::Manual))?;
         rt.create_mat(CsMat::zeros("y", 1, 1))?;
         let params = Params::new().with("inputs", vec!["y".to_owned()]);
-        let err = rt
-            .install_component(
-                "h",
-                "bad",
-                "recorder",
-                &params.clone().with("capacity", 0.0),
-            )
-            .err()
-            .ok_or("installed")?
-            .to_string();
-        assert!(err.contains("`capacity`"), "{err}");
+        let err = refusal(&rt, "recorder", &params.clone().with("capacity", 0.0));
+        assert_refuses(&err, "capacity", &["whole number from 1"]);
+        let empty = Params::new().with("inputs", Vec::<String>::new());
+        assert_refuses(
+            &refusal(&rt, "recorder", &empty),
+            "inputs",
+            &["at least one"],
+        );
 
         let dir = tempfile::tempdir()?;
         let path = dir.path().join("missing").join("run.csv");

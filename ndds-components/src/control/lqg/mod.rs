@@ -18,398 +18,22 @@
 //! `process_noise`, `measurement_noise`; `N` makes `y` settle at `r`). An explicit model has
 //! `y0 = 0`, `u0 = 0`.
 
-use nalgebra::linalg::{Schur, SymmetricEigen};
-use nalgebra::{DMatrix, DVector};
+mod model;
+mod weights;
 
-use super::arm::{ArmModel, joint_pair};
-use super::control::gemm;
-use super::{LqgDesign, LqgWeights, Physical, copy_out, design_lqg, distinct, shape_error};
-use ndds_runtime::Mat;
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{
-    ComponentSpec, ParamError, ParamKind as K, ParamSpec as P, ParamValue, Params, Registry,
-};
+pub use model::{ArmOutput, LqgModel, MassOutput};
 
-/// The period (s) at which [`Lqg::new`] test-designs the controller, to refuse a model or
-/// weights that cannot work before any habitat runs it (the real design is at the habitat's
-/// period, in `startup` and `timing_changed`).
-pub const LQG_NOMINAL_DT: f64 = 0.01;
+use nalgebra::DMatrix;
 
-fn failed(text: impl Into<String>) -> ModuleError {
-    ModuleError::Failed(text.into())
-}
+use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
+use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
 
-/// What an LQG controller of a `mass_spring_damper` measures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MassOutput {
-    /// The position `p` (m): `C = [1, 0]`.
-    Position,
-    /// The lever angle `p / length` (rad): `C = [1/length, 0]`.
-    Angle,
-}
-
-/// What an LQG controller of a `two_link_arm` measures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ArmOutput {
-    /// The joint angles (rad): `C = [I, 0]`, `y0 = at`.
-    Angles,
-    /// The endpoint (m): `C = [J(at), 0]` (the Jacobian), `y0 = FK(at)`.
-    Endpoint,
-}
-
-/// The model an [`Lqg`] is designed on.
-#[derive(Clone, Debug, PartialEq)]
-pub enum LqgModel {
-    /// `ẋ = a·x + b·u`, `y = c·x` (a n × n, b n × m, c p × n), operating point 0.
-    Explicit {
-        /// A (n × n).
-        a: DMatrix<f64>,
-        /// B (n × m).
-        b: DMatrix<f64>,
-        /// C (p × n).
-        c: DMatrix<f64>,
-    },
-    /// A [`MassSpringDamper`](super::MassSpringDamper) (`x = [p, ṗ]`, `u` = force), exactly
-    /// linear, operating point 0.
-    MassSpringDamper {
-        /// Its constants.
-        physical: Physical,
-        /// What is measured.
-        output: MassOutput,
-    },
-    /// A [`TwoLinkArm`](super::TwoLinkArm) linearised about rest at `at`
-    /// (`δx = [q − at, q̇]`, `u0 = g(at)`, the gravity torque: 0 in a horizontal plane).
-    TwoLinkArm {
-        /// Its constants.
-        model: ArmModel,
-        /// The operating point (rad); for `Endpoint`, not singular (`q2 ≠ 0, π`).
-        at: [f64; 2],
-        /// What is measured.
-        output: ArmOutput,
-    },
-}
-
-/// A model linearised: `(A, B, C)` and the operating point `(y0, u0)`.
-struct Linear {
-    a: DMatrix<f64>,
-    b: DMatrix<f64>,
-    c: DMatrix<f64>,
-    y0: DMatrix<f64>,
-    u0: DMatrix<f64>,
-}
-
-impl Linear {
-    /// `(n, m, p)`: states, commands, measurements.
-    fn dims(&self) -> (usize, usize, usize) {
-        (self.a.nrows(), self.b.ncols(), self.c.nrows())
-    }
-}
-
-fn plant_error(e: ParamError) -> ModuleError {
-    failed(format!("parameter `plant.{}`: {}", e.name, e.problem))
-}
-
-fn all_finite(m: &DMatrix<f64>) -> bool {
-    m.iter().all(|x| x.is_finite())
-}
-
-impl LqgModel {
-    /// The model of an `lqg` component's parameters: `a`, `b` and `c`, or `plant` (a table
-    /// with `type = "mass_spring_damper"` or `"two_link_arm"`; see [`LQG`]).
-    pub fn from_params(p: &Params) -> Result<Self, ModuleError> {
-        let given: Vec<&str> = ["a", "b", "c"].into_iter().filter(|k| p.has(k)).collect();
-        match (p.has("plant"), given.len()) {
-            (true, 0) => Self::from_plant(p.table("plant")?),
-            (false, 3) => Ok(LqgModel::Explicit {
-                a: p.matrix("a")?,
-                b: p.matrix("b")?,
-                c: p.matrix("c")?,
-            }),
-            (true, _) => Err(failed(format!(
-                "parameter `plant`: give either `plant` or `a`, `b`, `c`, not both (also \
-                 given: {})",
-                given.join(", ")
-            ))),
-            (false, 0) => Err(failed(
-                "the model is missing: give `plant` (a table naming a library plant) or the \
-                 matrices `a`, `b` and `c`",
-            )),
-            (false, _) => Err(failed(format!(
-                "parameters `a`, `b`, `c`: all three are needed, only {} given",
-                given.join(", ")
-            ))),
-        }
-    }
-
-    fn from_plant(t: &Params) -> Result<Self, ModuleError> {
-        let kind = t.text("type").map_err(plant_error)?;
-        let known: &[&str] = match kind {
-            "mass_spring_damper" => &["type", "mass", "stiffness", "damping", "length", "output"],
-            "two_link_arm" => &[
-                "type", "l1", "l2", "m1", "m2", "damping", "gravity", "at", "output",
-            ],
-            other => {
-                return Err(failed(format!(
-                    "parameter `plant.type`: unknown plant `{other}` (known: \
-                     mass_spring_damper, two_link_arm)"
-                )));
-            }
-        };
-        if let Some(extra) = t.0.keys().find(|k| !known.contains(&k.as_str())) {
-            return Err(failed(format!(
-                "parameter `plant.{extra}`: not a parameter of a `{kind}` plant (known: {})",
-                known.join(", ")
-            )));
-        }
-        if kind == "mass_spring_damper" {
-            Self::mass_spring_damper(t)
-        } else {
-            Self::two_link_arm(t)
-        }
-    }
-
-    fn mass_spring_damper(t: &Params) -> Result<Self, ModuleError> {
-        let output = match t.text_or("output", "position").map_err(plant_error)? {
-            "position" => MassOutput::Position,
-            "angle" => MassOutput::Angle,
-            other => {
-                return Err(failed(format!(
-                    "parameter `plant.output`: expected \"position\" or \"angle\", got \
-                     \"{other}\""
-                )));
-            }
-        };
-        let physical = Physical {
-            mass: t.number_or("mass", 1.0).map_err(plant_error)?,
-            stiffness: t.number_or("stiffness", 4.0).map_err(plant_error)?,
-            damping: t.number_or("damping", 0.4).map_err(plant_error)?,
-            length: t.number_or("length", 0.5).map_err(plant_error)?,
-        };
-        Ok(LqgModel::MassSpringDamper { physical, output })
-    }
-
-    fn two_link_arm(t: &Params) -> Result<Self, ModuleError> {
-        let output = match t.text_or("output", "angles").map_err(plant_error)? {
-            "angles" => ArmOutput::Angles,
-            "endpoint" => ArmOutput::Endpoint,
-            other => {
-                return Err(failed(format!(
-                    "parameter `plant.output`: expected \"angles\" or \"endpoint\", got \
-                     \"{other}\""
-                )));
-            }
-        };
-        if !t.has("at") {
-            return Err(failed(
-                "parameter `plant.at`: missing (the operating point [q1, q2] in rad)",
-            ));
-        }
-        Ok(LqgModel::TwoLinkArm {
-            model: ArmModel::from_params(t).map_err(plant_error)?,
-            at: joint_pair(t, "at", [0.0; 2]).map_err(plant_error)?,
-            output,
-        })
-    }
-
-    /// `(n, m, p)`: the numbers of states, commands and measurements, once the model checks.
-    pub fn dimensions(&self) -> Result<(usize, usize, usize), ModuleError> {
-        Ok(self.linear()?.dims())
-    }
-
-    /// Checks the model and linearises it.
-    fn linear(&self) -> Result<Linear, ModuleError> {
-        match self {
-            LqgModel::Explicit { a, b, c } => explicit(a, b, c),
-            LqgModel::MassSpringDamper { physical, output } => {
-                let ph = physical;
-                let ok = ph.mass.is_finite() && ph.mass > 0.0 && ph.length.is_finite();
-                if !(ok && ph.length > 0.0 && ph.stiffness.is_finite() && ph.damping.is_finite()) {
-                    return Err(failed(format!(
-                        "parameter `plant`: mass and length must be positive, stiffness and \
-                         damping finite; got {ph:?}"
-                    )));
-                }
-                let (a, b) = ph.model();
-                let scale = match output {
-                    MassOutput::Position => 1.0,
-                    MassOutput::Angle => 1.0 / ph.length,
-                };
-                Ok(Linear {
-                    a,
-                    b,
-                    c: DMatrix::from_row_slice(1, 2, &[scale, 0.0]),
-                    y0: DMatrix::zeros(1, 1),
-                    u0: DMatrix::zeros(1, 1),
-                })
-            }
-            LqgModel::TwoLinkArm { model, at, output } => arm_linear(model, *at, *output),
-        }
-    }
-}
-
-/// States (and commands, measurements) an `lqg` takes at most.
-pub const MAX_STATES: usize = 16;
-
-fn explicit(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &DMatrix<f64>) -> Result<Linear, ModuleError> {
-    let n = a.nrows();
-    let dims = |name: &str, m: &DMatrix<f64>, expected: String| {
-        failed(format!(
-            "parameter `{name}`: expected {expected}, got {} × {}",
-            m.nrows(),
-            m.ncols()
-        ))
-    };
-    if n == 0 || a.ncols() != n {
-        return Err(dims("a", a, "a square matrix (n × n, n ≥ 1)".into()));
-    }
-    if n > MAX_STATES || b.ncols() > MAX_STATES || c.nrows() > MAX_STATES {
-        return Err(failed(format!(
-            "parameter `a`: at most {MAX_STATES} states, commands and measurements \
-             (the design iterates a Riccati equation at load time)"
-        )));
-    }
-    if b.nrows() != n || b.ncols() == 0 {
-        return Err(dims("b", b, format!("{n} rows (n × m, `a` is {n} × {n})")));
-    }
-    if c.ncols() != n || c.nrows() == 0 {
-        return Err(dims(
-            "c",
-            c,
-            format!("{n} columns (p × n, `a` is {n} × {n})"),
-        ));
-    }
-    for (name, m) in [("a", a), ("b", b), ("c", c)] {
-        if !all_finite(m) {
-            return Err(failed(format!("parameter `{name}`: not all finite")));
-        }
-    }
-    Ok(Linear {
-        a: a.clone(),
-        b: b.clone(),
-        c: c.clone(),
-        y0: DMatrix::zeros(c.nrows(), 1),
-        u0: DMatrix::zeros(b.ncols(), 1),
-    })
-}
-
-fn arm_linear(model: &ArmModel, at: [f64; 2], output: ArmOutput) -> Result<Linear, ModuleError> {
-    model.check().map_err(plant_error)?;
-    if !(at[0].is_finite() && at[1].is_finite()) {
-        return Err(failed(format!(
-            "parameter `plant.at`: expected finite angles (rad), got {at:?}"
-        )));
-    }
-    let (a, b) = model.linearize(at);
-    let mut c = DMatrix::zeros(2, 4);
-    let y0 = match output {
-        ArmOutput::Angles => {
-            c[(0, 0)] = 1.0;
-            c[(1, 1)] = 1.0;
-            at
-        }
-        ArmOutput::Endpoint => {
-            let j = model.jacobian(at);
-            let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
-            if det.abs() < 1e-6 * model.l1 * model.l2 {
-                return Err(failed(format!(
-                    "parameter `plant.at`: the arm is singular at {at:?} (q2 = 0 or π): the \
-                     endpoint does not determine the joint angles there"
-                )));
-            }
-            for (i, row) in j.iter().enumerate() {
-                c[(i, 0)] = row[0];
-                c[(i, 1)] = row[1];
-            }
-            model.forward_kinematics(at)
-        }
-    };
-    Ok(Linear {
-        a,
-        b,
-        c,
-        y0: DMatrix::from_column_slice(2, 1, &y0),
-        u0: DMatrix::from_column_slice(2, 1, &model.gravity_torque(at)),
-    })
-}
-
-/// A weight or covariance parameter as a `dim × dim` matrix: a matrix of that shape as it
-/// is, a list of `dim` numbers (a row or a column) as its diagonal, one number times the
-/// identity.
-pub fn weight_matrix(p: &Params, name: &str, dim: usize) -> Result<DMatrix<f64>, ModuleError> {
-    let m = match p.0.get(name) {
-        Some(ParamValue::Numbers(xs)) => DMatrix::from_column_slice(xs.len(), 1, xs),
-        _ => p.matrix(name)?,
-    };
-    if m.shape() == (dim, dim) {
-        Ok(m)
-    } else if m.len() == 1 {
-        Ok(DMatrix::identity(dim, dim) * m[0])
-    } else if m.len() == dim && (m.nrows() == 1 || m.ncols() == 1) {
-        Ok(DMatrix::from_diagonal(&DVector::from_iterator(
-            dim,
-            m.iter().copied(),
-        )))
-    } else {
-        Err(failed(format!(
-            "parameter `{name}`: expected a {dim} × {dim} matrix or its diagonal ({dim} \
-             numbers), got {} × {}",
-            m.nrows(),
-            m.ncols()
-        )))
-    }
-}
-
-/// Checks that `w` is `dim × dim`, finite, symmetric, and positive semi-definite (or definite).
-fn check_weight(name: &str, w: &DMatrix<f64>, dim: usize, definite: bool) -> RoutineResult {
-    let bad = |why: String| Err(failed(format!("parameter `{name}`: {why}")));
-    if w.shape() != (dim, dim) {
-        return bad(format!(
-            "expected {dim} × {dim}, got {} × {}",
-            w.nrows(),
-            w.ncols()
-        ));
-    }
-    if !all_finite(w) {
-        return bad("not all finite".into());
-    }
-    let scale = w.abs().max();
-    if (w - w.transpose()).abs().max() > 1e-9 * (1.0 + scale) {
-        return bad("not symmetric".into());
-    }
-    let lowest = SymmetricEigen::try_new(w.clone(), 1e-14, 10_000)
-        .map(|e| e.eigenvalues.min())
-        .unwrap_or(f64::NAN);
-    let tolerance = 1e-12 * scale;
-    let ok = if definite {
-        lowest > tolerance
-    } else {
-        lowest >= -tolerance
-    };
-    if ok {
-        Ok(())
-    } else {
-        let what = if definite {
-            "definite"
-        } else {
-            "semi-definite"
-        };
-        bad(format!(
-            "expected a positive {what} matrix, its lowest eigenvalue is {lowest:e}"
-        ))
-    }
-}
-
-/// The largest eigenvalue modulus of `m` (NaN if the eigenvalues cannot be computed).
-fn spectral_radius(m: &DMatrix<f64>) -> f64 {
-    Schur::try_new(m.clone(), 1e-14, 10_000)
-        .map(|s| {
-            s.complex_eigenvalues()
-                .iter()
-                .map(|z| z.norm())
-                .fold(0.0, f64::max)
-        })
-        .unwrap_or(f64::NAN)
-}
+use crate::design::spectral_radius;
+use crate::mats::{copy_out, distinct, gemm, shape_error};
+use crate::params::failed;
+use crate::{LqgDesign, LqgWeights, design_lqg};
+use model::Linear;
+use weights::{check_weight, weight_matrix};
 
 /// Designs at `dt` and checks that both the state feedback and the estimator are stable.
 fn design(linear: &Linear, weights: &LqgWeights, dt: f64) -> Result<LqgDesign, ModuleError> {
@@ -442,9 +66,14 @@ fn design(linear: &Linear, weights: &LqgWeights, dt: f64) -> Result<LqgDesign, M
 fn read_deviation(mat: &Mat, offset: &DMatrix<f64>, buffer: &mut DMatrix<f64>) -> RoutineResult {
     let value = mat.read();
     if value.shape() != buffer.shape() {
-        return Err(shape_error("input", &value, buffer.shape()));
+        return Err(shape_error(
+            "input",
+            value.name(),
+            value.shape(),
+            buffer.shape(),
+        ));
     }
-    if !all_finite(value.matrix()) {
+    if !value.matrix().iter().all(|x| x.is_finite()) {
         return Err(failed(format!(
             "input `{}` holds a non-finite value",
             value.name()
@@ -484,9 +113,14 @@ pub struct Lqg {
 }
 
 impl Lqg {
+    /// The period (s) at which [`Lqg::new`] test-designs the controller, to refuse a model or
+    /// weights that cannot work before any habitat runs it (the real design is at the
+    /// habitat's period, in `startup` and `timing_changed`).
+    pub const NOMINAL_DT: f64 = 0.01;
+
     /// Reads `measured` and `reference` (p × 1), writes `output` (m × 1) and `estimate`
     /// (n × 1) if given. Checks the model and weights and test-designs the controller at
-    /// [`LQG_NOMINAL_DT`], failing with the reason if that is impossible. `limit`, if given,
+    /// [`NOMINAL_DT`](Self::NOMINAL_DT), failing with the reason if that is impossible. `limit`, if given,
     /// clamps each command element to `[−limit, limit]`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
@@ -511,11 +145,12 @@ impl Lqg {
         if let Some(limit) = limit
             && (limit.is_nan() || limit <= 0.0)
         {
-            return Err(failed(format!(
-                "parameter `limit`: expected a positive number (command units), got {limit}"
-            )));
+            return Err(ModuleError::param(
+                "limit",
+                format!("expected a positive number (command units), got {limit}"),
+            ));
         }
-        design(&linear, &weights, LQG_NOMINAL_DT)?;
+        design(&linear, &weights, Self::NOMINAL_DT)?;
         let c_pinv = linear
             .c
             .clone()
@@ -621,8 +256,7 @@ impl SampleModule for Lqg {
     }
 }
 
-/// `lqg`.
-pub const LQG: ComponentSpec = ComponentSpec {
+const LQG: ComponentSpec = ComponentSpec {
     name: "lqg",
     summary: "LQG controller: steady-state Kalman estimator and LQR state feedback with \
               reference feedforward, u = u0 + N·(r − y0) − K·x̂, designed at the habitat's rate \
@@ -716,40 +350,9 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use crate::dlqr;
-    use ndds_runtime::{Clock, CsMat, HabitatOptions, Runtime};
-
-    /// The positive root of the scalar discrete Riccati equation
-    /// `P = q + a²P − (abP)²/(r + b²P)`, i.e. `b²P² + ((1 − a²)r − qb²)P − qr = 0`.
-    fn scalar_riccati(a: f64, b: f64, q: f64, r: f64) -> f64 {
-        let linear = (1.0 - a * a) * r - q * b * b;
-        (-linear + (linear * linear + 4.0 * b * b * q * r).sqrt()) / (2.0 * b * b)
-    }
-
-    fn scalar_gain(a: f64, b: f64, q: f64, r: f64) -> f64 {
-        let p = scalar_riccati(a, b, q, r);
-        a * b * p / (r + b * b * p)
-    }
-
-    fn one(x: f64) -> DMatrix<f64> {
-        DMatrix::from_element(1, 1, x)
-    }
-
-    #[test]
-    fn dlqr_matches_the_scalar_closed_form() {
-        let golden = (1.0 + 5f64.sqrt()) / 2.0;
-        assert!((scalar_riccati(1.0, 1.0, 1.0, 1.0) - golden).abs() < 1e-12);
-        for (a, b, q, r) in [
-            (1.0, 1.0, 1.0, 1.0),
-            (1.2, 0.5, 2.0, 0.3),
-            (0.9, 2.0, 0.1, 5.0),
-        ] {
-            let k = dlqr(&one(a), &one(b), &one(q), &one(r)).expect("a design")[0];
-            let expected = scalar_gain(a, b, q, r);
-            assert!((k - expected).abs() < 1e-9, "{k} vs {expected}");
-        }
-        assert!((scalar_gain(1.0, 1.0, 1.0, 1.0) - 0.618_034).abs() < 1e-6);
-    }
+    use crate::ArmModel;
+    use crate::testing::{assert_refuses, one, refusal, scalar_gain};
+    use ndds_runtime::{Clock, CsMat, HabitatOptions, ParamValue, Params, Runtime};
 
     #[test]
     fn the_component_designs_the_scalar_closed_form() {
@@ -979,65 +582,94 @@ mod tests {
             .with("a", a.clone())
             .with("b", b.clone())
             .with("c", c.clone());
+        let table = |type_name: &str| Params::new().with("type", type_name);
         let cases = [
             (
+                base.clone().with("plant", table("pendulum")),
+                "plant.type",
+                "unknown plant",
+            ),
+            (
                 base.clone()
-                    .with("plant", Params::new().with("type", "pendulum")),
-                "`plant.type`",
+                    .with("plant", table("mass_spring_damper").with("stifness", 3.0)),
+                "plant.stifness",
+                "not a parameter",
             ),
             (
                 base.clone().with(
                     "plant",
-                    Params::new()
-                        .with("type", "mass_spring_damper")
-                        .with("stifness", 3.0),
+                    table("mass_spring_damper").with("stiffness", "stiff"),
                 ),
-                "`plant.stifness`",
+                "plant.stiffness",
+                "number",
             ),
             (
-                base.clone()
-                    .with("plant", Params::new().with("type", "two_link_arm")),
-                "`plant.at`",
+                base.clone().with("plant", table("two_link_arm")),
+                "plant.at",
+                "missing",
             ),
             (
                 base.clone().with(
                     "plant",
-                    Params::new()
-                        .with("type", "two_link_arm")
+                    table("two_link_arm")
                         .with("at", vec![0.3, 0.0])
                         .with("output", "endpoint"),
                 ),
+                "plant.at",
                 "singular",
             ),
             (
+                base.clone().with(
+                    "plant",
+                    table("two_link_arm")
+                        .with("l2", -1.0)
+                        .with("at", vec![0.5, 1.0]),
+                ),
+                "plant.l2",
+                "positive",
+            ),
+            (
                 explicit.clone().with("b", DMatrix::from_element(3, 1, 1.0)),
-                "`b`",
+                "b",
+                "2 rows",
             ),
             (
                 explicit.clone().with("c", DMatrix::from_element(1, 3, 1.0)),
-                "`c`",
+                "c",
+                "2 columns",
             ),
             (
                 explicit.clone().with("a", DMatrix::from_element(2, 3, 1.0)),
-                "`a`",
+                "a",
+                "square",
             ),
-            (base.clone().with("a", a.clone()), "all three"),
-            (base.clone(), "`plant`"),
             (
                 explicit
                     .clone()
-                    .with("plant", Params::new().with("type", "mass_spring_damper")),
+                    .with("a", DMatrix::from_element(2, 2, f64::NAN)),
+                "a",
+                "finite",
+            ),
+            (base.clone().with("a", a.clone()), "b", "all three"),
+            (base.clone(), "plant", "missing"),
+            (
+                explicit.clone().with("plant", table("mass_spring_damper")),
+                "plant",
                 "not both",
             ),
-            (explicit.clone().with("q", vec![1.0, 2.0, 3.0]), "`q`"),
-            (explicit.clone().with("r", -1.0), "`r`"),
-            (explicit.clone().with("limit", 0.0), "`limit`"),
-            (explicit.clone().with("estimate", "y"), "`y`"),
+            (
+                explicit.clone().with("q", vec![1.0, 2.0, 3.0]),
+                "q",
+                "diagonal",
+            ),
+            (explicit.clone().with("r", -1.0), "r", "positive definite"),
+            (explicit.clone().with("limit", 0.0), "limit", "positive"),
         ];
-        for (params, needle) in cases {
-            let err = install_error(&params);
-            assert!(err.contains(needle), "{needle}: {err}");
+        for (params, name, says) in cases {
+            assert_refuses(&refusal(&habitat(), "lqg", &params), name, &[says]);
         }
+        let err = install_error(&explicit.clone().with("estimate", "y"));
+        assert!(err.contains("`y`") && err.contains("twice"), "{err}");
         // The explicit model itself is fine.
         habitat()
             .install_component("h", "lqg", "lqg", &explicit)

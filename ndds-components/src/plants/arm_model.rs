@@ -1,5 +1,5 @@
-//! A simulated planar two-link arm: [`ArmModel`] (its rigid-body dynamics, kinematics and
-//! linearisation) and the sample module [`TwoLinkArm`] that integrates it.
+//! The planar two-link arm as a model: [`ArmModel`], its rigid-body dynamics, kinematics and
+//! linearisation (the sample module that integrates it is [`TwoLinkArm`](crate::TwoLinkArm)).
 //!
 //! Both links are uniform rods: link `i` has mass `mᵢ` spread evenly over its length `lᵢ`, so
 //! its centre of mass is at `lᵢ/2` and its inertia about that centre is `mᵢ·lᵢ²/12`. Joint
@@ -21,14 +21,7 @@
 
 use nalgebra::DMatrix;
 
-use super::distinct;
-use ndds_runtime::Mat;
-use ndds_runtime::csmat::CsMat;
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamError, ParamKind as K, ParamSpec as P, Params, Registry};
-
-/// The longest RK4 substep [`ArmModel::integrate`] takes (s).
-pub const ARM_MAX_SUBSTEP: f64 = 1e-3;
+use ndds_runtime::{ParamError, Params};
 
 /// The physical constants of a planar two-link arm of uniform rods (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,6 +65,9 @@ fn solve2(m: [[f64; 2]; 2], v: [f64; 2]) -> [f64; 2] {
 }
 
 impl ArmModel {
+    /// The longest RK4 substep [`integrate`](Self::integrate) takes (s).
+    pub const MAX_SUBSTEP: f64 = 1e-3;
+
     /// Reads `l1`, `l2`, `m1`, `m2`, `damping` and `gravity` from `p`, with the defaults of
     /// [`ArmModel::default`] for those absent, and [checks](Self::check) them.
     pub fn from_params(p: &Params) -> Result<Self, ParamError> {
@@ -212,12 +208,12 @@ impl ArmModel {
     }
 
     /// Advances `state` by `dt` seconds with `torque` held constant: classical RK4 in equal
-    /// substeps of at most [`ARM_MAX_SUBSTEP`]. A `dt` that is not positive changes nothing.
+    /// substeps of at most [`MAX_SUBSTEP`](Self::MAX_SUBSTEP). A `dt` that is not positive changes nothing.
     pub fn integrate(&self, state: [f64; 4], torque: [f64; 2], dt: f64) -> [f64; 4] {
         if !(dt > 0.0 && dt.is_finite()) {
             return state;
         }
-        let steps = (dt / ARM_MAX_SUBSTEP).ceil().max(1.0) as u64;
+        let steps = (dt / Self::MAX_SUBSTEP).ceil().max(1.0) as u64;
         let h = dt / steps as f64;
         let add = |x: [f64; 4], k: [f64; 4], s: f64| std::array::from_fn(|i| x[i] + s * k[i]);
         let mut x = state;
@@ -258,229 +254,31 @@ impl ArmModel {
         }
         (a, b)
     }
-}
 
-/// Reads a pair of joint angles (rad) `name` from `p`, or `default` if absent.
-pub(crate) fn joint_pair(
-    p: &Params,
-    name: &str,
-    default: [f64; 2],
-) -> Result<[f64; 2], ParamError> {
-    let values = p.numbers_or(name, &default)?;
-    match values[..] {
-        [a, b] if a.is_finite() && b.is_finite() => Ok([a, b]),
-        _ => Err(ParamError {
-            name: name.into(),
-            problem: format!("expected two finite joint angles [q1, q2] (rad), got {values:?}"),
-        }),
-    }
-}
-
-/// A simulated [`ArmModel`]. `execute` writes the joint angles (rad), the endpoint (m) and,
-/// if asked for, the joint velocities (rad/s), each 2 × 1 with field names and units;
-/// `state_update` reads the torque (N·m, 2 × 1) and integrates over the sample period with
-/// [`ArmModel::integrate`], so a controller reading the arm's outputs and writing its torque
-/// closes a legal loop. Enabling it publishes its current state at once (so controllers
-/// enabled after it start from the real measurement); `reset` puts it back at rest at `q0`.
-pub struct TwoLinkArm {
-    torque: Mat,
-    angles: Mat,
-    endpoint: Mat,
-    velocities: Option<Mat>,
-    model: ArmModel,
-    q0: [f64; 2],
-    state: [f64; 4],
-    active: bool,
-}
-
-impl TwoLinkArm {
-    /// Reads `torque`; writes `angles`, `endpoint` and `velocities` (if given). Starts at rest
-    /// at `q0` (rad).
-    pub fn new(
-        b: &mut Binder<'_>,
-        torque: &str,
-        angles: &str,
-        endpoint: &str,
-        velocities: Option<&str>,
-        model: ArmModel,
-        q0: [f64; 2],
-    ) -> Result<Self, ModuleError> {
-        let mut names = vec![torque, angles, endpoint];
-        names.extend(velocities);
-        distinct(&names)?;
-        model.check()?;
-        if !(q0[0].is_finite() && q0[1].is_finite()) {
-            return Err(ModuleError::Failed(format!(
-                "parameter `q0`: expected finite joint angles (rad), got {q0:?}"
-            )));
+    /// Reads a pair of joint angles (rad) `name` from `p`, or `default` if absent.
+    pub(crate) fn joint_pair(
+        p: &Params,
+        name: &str,
+        default: [f64; 2],
+    ) -> Result<[f64; 2], ParamError> {
+        let values = p.numbers_or(name, &default)?;
+        match values[..] {
+            [a, b] if a.is_finite() && b.is_finite() => Ok([a, b]),
+            _ => Err(ParamError {
+                name: name.into(),
+                problem: format!("expected two finite joint angles [q1, q2] (rad), got {values:?}"),
+            }),
         }
-        let template = |name: &str, values: [f64; 2], fields: [(&str, &str); 2]| {
-            CsMat::from_row_slice(name, 2, 1, &values)?.with_row_fields(fields)
-        };
-        let tip = model.forward_kinematics(q0);
-        let angles_mat = template(angles, q0, [("q1", "rad"), ("q2", "rad")])?;
-        let endpoint_mat = template(endpoint, tip, [("x", "m"), ("y", "m")])?;
-        let velocities_mat = match velocities {
-            Some(name) => Some((
-                name,
-                template(name, [0.0; 2], [("q1dot", "rad/s"), ("q2dot", "rad/s")])?,
-            )),
-            None => None,
-        };
-        let torque = b.state_input(torque, (2, 1));
-        let angles = b.output_like(angles, angles_mat);
-        let endpoint = b.output_like(endpoint, endpoint_mat);
-        Ok(Self {
-            torque,
-            angles,
-            endpoint,
-            velocities: velocities_mat.map(|(name, mat)| b.output_like(name, mat)),
-            model,
-            q0,
-            state: [q0[0], q0[1], 0.0, 0.0],
-            active: false,
-        })
     }
-
-    /// The state `[q1, q2, q̇1, q̇2]` (rad, rad/s).
-    pub fn state(&self) -> [f64; 4] {
-        self.state
-    }
-
-    /// Sets the state `[q1, q2, q̇1, q̇2]` (rad, rad/s).
-    pub fn set_state(&mut self, state: [f64; 4]) {
-        self.state = state;
-    }
-
-    /// Its physical constants.
-    pub fn model(&self) -> &ArmModel {
-        &self.model
-    }
-
-    fn publish(&self) -> RoutineResult {
-        let q = [self.state[0], self.state[1]];
-        write_pair(&self.angles, q)?;
-        write_pair(&self.endpoint, self.model.forward_kinematics(q))?;
-        if let Some(velocities) = &self.velocities {
-            write_pair(velocities, [self.state[2], self.state[3]])?;
-        }
-        Ok(())
-    }
-}
-
-/// Writes a 2 × 1 CSMat (one lock, released on return).
-fn write_pair(mat: &Mat, values: [f64; 2]) -> RoutineResult {
-    let mut out = mat.write();
-    out.set(0, 0, values[0])?;
-    out.set(1, 0, values[1])?;
-    Ok(())
-}
-
-impl SampleModule for TwoLinkArm {
-    fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        self.publish()
-    }
-
-    fn state_update(&mut self, ctx: &SampleContext) -> RoutineResult {
-        let tau = {
-            let t = self.torque.read();
-            [t.get(0, 0)?, t.get(1, 0)?]
-        };
-        if !(tau[0].is_finite() && tau[1].is_finite()) {
-            return Err(ModuleError::Failed(format!(
-                "torque `{}` is not finite: {tau:?} (the arm holds its state)",
-                self.torque.name()
-            )));
-        }
-        self.state = self.model.integrate(self.state, tau, ctx.dt());
-        Ok(())
-    }
-
-    fn enable(&mut self, _: &SampleContext) -> RoutineResult {
-        self.active = true;
-        self.publish()
-    }
-
-    fn disable(&mut self, _: &SampleContext) -> RoutineResult {
-        self.active = false;
-        Ok(())
-    }
-
-    fn reset(&mut self, _: &SampleContext) -> RoutineResult {
-        self.state = [self.q0[0], self.q0[1], 0.0, 0.0];
-        if self.active {
-            self.publish()?;
-        }
-        Ok(())
-    }
-}
-
-/// `two_link_arm`.
-pub const TWO_LINK_ARM: ComponentSpec = ComponentSpec {
-    name: "two_link_arm",
-    summary: "Simulated planar two-link arm of uniform rods, M(q)·q̈ + C(q,q̇)·q̇ + d·q̇ + g(q) = τ, \
-              integrated with RK4 in ≤ 1 ms substeps, the torque held over each sample; writes \
-              the joint angles, the endpoint and optionally the joint velocities.",
-    params: &[
-        P::required("torque", K::Input, "τ (N·m, 2 × 1), read in state_update"),
-        P::required(
-            "angles",
-            K::Output,
-            "q (rad, 2 × 1): q1 from the x axis, q2 relative to link 1",
-        ),
-        P::required("endpoint", K::Output, "tip position [x, y] (m, 2 × 1)"),
-        P::optional("velocities", K::Output, "none", "q̇ (rad/s, 2 × 1)"),
-        P::optional("l1", K::Number, "1", "length of link 1 (m)"),
-        P::optional("l2", K::Number, "0.8", "length of link 2 (m)"),
-        P::optional("m1", K::Number, "2", "mass of link 1, a uniform rod (kg)"),
-        P::optional("m2", K::Number, "1", "mass of link 2, a uniform rod (kg)"),
-        P::optional(
-            "damping",
-            K::Number,
-            "0.5",
-            "viscous damping at each joint (N·m·s/rad)",
-        ),
-        P::optional(
-            "gravity",
-            K::Number,
-            "0",
-            "gravity along the plane's −y axis (m/s²); 0: a horizontal plane",
-        ),
-        P::optional(
-            "q0",
-            K::Numbers,
-            "[0.3, 0.6]",
-            "initial joint angles [q1, q2] (rad), at rest",
-        ),
-    ],
-};
-
-/// Registers `two_link_arm`.
-pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&TWO_LINK_ARM, |b, p| {
-        let velocities = if p.has("velocities") {
-            Some(p.text("velocities")?)
-        } else {
-            None
-        };
-        TwoLinkArm::new(
-            b,
-            p.text("torque")?,
-            p.text("angles")?,
-            p.text("endpoint")?,
-            velocities,
-            ArmModel::from_params(p)?,
-            joint_pair(p, "q0", [0.3, 0.6])?,
-        )
-    });
 }
 
 #[cfg(test)]
 mod tests {
     use std::f64::consts::FRAC_PI_2;
 
+    use nalgebra::DMatrix;
+
     use super::*;
-    use ndds_runtime::{Clock, CsMat, HabitatOptions, Runtime};
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
         (a - b).abs() <= tol
@@ -617,75 +415,5 @@ mod tests {
             DMatrix::from_row_slice(2, 4, &[0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
         );
         assert!(b.view((0, 0), (2, 2)).iter().all(|x| *x == 0.0));
-    }
-
-    #[test]
-    fn bad_parameters_are_refused_by_name() {
-        let rt = Runtime::new("t");
-        crate::register(&rt);
-        let base = Params::new()
-            .with("torque", "torque")
-            .with("angles", "angles")
-            .with("endpoint", "endpoint");
-        for (params, name) in [
-            (base.clone().with("l2", -1.0), "`l2`"),
-            (base.clone().with("damping", -0.1), "`damping`"),
-            (base.clone().with("q0", vec![0.1, 0.2, 0.3]), "`q0`"),
-            (base.clone().with("endpoint", "angles"), "`angles`"),
-        ] {
-            let err = rt
-                .install_component("h", "arm", "two_link_arm", &params)
-                .expect_err("refused")
-                .to_string();
-            assert!(err.contains(name), "{err}");
-        }
-    }
-
-    #[test]
-    fn pd_on_the_joint_angles_reaches_its_reference() {
-        let rt = Runtime::new("t");
-        crate::register(&rt);
-        rt.create_habitat("h", HabitatOptions::rate(200.0).clock(Clock::Manual))
-            .unwrap();
-        let goal = [0.5, 0.9];
-        rt.create_mat(CsMat::from_row_slice("reference", 2, 1, &goal).unwrap())
-            .unwrap();
-        let arm = Params::new()
-            .with("torque", "torque")
-            .with("angles", "angles")
-            .with("endpoint", "endpoint")
-            .with("velocities", "velocities");
-        rt.install_component("h", "arm", "two_link_arm", &arm)
-            .unwrap();
-        let pd = Params::new()
-            .with("measured", "angles")
-            .with("reference", "reference")
-            .with("output", "torque")
-            .with("kp", 50.0)
-            .with("kd", 10.0);
-        rt.install_component("h", "pd", "pd", &pd).unwrap();
-        let angles = rt.mat("angles");
-        assert_eq!(angles.read().row_fields()[1].unit, "rad");
-        assert_eq!(angles.value(0, 0), 0.3, "starts at q0");
-        let habitat = rt.habitat("h");
-        habitat.start().unwrap();
-        let mut settled = None;
-        for k in 0..1000 {
-            habitat.step().unwrap();
-            let error = (0..2)
-                .map(|i| (angles.value(i, 0) - goal[i]).abs())
-                .fold(0.0, f64::max);
-            match (error < 1e-3, settled) {
-                (true, None) => settled = Some(k),
-                (false, _) => settled = None,
-                _ => {}
-            }
-        }
-        habitat.stop();
-        let settled = settled.expect("within 1e-3 rad after 5 s") as f64 / 200.0;
-        assert!(settled < 4.0, "settled at {settled} s");
-        assert!(rt.mat("velocities").value(0, 0).abs() < 1e-3);
-        assert_eq!(habitat.stats_total().module_errors, 0);
-        eprintln!("pd on the arm: |q − r| < 1e-3 rad from {settled:.3} s");
     }
 }
