@@ -7,7 +7,9 @@
 //! runs when [`Habitat::step`] is called (simulation, tests).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, Weak};
+
+use super::sync::lock;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -187,10 +189,6 @@ struct StatsSlot {
     interval: Timings,
     total: Timings,
     interval_s: f64,
-}
-
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 impl Habitat {

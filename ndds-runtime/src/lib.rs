@@ -78,6 +78,7 @@ mod requests;
 mod runtime;
 mod sort;
 mod stats;
+mod sync;
 pub mod system;
 mod verify;
 

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, MutexGuard, Weak};
 use std::thread::JoinHandle;
 
 use super::binding::{InputStatus, Reception, Subscriber};
@@ -24,9 +24,7 @@ use super::stats::HabitatStats;
 use super::verify::{VerifyReport, verify};
 use ndds_client::{CallbackConsumer, Participant};
 
-pub(crate) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
+pub(crate) use super::sync::lock;
 
 /// Refuses a call made inside a module's routine that cannot be queued.
 pub(crate) fn refuse_inside_routine(operation: &'static str) -> Result<(), RuntimeError> {

@@ -402,6 +402,7 @@ impl SampleModule for Counted {
 
 fn counting_runtime(counter: &Counter) -> Runtime {
     let rt = Runtime::new("counted");
+    ndds_components::register(&rt);
     let count = Arc::clone(&counter.0);
     rt.register_component(
         "counted",

@@ -15,7 +15,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
-use std::sync::{Arc, Mutex, MutexGuard, Weak};
+use std::sync::{Arc, Mutex, Weak};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -23,6 +23,8 @@ use super::engine::{Outcome, Stimulus};
 use super::task::{FsmError, Shared, enqueue};
 use ndds_client::Participant;
 use ndds_client::ports::{PortError, PortOwner, ReplyHandle};
+
+use crate::sync::lock;
 
 /// The reply of a machine's command port: what the stimuli did, or why not (refused, or an
 /// action that faulted; then what did happen comes first).
@@ -221,8 +223,4 @@ fn describe(sent: &str, outcome: &Outcome, state: &str) -> String {
         })
         .collect();
     format!("{sent}: {}", steps.join(", then "))
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }

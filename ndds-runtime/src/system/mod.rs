@@ -34,7 +34,8 @@
 //! output = "out"
 //! k = 2.0
 //! "#;
-//! let system = System::from_str("servo.toml", text, None)?;
+//! // The built-in library (ndds-components, a dev-dependency here) makes `constant` and `gain`.
+//! let system = System::from_str("servo.toml", text, None, ndds_components::library())?;
 //! system.start()?;
 //! system.runtime().habitat("servo").step()?;
 //! assert_eq!(system.runtime().mat("out").value(0, 0), 3.0);
@@ -54,6 +55,7 @@ pub use decl::{SECTION_KEYS, SECTIONS, Serves};
 pub use source::{Diagnostic, Diagnostics, Location, MAX_FILE_BYTES, MAX_FILES, MAX_INCLUDE_DEPTH};
 
 use crate::fsm::{FsmError, MachineState, StateMachine};
+use crate::sync::lock;
 use crate::{HabitatStats, Registry, Runtime, RuntimeError};
 use ndds_client::Participant;
 
@@ -429,6 +431,3 @@ pub struct Status {
     pub display: Vec<(String, crate::CsMat)>,
 }
 
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-}
