@@ -75,24 +75,28 @@ pub type RoutineResult = Result<(), ModuleError>;
 /// A sample module: the unit of reusable sampled-data code. Every routine defaults to doing
 /// nothing. When the habitat calls each:
 ///
-/// | routine          | when the habitat calls it                                                   |
-/// |------------------|-----------------------------------------------------------------------------|
-/// | `execute`        | once each sample period, active modules, in dependency order                |
-/// | `state_update`   | each sample, after every active module's `execute`, same order              |
-/// | `enable`         | when the module joins the active set while sampling (at `start`, after the startups; at a configuration switch; when installed into a running habitat) |
-/// | `disable`        | when it leaves the active set while sampling (configuration switch, removal, and at `stop` before the shutdowns) |
-/// | `startup`        | when sampling begins, every installed module (active or not), list order   |
-/// | `shutdown`       | when sampling ends, every installed module                                  |
-/// | `timing_changed` | when the habitat's rate changes, every installed module                     |
-/// | `reset`          | when [`Habitat::reset`](super::Habitat::reset) is called, every installed module |
-/// | `terminate`      | when the module is unloaded (removed, or its runtime dropped)               |
+/// | routine          | when it is called                                                      | on which thread |
+/// |------------------|------------------------------------------------------------------------|-----------------|
+/// | `execute`        | once each sample period, active modules, in dependency order           | the habitat's (the caller of `step` for a manual one) |
+/// | `state_update`   | each sample, after every active module's `execute`, same order         | the habitat's |
+/// | `enable`         | when the module joins the active set while sampling: at `start` after the startups; at a configuration switch *before* its first sample, while the old set still samples (so it can read the leaving modules' outputs and may take long: an LQG design costs no sample); when installed into a running habitat, before it joins | `start`'s caller; the caller of `switch` or `install` |
+/// | `disable`        | when it leaves the active set while sampling: at a switch *after* its last sample; at removal; at `stop` before the shutdowns | the caller of `switch`, `remove`, `stop` |
+/// | `startup`        | when sampling begins, every installed module (active or not), list order | `start`'s caller (`install`'s for a module installed while sampling) |
+/// | `shutdown`       | when sampling ends, every installed module                             | `stop`'s caller (`remove`'s) |
+/// | `timing_changed` | when the habitat's rate changes, every installed module, at the next sample boundary | the habitat's when it samples on a thread of its own, else `set_rate`'s caller |
+/// | `reset`          | after [`Habitat::reset`](super::Habitat::reset), every installed module, at the next sample boundary | as `timing_changed` |
+/// | `terminate`      | when the module is unloaded (removed, or its runtime dropped)          | the caller of `remove` (or the last holder of the runtime) |
 ///
-/// Routines of one habitat never run concurrently: all run under the habitat's list lock,
-/// between two samples (`execute` and `state_update` on the habitat's thread, the others on
-/// the thread that called `start`, `stop`, `switch`, `set_rate`, ...). So a routine must not
-/// call back into its [`Runtime`](super::Runtime) or [`Habitat`](super::Habitat) (switch,
-/// install, stop): that would wait for the lock it runs under. Hand such requests to another
-/// thread.
+/// One module's routines never run concurrently, and a habitat never waits for a routine
+/// that runs elsewhere: `enable` and `disable` run on modules lent out of the list, while the
+/// habitat samples the others (see `config.rs`). Because `disable` runs after the switch, it
+/// must not write the module's outputs: a module that entered may write them now.
+///
+/// A routine may ask its runtime or habitat for work: [`Runtime::switch`](super::Runtime::switch)
+/// and a habitat's `start`, `stop`, `set_rate` and `reset` are queued and carried out on the
+/// runtime's request thread once the routine has returned (their outcome is logged);
+/// `install`, `remove`, `step` and declaring groups or configurations are refused with an
+/// `InsideRoutine` error. Neither can deadlock.
 #[allow(unused_variables)]
 pub trait SampleModule: Send + 'static {
     /// Once each sample period.
