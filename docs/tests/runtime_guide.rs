@@ -66,7 +66,7 @@ fn entry_routines_are_the_traits() {
     first_column(
         &doc,
         &mut problems,
-        &["routine", "when the habitat calls it"],
+        &["routine", "when it is called"],
         &routines,
     );
     problems.finish("docs/runtime.md entry routines");
