@@ -2,7 +2,9 @@
 # Prints the "ControlShell runtime" section of docs/benchmarks.md (markdown on stdout):
 # `ndds perf runtime` — the per-sample overhead of a list of 50 modules and the jitter of a
 # 1 kHz timer habitat, idle, with the other core loaded, with both cores loaded, and with
-# SCHED_FIFO (when run as root). No network at all.
+# SCHED_FIFO (when run as root); and, beside the idle run, the same habitat while a
+# configuration switch runs every 100 ms (its entering controller designs an LQR in
+# `enable`). No network at all.
 #
 #   scripts/bench-runtime.sh            (scripts/bench.sh calls it)
 #
@@ -28,11 +30,11 @@ run() {
 }
 
 run idle --seconds "$SECS" --cpu 0
-run other --jitter-only --seconds "$SECS" --cpu 0 --load 1 --load-cpu 1
-run both --jitter-only --seconds "$SECS" --load 2
+run other --jitter-only --switch-every 0 --seconds "$SECS" --cpu 0 --load 1 --load-cpu 1
+run both --jitter-only --switch-every 0 --seconds "$SECS" --load 2
 FIFO_NOTE="(not measured: SCHED_FIFO needs root)"
 if [[ $(id -u) == 0 ]]; then
-    run fifo --jitter-only --seconds "$SECS" --cpu 0 --load 2 --fifo 50
+    run fifo --jitter-only --switch-every 0 --seconds "$SECS" --cpu 0 --load 2 --fifo 50
     FIFO_NOTE=""
 fi
 
@@ -102,6 +104,19 @@ $(row other "1 busy thread on CPU 1, habitat on CPU 0")
 $(row both "2 busy threads, unpinned (both cores loaded)")
 $(row fifo "2 busy threads, habitat on CPU 0 with SCHED_FIFO 50 $FIFO_NOTE")
 
+**Switch under load**: the idle run's habitat again for $SECS s, with a configuration switch
+every 100 ms between a 1 × 1 gain and a controller whose \`enable\` designs an LQR gain for a
+24-state model ($(q idle .switching.designs) designs of $(f1 "$(q idle .switching.mean_design_ms)") ms each, run on the
+switching thread while the habitat samples). Goal: start latency p99 within 2× of the run
+without switches, no overrun caused by a switch.
+
+| run | switches | samples | overruns | start latency p99 / max (µs) |
+|---|---|---|---|---|
+| without switches | 0 | $(q idle .jitter.samples) | $(q idle .jitter.overruns) | $(f1 "$(q idle .jitter.latency_us.p99)") / $(f1 "$(q idle .jitter.latency_us.max)") |
+| a switch every 100 ms | $(q idle .switching.switches) | $(q idle .switching.samples) | $(q idle .switching.overruns) | $(f1 "$(q idle .switching.latency_us.p99)") / $(f1 "$(q idle .switching.latency_us.max)") |
+
+p99 ratio, switching / not: $(awk -v x="$(q idle .switching.latency_p99_ratio_to_idle)" 'BEGIN { printf "%.2f", x }').
+
 The machine's own timer latency for comparison (cyclictest, one thread on CPU 0 waking every
 1 ms; p50 / p99 / max in µs; its normal-priority run keeps the default 50 µs timer slack, which
 the habitats set to 1 ns):
@@ -112,7 +127,7 @@ the habitats set to 1 ns):
 | idle, SCHED_FIFO 50 | $CT_FIFO |
 | 2 busy threads, SCHED_FIFO 50 | $CT_FIFO_LOADED |
 
-Steady-state sampling allocates nothing: \`ndds-client/tests/runtime_alloc.rs\` counts
+Steady-state sampling allocates nothing: \`ndds-runtime/tests/runtime_alloc.rs\` counts
 allocations with a counting global allocator on the sampling thread (50 modules plus the
 PD/LQG loop stepped 2000 times per configuration; a 1 kHz timer habitat for 1 s including ten
 statistics hand-overs; CSMats published and received through topics for 1000 samples): 0.
