@@ -192,12 +192,15 @@ impl ExecList {
             self.run_boundary_tasks();
         }
         let ctx = self.ctx;
+        // Marked once for the whole sample (not per routine): the hot path.
+        let outer = IN_ROUTINE.with(|flag| flag.replace(true));
         for k in 0..self.order.len() {
-            self.call(self.order[k], Routine::Execute, &ctx);
+            self.call_marked(self.order[k], Routine::Execute, &ctx);
         }
         for k in 0..self.order.len() {
-            self.call(self.order[k], Routine::StateUpdate, &ctx);
+            self.call_marked(self.order[k], Routine::StateUpdate, &ctx);
         }
+        IN_ROUTINE.with(|flag| flag.set(outer));
         self.ctx.sample += 1;
         self.ctx.time = self.ctx.time.saturating_add(ctx.period);
     }
@@ -378,6 +381,17 @@ impl ExecList {
         }
     }
 
+    /// [`call`](Self::call) on a thread already marked as inside a routine.
+    #[inline]
+    fn call_marked(&mut self, i: usize, routine: Routine, ctx: &SampleContext) {
+        let Some(module) = self.slots[i].module.as_mut() else {
+            return;
+        };
+        if let Err(err) = guarded(|| dispatch(module.as_mut(), routine, ctx)) {
+            self.note_error(i, routine, &err);
+        }
+    }
+
     #[cold]
     fn note_error(&mut self, i: usize, routine: Routine, err: &ModuleError) {
         let slot = &mut self.slots[i];
@@ -398,7 +412,14 @@ pub(crate) fn run_routine(
     ctx: &SampleContext,
 ) -> RoutineResult {
     let outer = IN_ROUTINE.with(|flag| flag.replace(true));
-    let result = guarded(|| match routine {
+    let result = guarded(|| dispatch(module, routine, ctx));
+    IN_ROUTINE.with(|flag| flag.set(outer));
+    result
+}
+
+#[inline]
+fn dispatch(module: &mut dyn SampleModule, routine: Routine, ctx: &SampleContext) -> RoutineResult {
+    match routine {
         Routine::Execute => module.execute(ctx),
         Routine::StateUpdate => module.state_update(ctx),
         Routine::Enable => module.enable(ctx),
@@ -407,9 +428,7 @@ pub(crate) fn run_routine(
         Routine::Shutdown => module.shutdown(ctx),
         Routine::TimingChanged => module.timing_changed(ctx),
         Routine::Reset => module.reset(ctx),
-    });
-    IN_ROUTINE.with(|flag| flag.set(outer));
-    result
+    }
 }
 
 /// Unloads a module (`terminate`), a panic in it caught.
