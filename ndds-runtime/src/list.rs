@@ -195,10 +195,20 @@ impl ExecList {
         // Marked once for the whole sample (not per routine): the hot path.
         let outer = IN_ROUTINE.with(|flag| flag.replace(true));
         for k in 0..self.order.len() {
-            self.call_marked(self.order[k], Routine::Execute, &ctx);
+            let i = self.order[k];
+            if let Some(module) = self.slots[i].module.as_deref_mut()
+                && let Err(err) = guarded(|| module.execute(&ctx))
+            {
+                self.note_error(i, Routine::Execute, &err);
+            }
         }
         for k in 0..self.order.len() {
-            self.call_marked(self.order[k], Routine::StateUpdate, &ctx);
+            let i = self.order[k];
+            if let Some(module) = self.slots[i].module.as_deref_mut()
+                && let Err(err) = guarded(|| module.state_update(&ctx))
+            {
+                self.note_error(i, Routine::StateUpdate, &err);
+            }
         }
         IN_ROUTINE.with(|flag| flag.set(outer));
         self.ctx.sample += 1;
@@ -377,17 +387,6 @@ impl ExecList {
             return;
         };
         if let Err(err) = run_routine(module.as_mut(), routine, ctx) {
-            self.note_error(i, routine, &err);
-        }
-    }
-
-    /// [`call`](Self::call) on a thread already marked as inside a routine.
-    #[inline]
-    fn call_marked(&mut self, i: usize, routine: Routine, ctx: &SampleContext) {
-        let Some(module) = self.slots[i].module.as_mut() else {
-            return;
-        };
-        if let Err(err) = guarded(|| dispatch(module.as_mut(), routine, ctx)) {
             self.note_error(i, routine, &err);
         }
     }
