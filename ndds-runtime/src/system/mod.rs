@@ -430,4 +430,3 @@ pub struct Status {
     /// The displayed CSMats' values.
     pub display: Vec<(String, crate::CsMat)>,
 }
-
