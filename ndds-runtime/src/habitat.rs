@@ -246,10 +246,8 @@ impl Habitat {
     /// The sample period: the one last set (a rate change reaches the modules, with
     /// `timing_changed`, at the next sample boundary).
     pub fn period(&self) -> Duration {
-        match lock(&self.shared.options).as_ref() {
-            Some(options) => options.period,
-            None => lock(&self.shared.list).ctx.period,
-        }
+        let configured = lock(&self.shared.options).as_ref().map(|o| o.period);
+        configured.unwrap_or_else(|| lock(&self.shared.list).ctx.period)
     }
 
     /// Whether a thread of its own samples it now (a timer or topic clock): routines are then
@@ -471,13 +469,10 @@ impl Habitat {
     /// Statistics: counters since sampling began, distributions over the last complete
     /// statistics interval.
     pub fn stats(&self) -> HabitatStats {
-        let (rate_hz, active, errors) = {
+        let rate_hz = 1.0 / self.period().as_secs_f64();
+        let (active, errors) = {
             let list = lock(&self.shared.list);
-            (
-                1.0 / self.period().as_secs_f64(),
-                list.order.len(),
-                list.module_errors,
-            )
+            (list.order.len(), list.module_errors)
         };
         let slot = lock(&self.shared.slot);
         HabitatStats {
