@@ -332,25 +332,13 @@ fn swap_at_boundaries(plans: &mut [Plan]) -> Vec<Vec<Lent>> {
         .iter_mut()
         .zip(lists.iter_mut())
         .map(|(plan, list)| {
-            let sampling = list.sampling;
-            let leaving = list.swap(
+            list.swap(
                 &plan.next,
                 std::mem::take(&mut plan.order),
                 std::mem::take(&mut plan.lent),
-            );
-            if sampling {
-                leaving
-            } else {
-                list_restore_now(list, leaving)
-            }
+            )
         })
         .collect()
-}
-
-/// A list that does not sample gets its leaving modules back at once (no `disable`).
-fn list_restore_now(list: &mut ExecList, leaving: Vec<Lent>) -> Vec<Lent> {
-    list.restore(leaving);
-    Vec::new()
 }
 
 /// Locks every list, each between two of its samples. With several, they are taken with

@@ -288,8 +288,8 @@ impl ExecList {
 
     /// Adopts a prepared switch at this sample boundary: `next_active` says which slots are
     /// active, `order` is their execution order (already sorted). `entering` (lent, enabled)
-    /// come back; the modules that leave the active set are lent out and returned, for their
-    /// `disable` to run without the lock.
+    /// come back; while sampling, the modules that leave the active set are lent out and
+    /// returned, for their `disable` to run without the lock.
     pub(crate) fn swap(
         &mut self,
         next_active: &[bool],
@@ -307,6 +307,9 @@ impl ExecList {
             slot.active = active;
         }
         self.order = order;
+        if !self.sampling {
+            return Vec::new();
+        }
         self.lend(&leaving)
     }
 
