@@ -91,7 +91,7 @@ one by one on the calling thread):
 | modules | per sample (mean) | per module (mean) | per sample p50 / p99 / max |
 |---|---|---|---|
 | 50 that do nothing (the runtime's own cost) | $(f1 "$(q idle .overhead.nop.mean_ns_per_sample)") ns | $(f1 "$(q idle .overhead.nop.mean_ns_per_module)") ns | $(q idle .overhead.nop.p50_ns) / $(q idle .overhead.nop.p99_ns) / $(q idle .overhead.nop.max_ns) ns |
-| 50 1 × 1 gains in a chain (each locks its gain, input and output one at a time; two copies) | $(f1 "$(q idle .overhead.gain.mean_ns_per_sample)") ns | $(f1 "$(q idle .overhead.gain.mean_ns_per_module)") ns | $(q idle .overhead.gain.p50_ns) / $(q idle .overhead.gain.p99_ns) / $(q idle .overhead.gain.max_ns) ns |
+| 50 1 × 1 gains in a chain (each reads its gain and input and writes its output, all owned by the habitat: no lock; two copies) | $(f1 "$(q idle .overhead.gain.mean_ns_per_sample)") ns | $(f1 "$(q idle .overhead.gain.mean_ns_per_module)") ns | $(q idle .overhead.gain.p50_ns) / $(q idle .overhead.gain.p99_ns) / $(q idle .overhead.gain.max_ns) ns |
 
 **Jitter** of a 1 kHz timer habitat running the 50 gains for $SECS s (µs; *start latency*: how
 late a sample started against its absolute deadline; *period jitter*: how far the interval

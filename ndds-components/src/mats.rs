@@ -1,9 +1,9 @@
 //! A module's CSMats and its own buffers: declaring parameter CSMats, copying values in and
-//! out (one lock at a time), and the checked matrix product routines use on the copies.
+//! out (one guard at a time), and the checked matrix product routines use on the copies.
 //!
-//! Built-in modules never hold two CSMat locks at once: each routine copies what it reads into
-//! a buffer of its own, computes on the buffers, and copies the result out. Habitats that feed
-//! each other therefore cannot deadlock.
+//! Built-in modules never hold two CSMat guards at once: each routine copies what it reads into
+//! a buffer of its own, computes on the buffers, and copies the result out. CSMats that cross
+//! habitats are locked per access, so habitats that feed each other cannot deadlock.
 
 use nalgebra::DMatrix;
 
@@ -12,7 +12,7 @@ use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, Shape};
 
 use crate::params::failed;
 
-/// Fails when two of a module's CSMats are the same (a module holds both locks at once).
+/// Fails when two of a module's CSMats are the same (a module holds both guards at once).
 pub(crate) fn distinct(names: &[&str]) -> Result<(), ModuleError> {
     for (i, a) in names.iter().enumerate() {
         if names[i + 1..].contains(a) {

@@ -207,6 +207,7 @@ impl CsMat {
     }
 
     /// The matrix's name.
+    #[inline]
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -217,16 +218,19 @@ impl CsMat {
     }
 
     /// Number of rows.
+    #[inline]
     pub fn rows(&self) -> usize {
         self.m.nrows()
     }
 
     /// Number of columns.
+    #[inline]
     pub fn cols(&self) -> usize {
         self.m.ncols()
     }
 
     /// `(rows, cols)`.
+    #[inline]
     pub fn shape(&self) -> (usize, usize) {
         self.m.shape()
     }
@@ -247,17 +251,20 @@ impl CsMat {
     }
 
     /// The values.
+    #[inline]
     pub fn matrix(&self) -> &DMatrix<f64> {
         &self.m
     }
 
     /// The values, mutably. The shape cannot change through this reference (use
     /// [`resize`](Self::resize)), so the fields stay consistent.
+    #[inline]
     pub fn matrix_mut(&mut self) -> &mut DMatrix<f64> {
         &mut self.m
     }
 
     /// The value at (`row`, `col`), or [`MatError::OutOfRange`].
+    #[inline]
     pub fn get(&self, row: usize, col: usize) -> Result<f64, MatError> {
         self.m
             .get((row, col))
@@ -266,6 +273,7 @@ impl CsMat {
     }
 
     /// Sets the value at (`row`, `col`), or [`MatError::OutOfRange`].
+    #[inline]
     pub fn set(&mut self, row: usize, col: usize, value: f64) -> Result<(), MatError> {
         match self.m.get_mut((row, col)) {
             Some(slot) => {
@@ -288,6 +296,14 @@ impl CsMat {
     /// Sets every value to `value`.
     pub fn fill(&mut self, value: f64) {
         self.m.fill(value);
+    }
+
+    /// Whether `other` has the same name and fields (the values and shape aside).
+    #[inline]
+    pub(crate) fn same_fields(&self, other: &CsMat) -> bool {
+        self.name == other.name
+            && self.row_fields == other.row_fields
+            && self.col_fields == other.col_fields
     }
 
     /// Copies `other`'s values (not its name or fields) into this matrix without allocating;

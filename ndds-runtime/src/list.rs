@@ -15,6 +15,7 @@
 use std::cell::Cell;
 use std::time::Duration;
 
+use super::mat::{Owned, as_sampler};
 use super::module::{Interface, ModuleError, RoutineResult, SampleContext, SampleModule};
 use super::sort::{SortError, SortNode, sort};
 
@@ -152,6 +153,8 @@ pub(crate) struct ExecList {
     pub(crate) module_errors: u64,
     /// Carried out at the start of the next sample.
     pub(crate) boundary: Vec<BoundaryTask>,
+    /// The CSMats only this habitat's modules name: its routines reach them without a lock.
+    pub(crate) owned: Owned,
 }
 
 impl ExecList {
@@ -167,6 +170,7 @@ impl ExecList {
             },
             module_errors: 0,
             boundary: Vec::new(),
+            owned: Owned::new(),
         }
     }
 
@@ -193,6 +197,8 @@ impl ExecList {
         }
         let ctx = self.ctx;
         // Marked once for the whole sample (not per routine): the hot path.
+        let sampler = as_sampler(self.owned.id());
+        self.owned.take_in();
         let outer = IN_ROUTINE.with(|flag| flag.replace(true));
         for k in 0..self.order.len() {
             let i = self.order[k];
@@ -211,6 +217,8 @@ impl ExecList {
             }
         }
         IN_ROUTINE.with(|flag| flag.set(outer));
+        self.owned.publish();
+        drop(sampler);
         self.ctx.sample += 1;
         self.ctx.time = self.ctx.time.saturating_add(ctx.period);
     }
@@ -367,6 +375,7 @@ impl ExecList {
         }
         self.slots.clear();
         self.order.clear();
+        self.owned.release_all();
     }
 
     /// Names of the active modules in execution order.
@@ -389,7 +398,11 @@ impl ExecList {
         let Some(module) = self.slots[i].module.as_mut() else {
             return;
         };
-        if let Err(err) = run_routine(module.as_mut(), routine, ctx) {
+        let _sampler = as_sampler(self.owned.id());
+        self.owned.take_in();
+        let result = run_routine(module.as_mut(), routine, ctx);
+        self.owned.publish();
+        if let Err(err) = result {
             self.note_error(i, routine, &err);
         }
     }

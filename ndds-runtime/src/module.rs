@@ -3,12 +3,14 @@
 //!
 //! See [`SampleModule`] for when each routine is called.
 //!
-//! Routines of one habitat never run concurrently: all run under the habitat's list lock,
-//! between two samples (`execute` and `state_update` on the habitat's thread, the others on
-//! the thread that called `start`, `stop`, `switch`, `set_rate`, ...). So a routine must not
-//! call back into its [`Runtime`](super::Runtime) or [`Habitat`](super::Habitat) (switch,
-//! install, stop): that would wait for the lock it runs under. Hand such requests to another
-//! thread.
+//! One module's routines never run at the same time. `execute` and `state_update` run on the
+//! habitat's sampler (its thread, or the caller of `step`); `enable` and `disable` of a switch,
+//! and the routines of a module being installed or removed, run on the thread that asked,
+//! while the habitat keeps sampling (the table on [`SampleModule`]). Requests a routine makes
+//! of its runtime or habitat are queued or refused, never carried out re-entrantly.
+//!
+//! A module reaches its CSMats through [`Mat::read`] and [`Mat::write`]; those only its own
+//! habitat names take no lock in its sampler (the `mat` module's doc).
 
 use std::time::Duration;
 

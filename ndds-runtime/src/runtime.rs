@@ -478,7 +478,52 @@ impl Runtime {
                 source,
             });
         }
+        self.assign_owners();
         Ok(())
+    }
+
+    /// Gives each habitat the CSMats that only its modules name, for them to reach without a
+    /// lock (the mat module's doc). Called after every install and removal, under the
+    /// structure lock; the lists take the change over without waiting (now or at a boundary).
+    fn assign_owners(&self) {
+        let plan: Vec<(Habitat, Vec<Mat>)> = {
+            let mut db = self.db();
+            // CSMat name -> (the one habitat naming it, or None once two do; the handle).
+            let mut users: BTreeMap<&str, (Option<&str>, &Mat)> = BTreeMap::new();
+            for entry in db.modules.values() {
+                let ports = entry.interface.inputs.iter().map(|(port, _)| port);
+                for port in ports.chain(&entry.interface.outputs) {
+                    let user = users
+                        .entry(port.mat.name())
+                        .or_insert((Some(&entry.habitat), &port.mat));
+                    if user.0 != Some(entry.habitat.as_str()) {
+                        user.0 = None;
+                    }
+                }
+            }
+            let mut per_habitat: BTreeMap<String, Vec<Mat>> = db
+                .habitats
+                .keys()
+                .map(|name| (name.clone(), Vec::new()))
+                .collect();
+            for (habitat, mat) in users.into_values() {
+                if let Some(habitat) = habitat
+                    && mat.is_bound()
+                {
+                    per_habitat
+                        .entry(habitat.to_owned())
+                        .or_default()
+                        .push(mat.clone());
+                }
+            }
+            per_habitat
+                .into_iter()
+                .map(|(name, mats)| (self.habitat_in(&mut db, &name), mats))
+                .collect()
+        };
+        for (habitat, mats) in plan {
+            lock(&habitat.shared.list).owned.want(mats);
+        }
     }
 
     /// Builds `module` against the database and records it there (active or not).
@@ -647,6 +692,7 @@ impl Runtime {
             }
             crate::list::terminate(built.as_mut());
         }
+        self.assign_owners();
         Ok(())
     }
 

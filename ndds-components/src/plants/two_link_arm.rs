@@ -101,7 +101,7 @@ impl TwoLinkArm {
     }
 }
 
-/// Writes a 2 × 1 CSMat (one lock, released on return).
+/// Writes a 2 × 1 CSMat (one guard, released on return).
 fn write_pair(mat: &Mat, values: [f64; 2]) -> RoutineResult {
     let mut out = mat.write();
     out.set(0, 0, values[0])?;

@@ -2,8 +2,9 @@
 //!
 //! 1. **Overhead**: a manual habitat runs `--samples` samples of `--modules` modules, first
 //!    modules that do nothing (the runtime's own cost: the list lock, two routine calls per
-//!    module, the counters), then a chain of 1 × 1 gains (each locks its gain, its input and
-//!    its output, one at a time, and copies the value in and out). Reported per sample and
+//!    module, the counters), then a chain of 1 × 1 gains (each reads its gain and its input
+//!    and writes its output, copying the value in and out; the habitat owns all three, so no
+//!    lock is taken, and publishes each output after the sample). Reported per sample and
 //!    per module.
 //! 2. **Jitter**: a timer habitat of `--modules` gains at `--rate` for `--seconds`: how late
 //!    each sample started against its absolute deadline, how far each period was from the
@@ -125,7 +126,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     } else {
         if let Some((nop, gain)) = &overhead {
             nop.print("modules that do nothing")?;
-            gain.print("1x1 gains (three CSMat locks: gain, input, output; two copies)")?;
+            gain.print(
+                "1x1 gains (three CSMat accesses without a lock: gain, input, output; two copies)",
+            )?;
         }
         print_jitter(args, &jitter)?;
         if let Some(run) = &switching {
