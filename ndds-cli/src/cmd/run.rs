@@ -58,8 +58,9 @@ pub struct Args {
     #[arg(long)]
     plain: bool,
     /// Run this many seconds of simulated time as fast as the machine allows (every habitat
-    /// clocked by the simulation), print the final status and the speed, and stop. Samples
-    /// crossing the network still travel in real time.
+    /// clocked by the simulation), print the final status and the speed, and stop. A topic
+    /// the system both publishes and subscribes to is passed on in the process; samples from
+    /// other programs still travel in real time.
     #[arg(long, value_parser = seconds::parse, conflicts_with_all = ["seconds", "check"])]
     simulate: Option<Duration>,
     /// Run the system under this name instead of the file's (a name runs once per domain).

@@ -315,7 +315,30 @@ pub(crate) fn build_into(
             .mats
             .entry(s.mat.name.clone())
             .or_insert_with(|| s.mat.at.clone());
-        if let Err(err) = rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos) {
+        // Simulated, a topic this system also publishes is passed on inside the process
+        // (a rate transition from the publisher's CSMat): the loop it closes then runs in
+        // simulated time, sample for sample, instead of at the network's pace.
+        let loopback = options
+            .simulated
+            .then(|| d.publishes.iter().find(|p| p.topic == s.topic))
+            .flatten();
+        let bound = match loopback {
+            Some(p) => {
+                let name = format!("subscribe:{}", s.topic);
+                for half in ["in", "out"] {
+                    places
+                        .modules
+                        .insert(format!("{name}.{half}"), s.at.clone());
+                }
+                rt.rate_transition(
+                    &name,
+                    (&p.habitat.name, &p.mat.name),
+                    (&s.habitat.name, &s.mat.name),
+                )
+            }
+            None => rt.subscribe(&s.habitat.name, &s.mat.name, s.shape, &s.topic, s.qos),
+        };
+        if let Err(err) = bound {
             found.refuse(&s.at, &err);
         }
     }

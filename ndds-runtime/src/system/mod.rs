@@ -392,8 +392,11 @@ pub struct LoadOptions {
     /// Every habitat is clocked by [`System::simulate`] (or [`Habitat::step`](
     /// crate::Habitat::step)) instead of its timer or clock topic: simulated time,
     /// as fast as the machine allows (for tests, and for trying a system without its hardware).
-    /// Samples that cross the network still travel in real time, so a loop closed through
-    /// topics is not time-accurate in simulation; close such loops inside one file.
+    /// A topic the system both publishes and subscribes to is passed on inside the process
+    /// (as a rate transition from the published CSMat), so a loop closed through it runs in
+    /// simulated time too; the topic is still published for others to watch. Samples from
+    /// other programs still travel in real time: a loop closed through another process is
+    /// not time-accurate in simulation.
     pub simulated: bool,
 }
 
