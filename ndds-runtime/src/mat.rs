@@ -67,9 +67,14 @@ struct Inner {
     /// The `writes` the owner has taken in (a shared copy with writes beyond it holds a
     /// value newer than the owner's, which publication must not overwrite).
     taken: AtomicU64,
-    /// The id of the habitat that owns it, or 0. Changed only with `shared` locked, by a
-    /// holder of the list lock of the habitat it is changed from or to.
+    /// The id of the habitat that owns it, or 0. Set (from 0) only with `shared` locked, by
+    /// a holder of the new owner's list lock; reset to 0 only by a holder of the owner's list
+    /// lock (with `shared` locked, except when a list going away or an escaped guard cannot
+    /// wait for it).
     owner: AtomicU64,
+    /// Set when a guard outlived the routine that took it: the local copy is left to that
+    /// guard, and no habitat owns this CSMat again.
+    abandoned: AtomicBool,
     /// The owner's values after its last sample.
     published: Published,
     local: Local,
@@ -104,11 +109,15 @@ struct Local {
     seen: Cell<u64>,
 }
 
-// SAFETY: `Local`'s cells are reached only by a thread whose `SAMPLER` equals `owner`. `owner`
-// is set to a list's id (from 0) and back to 0 only by a holder of that list's lock, and
-// `SAMPLER` takes a list's id only while its lock is held, so at most one thread at a time
-// touches `Local`, and the lock (with `owner`'s release/acquire for a change of owner) orders
-// one holder's accesses before the next one's. `published.values` is read by the owner
+// SAFETY: `Local`'s cells are reached only by a thread whose `SAMPLER` equals `owner` (or by
+// `Owned`, under the same list lock). `owner` is set to a list's id (from 0) and back to 0
+// only by a holder of that list's lock, and `SAMPLER` takes a list's id only while its lock is
+// held, so at most one thread at a time touches `Local`, and the lock (with `owner`'s
+// release/acquire for a change of owner) orders one holder's accesses before the next one's.
+// A guard is tied to its `Mat`'s lifetime, not to the sampler's turn; one that outlives its
+// routine (a `'static` handle's guard stashed away) is found alive after the routine by
+// `Owned::publish`, which then abandons the CSMat to it: nobody else touches that `Local`
+// again. `published.values` is read by the owner
 // without a lock and by others with `shared` locked, and replaced only by the owner with
 // `shared` locked. Everything else is atomics and a mutex.
 unsafe impl Sync for Inner {}
@@ -126,6 +135,7 @@ impl Mat {
             writes: AtomicU64::new(0),
             taken: AtomicU64::new(0),
             owner: AtomicU64::new(0),
+            abandoned: AtomicBool::new(false),
             published: Published {
                 seq: AtomicU64::new(0),
                 values: UnsafeCell::new(Box::new([])),
@@ -275,11 +285,11 @@ impl Inner {
         shared
     }
 
-    /// With `shared` locked: copies the owner's last publication in, unless the shared copy
-    /// holds a write the owner has not taken in yet (that one is newer).
+    /// With `shared` locked: copies the (last) owner's last publication in, unless the
+    /// shared copy holds a write the owner has not taken in (that one is newer). A CSMat
+    /// never owned has no publication (`seq` and `synced` both 0).
     fn refresh(&self, shared: &mut Shared) {
-        if self.owner.load(Ordering::Acquire) == 0
-            || self.taken.load(Ordering::Acquire) != self.writes.load(Ordering::Relaxed)
+        if self.taken.load(Ordering::Acquire) != self.writes.load(Ordering::Relaxed)
             || self.published.seq.load(Ordering::Acquire) == shared.synced
         {
             return;
@@ -291,8 +301,10 @@ impl Inner {
             // A change of shape is published through the shared copy itself.
             return;
         }
-        let mut spins = 0_u32;
-        loop {
+        // The owner writes a publication in a few stores and never waits for us; should it be
+        // preempted in the middle (a real-time reader on its CPU would never let it go on),
+        // the shared copy stays as it is: whole, one publication older.
+        for spin in 0..256_u32 {
             let before = self.published.seq.load(Ordering::Acquire);
             if before & 1 == 0 {
                 for (to, from) in target.iter_mut().zip(values.iter()) {
@@ -304,9 +316,7 @@ impl Inner {
                     return;
                 }
             }
-            // The owner is writing it (a few stores); it never waits for us.
-            spins += 1;
-            if spins < 64 {
+            if spin < 64 {
                 std::hint::spin_loop();
             } else {
                 std::thread::yield_now();
@@ -376,8 +386,10 @@ impl Inner {
         self.published.seq.fetch_add(2, Ordering::Release);
     }
 
-    /// Owner, with `shared` locked: takes the shared copy in.
+    /// Owner, with `shared` locked: takes the shared copy in (brought up to the last
+    /// publication first, for a new owner after one that let go without the lock).
     fn take_in_locked(&self, shared: &mut Shared) {
+        self.refresh(shared);
         // SAFETY: the owner's sampler (or the new owner), between routines.
         assign(unsafe { self.local_mut() }, &shared.value);
         assign(unsafe { &mut *self.local.last.get() }, &shared.value);
@@ -517,12 +529,21 @@ impl Owned {
         self.settle();
     }
 
-    /// Gives everything back (the list is going away).
+    /// Gives everything back (the list is going away), without waiting: a shared copy that
+    /// someone holds is refreshed from the last publication by its next reader.
     pub(crate) fn release_all(&mut self) {
         self.wanted = None;
         for mat in std::mem::take(&mut self.mats) {
-            let mut shared = lock(&mat.0.shared);
-            Self::give_back(&mat.0, &mut shared);
+            let inner = &*mat.0;
+            match try_lock(&inner.shared) {
+                Some(mut shared) => Self::give_back(inner, &mut shared),
+                None => {
+                    if inner.local.dirty.get() {
+                        inner.publish();
+                    }
+                    inner.owner.store(0, Ordering::Release);
+                }
+            }
         }
     }
 
@@ -563,6 +584,9 @@ impl Owned {
                 continue;
             }
             let inner = &*mat.0;
+            if inner.abandoned.load(Ordering::Relaxed) {
+                continue;
+            }
             let Some(mut shared) = try_lock(&inner.shared) else {
                 pending = true;
                 continue;
@@ -600,14 +624,38 @@ impl Owned {
         }
     }
 
-    /// After routines ran: publishes what they wrote.
+    /// After routines ran: publishes what they wrote. A guard still alive now outlived its
+    /// routine (stashed with a `'static` handle): its CSMat is abandoned to it and shared
+    /// from now on, so that no other thread ever touches the copy it points into.
     #[inline]
     pub(crate) fn publish(&mut self) {
+        let mut escaped = false;
         for mat in &self.mats {
-            if mat.0.local.dirty.get() {
+            let local = &mat.0.local;
+            if local.borrows.get() != 0 {
+                escaped = true;
+            } else if local.dirty.get() {
                 mat.0.publish();
             }
         }
+        if escaped {
+            self.abandon_escaped();
+        }
+    }
+
+    #[cold]
+    fn abandon_escaped(&mut self) {
+        self.mats.retain(|mat| {
+            let inner = &*mat.0;
+            if inner.local.borrows.get() == 0 {
+                return true;
+            }
+            tracing::error!(mat = %inner.name,
+                "a guard of CSMat outlived the routine that took it; the CSMat is no longer owned by its habitat (its modules now take its lock)");
+            inner.abandoned.store(true, Ordering::Relaxed);
+            inner.owner.store(0, Ordering::Release);
+            false
+        });
     }
 }
 
@@ -772,6 +820,27 @@ mod tests {
         }
         assert_eq!(mat.shape(), (2, 3));
         assert_eq!(mat.snapshot().name(), "other name");
+    }
+
+    #[test]
+    fn a_guard_that_outlives_its_routine_leaves_the_mat_to_it() {
+        let mat: &'static Mat = Box::leak(Box::new(scalar("e", 1.0)));
+        let mut owned = Owned::new();
+        owned.want(vec![mat.clone()]);
+        {
+            let _sampler = as_sampler(owned.id());
+            std::mem::forget(mat.write());
+            owned.publish();
+        }
+        assert!(!mat.is_owned(), "abandoned to the escaped guard");
+        owned.want(vec![mat.clone()]);
+        assert!(!mat.is_owned(), "and never owned again");
+        mat.write().set(0, 0, 2.0).expect("in range");
+        assert_eq!(
+            mat.value(0, 0),
+            2.0,
+            "the shared copy works as for any CSMat"
+        );
     }
 
     #[test]
