@@ -13,9 +13,10 @@
 //!   charge, or when the persistence of the last accepted sample has run out (counted from its
 //!   arrival here), or when the producer in charge was lost. The accepting producer is then in
 //!   charge.
-//! - **Old data**: a sample of the producer in charge whose source timestamp is not newer than
-//!   the last accepted one is refused with [`Notification::OldData`]. Timestamps of different
-//!   producers are never compared (their clocks may differ).
+//! - **Old data**: a sample of the producer in charge whose sequence number is not above the
+//!   last accepted one's is refused with [`Notification::OldData`] (a duplicate, or one that
+//!   was overtaken). Sequence numbers, not clocks: a producer whose clock steps back is still
+//!   accepted, and a sample stamped far in the future does not make later ones "old".
 //! - **Minimum separation**: at most one delivery per window; a sample accepted inside the
 //!   window is held, a newer one replaces it, and the held one is delivered when the window
 //!   ends, so a slow consumer always gets the newest data.
@@ -42,13 +43,14 @@ pub struct Rules {
 pub struct Incoming {
     /// Its producer.
     pub writer: Guid,
-    /// Its sequence number (reported with old data).
+    /// Its sequence number (what old data is judged by).
     pub seq: u64,
     /// The producer's strength.
     pub strength: i32,
     /// The producer's persistence.
     pub persistence: Duration,
-    /// Source timestamp, nanoseconds since the Unix epoch on the producer's clock.
+    /// Source timestamp, nanoseconds since the Unix epoch on the producer's clock (carried to
+    /// the application; arbitration never compares clocks).
     pub source_ns: u64,
 }
 
@@ -89,7 +91,7 @@ struct InCharge {
     strength: i32,
     persistence: Duration,
     accepted_at: Instant,
-    source_ns: u64,
+    seq: u64,
     lost: bool,
 }
 
@@ -140,7 +142,7 @@ impl<S> Arbiter<S> {
     pub fn handle_sample(&mut self, now: Instant, meta: Incoming, sample: S) {
         let status = match self.in_charge {
             Some(current) if current.writer == meta.writer => {
-                if meta.source_ns <= current.source_ns {
+                if meta.seq <= current.seq {
                     self.stats.old_data += 1;
                     self.output.push_back(Output::Notify(Notification::OldData {
                         writer: meta.writer,
@@ -176,7 +178,7 @@ impl<S> Arbiter<S> {
             strength: meta.strength,
             persistence: meta.persistence,
             accepted_at: now,
-            source_ns: meta.source_ns,
+            seq: meta.seq,
             lost: false,
         });
         self.next_deadline = self.rules.deadline.and_then(|d| now.checked_add(d));

@@ -163,9 +163,35 @@ fn old_and_duplicate_samples_of_the_producer_in_charge_are_refused() {
         writer: writer(1),
         seq: 40
     })));
-    // Another producer's clock is not compared: an earlier timestamp from 2 is fine.
+    // Another producer's numbers are not compared: an earlier one from 2 is fine.
     a.handle_sample(t0 + MS * 2, incoming(2, 0, 0, 10), 5);
     assert_eq!(delivered(&drain(&mut a)), vec![5]);
+}
+
+#[test]
+fn old_data_is_judged_by_sequence_number_not_by_the_producers_clock() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    // The producer's clock steps back an hour between its samples 1 and 2: both are new.
+    let first = Incoming {
+        source_ns: 7_200_000 * 1_000_000,
+        ..incoming(1, 0, 0, 1)
+    };
+    let stepped_back = Incoming {
+        source_ns: 3_600_000 * 1_000_000,
+        ..incoming(1, 0, 0, 2)
+    };
+    a.handle_sample(t0, first, 1);
+    a.handle_sample(t0 + MS, stepped_back, 2);
+    // One stamped far in the future does not make the next genuine sample old.
+    let future = Incoming {
+        source_ns: u64::MAX,
+        ..incoming(1, 0, 0, 3)
+    };
+    a.handle_sample(t0 + MS * 2, future, 3);
+    a.handle_sample(t0 + MS * 3, incoming(1, 0, 0, 4), 4);
+    assert_eq!(delivered(&drain(&mut a)), vec![1, 2, 3, 4]);
+    assert_eq!(a.stats().old_data, 0);
 }
 
 #[test]
