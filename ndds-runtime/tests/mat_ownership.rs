@@ -4,9 +4,12 @@
 //! habitats stay behind their lock. Real threads and habitats; no timing is asserted beyond
 //! generous waits for a condition.
 
+#[path = "../../ndds-client/tests/common/mod.rs"]
+mod common;
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use ndds_runtime::csmat::CsMat;
 use ndds_runtime::{
@@ -15,17 +18,8 @@ use ndds_runtime::{
 
 type TestResult = Result<(), Box<dyn std::error::Error>>;
 
-const WAIT: Duration = Duration::from_secs(20);
-
-fn eventually(mut check: impl FnMut() -> bool) -> bool {
-    let deadline = Instant::now() + WAIT;
-    while Instant::now() < deadline {
-        if check() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    check()
+fn eventually(check: impl FnMut() -> bool) -> bool {
+    common::eventually(Duration::from_secs(20), check)
 }
 
 /// `output = k · input` (k a parameter CSMat `<name>.k`).
