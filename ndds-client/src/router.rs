@@ -3,6 +3,7 @@
 
 use std::collections::HashMap;
 use std::sync::{Arc, RwLock};
+use std::time::Instant;
 
 use ndds_core::arbitration::Notification;
 use ndds_core::discovery::Incompatibility;
@@ -28,10 +29,12 @@ impl Endpoint {
         }
     }
 
-    /// Applies a change of the matched set: producers re-target their samples.
+    /// Applies a change of the matched set: producers re-target their samples, consumers
+    /// believe the new set's producers only.
     fn on_change(&self, all: Matched<'_>) {
-        if let Endpoint::Producer(state) = self {
-            state.set_matched(all);
+        match self {
+            Endpoint::Producer(state) => state.set_matched(all),
+            Endpoint::Consumer(state) => state.slot.set_matched(Instant::now(), all),
         }
     }
 

@@ -44,6 +44,16 @@ pub struct RawSample {
     pub info: SampleInfo,
 }
 
+impl RawSample {
+    /// The same sample in a buffer of its own (not sharing the datagram's).
+    pub(crate) fn detached(self) -> Self {
+        RawSample {
+            payload: Bytes::copy_from_slice(&self.payload),
+            info: self.info,
+        }
+    }
+}
+
 /// What an immediate consumer receives: a sample, or a notification without one.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event<T> {

@@ -11,6 +11,7 @@
 //!
 //! ## Layout
 //! - [`wire`]: header and one file per datagram kind, encode/decode, drop reasons.
+//! - [`admission`]: who an endpoint believes (matched peers at their locators only).
 //! - [`arbitration`]: a consumer's arbitration, minimum separation, deadline and statuses.
 //! - [`reliability`]: reliable streams (history, heartbeats, acknowledgements, repair).
 //! - [`fragment`]: large samples split into pieces and reassembled.
@@ -23,6 +24,7 @@
 //! - [`suggest`]: "did you mean" for mistyped names (topics, machines, configurations, ...).
 #![warn(missing_docs)]
 
+pub mod admission;
 pub mod arbitration;
 pub mod discovery;
 pub mod domain;

@@ -65,6 +65,11 @@ pub struct ConsumerStats {
     pub overflow: u64,
     /// Samples that did not decode as the consumer's type.
     pub decode_errors: u64,
+    /// Samples, heartbeats and gaps dropped because discovery never matched their producer
+    /// with this consumer (forged, or from a producer gone long ago).
+    pub unmatched: u64,
+    /// Dropped because they carried a matched producer's id but came from another address.
+    pub wrong_address: u64,
 }
 
 /// How long [`RawConsumer::next_event`] may wait.
@@ -248,6 +253,7 @@ impl RawConsumer {
     pub fn stats(&self) -> ConsumerStats {
         let slot = &self.state.slot;
         let arbiter = slot.arbiter_stats();
+        let admission = slot.admission_stats();
         ConsumerStats {
             received: slot.arrived.load(Ordering::Relaxed),
             accepted: arbiter.accepted,
@@ -258,6 +264,8 @@ impl RawConsumer {
             deadline_misses: arbiter.deadline_misses,
             overflow: slot.sink.overflow.load(Ordering::Relaxed),
             decode_errors: self.state.decoder.errors.load(Ordering::Relaxed),
+            unmatched: admission.unmatched,
+            wrong_address: admission.wrong_address,
         }
     }
 }

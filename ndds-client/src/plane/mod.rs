@@ -87,6 +87,11 @@ pub struct ParticipantStats {
     pub unknown_reader: u64,
     /// Fragments of large samples refused by reassembly.
     pub fragments_refused: u64,
+    /// Samples, heartbeats, gaps and feedback dropped because discovery never matched their
+    /// sender with the endpoint they address (forged, or from an endpoint gone long ago).
+    pub unmatched_sender: u64,
+    /// Dropped because they carried a matched sender's id but came from another address.
+    pub wrong_address: u64,
     /// Dropped datagrams by reason name (see `DropReason::name`).
     pub dropped: Vec<(&'static str, u64)>,
 }
@@ -170,6 +175,8 @@ impl DataPlane {
             misaddressed: load(&self.stats.misaddressed),
             unknown_reader: load(&self.stats.unknown_reader),
             fragments_refused: load(&self.stats.fragments_refused),
+            unmatched_sender: load(&self.net.unbelieved.unmatched),
+            wrong_address: load(&self.net.unbelieved.wrong_address),
             dropped: DropReason::ALL
                 .iter()
                 .map(|reason| (reason.name(), load(&self.stats.dropped[reason.index()])))

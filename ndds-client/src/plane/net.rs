@@ -2,7 +2,9 @@
 
 use std::io;
 use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
+use std::sync::atomic::{AtomicU64, Ordering};
 
+use ndds_core::admission::AdmissionStats;
 use ndds_core::wire::MAX_DATAGRAM;
 
 /// IPv4 and UDP headers.
@@ -55,6 +57,31 @@ pub(crate) struct Net {
     pub(crate) domain: u16,
     pub(crate) participant: u64,
     pub(crate) limits: Limits,
+    /// What the participant's endpoints refused to believe, in total.
+    pub(crate) unbelieved: Unbelieved,
+}
+
+/// Traffic from senders discovery did not match, summed over the participant's endpoints.
+#[derive(Debug, Default)]
+pub(crate) struct Unbelieved {
+    /// From a sender never matched.
+    pub(crate) unmatched: AtomicU64,
+    /// From a matched sender's id, at another address.
+    pub(crate) wrong_address: AtomicU64,
+}
+
+impl Unbelieved {
+    /// Adds what an endpoint's admission counted between `before` and `after`.
+    pub(crate) fn add(&self, before: AdmissionStats, after: AdmissionStats) {
+        let unmatched = after.unmatched.saturating_sub(before.unmatched);
+        let wrong = after.wrong_address.saturating_sub(before.wrong_address);
+        if unmatched > 0 {
+            self.unmatched.fetch_add(unmatched, Ordering::Relaxed);
+        }
+        if wrong > 0 {
+            self.wrong_address.fetch_add(wrong, Ordering::Relaxed);
+        }
+    }
 }
 
 impl Net {
@@ -64,6 +91,7 @@ impl Net {
             domain,
             participant,
             limits,
+            unbelieved: Unbelieved::default(),
         }
     }
 

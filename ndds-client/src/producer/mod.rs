@@ -10,12 +10,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
+use ndds_core::admission::{Admission, AdmissionConfig};
 use ndds_core::reliability::{ReliableWriter, WriterConfig, WriterOutput};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::data::{FLAG_RELIABLE, Gap, Heartbeat, Sample};
 use ndds_core::wire::feedback::bit;
 use ndds_core::wire::{
-    DataSub, EndpointInfo, EndpointQos, FeedbackSub, Guid, Reliability, SampleMeta,
+    DataSub, EndpointInfo, EndpointKind, EndpointQos, FeedbackSub, Guid, Reliability, SampleMeta,
 };
 use serde::Serialize;
 
@@ -53,6 +54,22 @@ struct Out {
     /// The time the timer thread will run this producer's timers at the latest (what was last
     /// handed to it), so a write schedules the timer only when it needs it earlier.
     armed: Option<Instant>,
+    /// The matched consumers: feedback from anyone else is not believed.
+    believed: Believed,
+}
+
+/// The matched consumers of a producer, at their locators.
+#[derive(Debug)]
+struct Believed(Admission<()>);
+
+impl Default for Believed {
+    fn default() -> Self {
+        // Feedback is never held: a consumer acknowledges only what it was sent.
+        Believed(Admission::new(AdmissionConfig {
+            max_held: 0,
+            ..AdmissionConfig::default()
+        }))
+    }
 }
 
 /// State of one producer shared with the participant's router, receive and timer threads.
@@ -112,6 +129,12 @@ impl ProducerState {
     /// serving the reliable consumers that appeared and forgets those that left.
     pub(crate) fn set_matched(&self, matched: Matched<'_>) {
         let mut out = lock(&self.out);
+        out.believed.0.set_matched(
+            matched
+                .clone()
+                .filter(|info| info.kind() == EndpointKind::Consumer)
+                .map(|info| (info.guid, SocketAddrV4::from(info.locator))),
+        );
         out.outbox.set_matched(&self.net, matched.clone());
         let Some(reliable) = out.reliable.as_mut() else {
             return;
@@ -373,7 +396,18 @@ impl Timed for ProducerState {
         if let Some(reliable) = &mut out.reliable
             && reliable.writer.poll_timeout().is_some_and(|due| due <= now)
         {
+            let was_open = reliable.writer.window_open();
             reliable.writer.handle_timeout(now);
+            while let Some(reader) = reliable.writer.poll_silenced() {
+                tracing::warn!(
+                    topic = %self.peers.topic,
+                    consumer = %reader,
+                    "a reliable consumer stopped acknowledging: it no longer holds this producer's window (it gets SamplesLost for what it misses if it comes back)"
+                );
+            }
+            if !was_open && reliable.writer.window_open() {
+                self.window.notify_all();
+            }
             self.drain(&mut out);
         }
         out.armed = self.next_timer(&out);
@@ -386,10 +420,16 @@ impl WriterSide for ProducerState {
         &self,
         now: Instant,
         reader: Guid,
-        _from: SocketAddrV4,
+        from: SocketAddrV4,
         sub: &FeedbackSub<'_>,
     ) -> Option<Instant> {
         let mut out = lock(&self.out);
+        let before = out.believed.0.stats();
+        let believed = out.believed.0.admit(&reader, from);
+        self.net.unbelieved.add(before, out.believed.0.stats());
+        if !believed {
+            return None;
+        }
         match sub {
             FeedbackSub::AckNack(ack) => {
                 let reliable = out.reliable.as_mut()?;

@@ -16,14 +16,16 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use ndds_core::admission::{Admission, AdmissionConfig, AdmissionStats, Verdict};
 use ndds_core::arbitration::{Arbiter, ArbiterStats, Incoming, Notification, Output};
 use ndds_core::reliability::{AckNack, Delivery, ReaderConfig, ReliableReader};
 use ndds_core::wire::data::{FLAG_RELIABLE, Gap, Heartbeat};
 use ndds_core::wire::feedback::{AckNack as WireAckNack, encode_feedback};
-use ndds_core::wire::{FeedbackSub, Guid, Reliability};
+use ndds_core::wire::{EndpointKind, FeedbackSub, Guid, Reliability};
 
 pub(crate) use sink::{Direct, Sink};
 
+use crate::peers::Matched;
 use crate::plane::{Net, Origin, Timer};
 use crate::qos::ConsumerQos;
 use crate::sample::{RawEvent, RawSample};
@@ -37,8 +39,34 @@ struct Stream {
     from: SocketAddrV4,
 }
 
+/// What a producer sent: held, in arrival order, until the producer is matched.
+#[derive(Debug)]
+struct Early {
+    origin: Origin,
+    what: Sent,
+}
+
+#[derive(Debug)]
+enum Sent {
+    Sample {
+        meta: Incoming,
+        flags: u8,
+        sample: RawSample,
+    },
+    /// Reliable-stream control: a heartbeat, a gap, a piece of a large sample (its seq).
+    Heartbeat(Heartbeat),
+    Gap(Gap),
+    Partial(u64),
+}
+
+/// The bytes a held control message is counted as.
+const CONTROL_BYTES: usize = 32;
+
 #[derive(Debug)]
 struct State {
+    /// The matched producers: samples, heartbeats and gaps from anyone else are not
+    /// believed (a sample from a producer not matched yet is held a moment).
+    admission: Admission<Early>,
     arbiter: Arbiter<RawSample>,
     streams: HashMap<Guid, Stream>,
     feedback: Vec<u8>,
@@ -81,6 +109,7 @@ impl ConsumerSlot {
             entity,
             reliable,
             state: Mutex::new(State {
+                admission: Admission::new(AdmissionConfig::default()),
                 arbiter: Arbiter::new(qos.rules(), now),
                 streams: HashMap::new(),
                 feedback: Vec::new(),
@@ -105,51 +134,129 @@ impl ConsumerSlot {
         // Counted first, so a reader woken by the delivery sees the count.
         self.arrived.fetch_add(1, Ordering::Relaxed);
         let mut state = lock(&self.state);
-        match self.reliable {
-            Some(config) if flags & FLAG_RELIABLE != 0 => {
-                let stream = stream(&mut state, config, origin);
-                stream.reader.handle_sample(now, meta.seq, (meta, sample));
-                self.pump(&mut state, now);
-            }
-            _ => {
-                state.arbiter.handle_sample(now, meta, sample);
-                self.drain(&mut state.arbiter);
-            }
+        let before = state.admission.stats();
+        let verdict = state.admission.check(&origin.writer, origin.from);
+        // A sample held for a producer not matched yet gets a buffer of its own, so it does
+        // not keep a whole receive buffer alive.
+        let sample = if verdict == Verdict::Unmatched {
+            sample.detached()
+        } else {
+            sample
+        };
+        let bytes = sample.payload.len();
+        let early = Early {
+            origin: *origin,
+            what: Sent::Sample {
+                meta,
+                flags,
+                sample,
+            },
+        };
+        let admitted = state
+            .admission
+            .offer(now, origin.writer, origin.from, bytes, early);
+        self.net.unbelieved.add(before, state.admission.stats());
+        if let Some(early) = admitted {
+            self.accept(&mut state, now, early);
         }
         self.reschedule(&state);
     }
 
+    /// Acts on what a matched producer sent.
+    fn accept(&self, state: &mut State, now: Instant, early: Early) {
+        let Early { origin, what } = early;
+        let reliable = self.reliable;
+        match (what, reliable) {
+            (
+                Sent::Sample {
+                    meta,
+                    flags,
+                    sample,
+                },
+                Some(config),
+            ) if flags & FLAG_RELIABLE != 0 => {
+                let stream = stream(state, config, &origin);
+                stream.reader.handle_sample(now, meta.seq, (meta, sample));
+                self.pump(state, now);
+            }
+            (Sent::Sample { meta, sample, .. }, _) => {
+                state.arbiter.handle_sample(now, meta, sample);
+                self.drain(&mut state.arbiter);
+            }
+            (control, Some(config)) => {
+                let reader = &mut stream(state, config, &origin).reader;
+                match control {
+                    Sent::Heartbeat(heartbeat) => {
+                        reader.handle_heartbeat(now, heartbeat.first, heartbeat.last);
+                    }
+                    Sent::Gap(gap) => reader.handle_gap(gap.from, gap.to),
+                    Sent::Partial(seq) => reader.handle_partial(now, seq),
+                    Sent::Sample { .. } => {}
+                }
+                self.pump(state, now);
+            }
+            // Reliable-stream control for a best-effort consumer: nothing to do.
+            (_, None) => {}
+        }
+    }
+
+    /// The producers this consumer is matched with now (discovery's view): samples held for
+    /// the new ones are acted on.
+    pub(crate) fn set_matched(&self, now: Instant, matched: Matched<'_>) {
+        let producers = matched
+            .filter(|info| info.kind() == EndpointKind::Producer)
+            .map(|info| (info.guid, SocketAddrV4::from(info.locator)));
+        let mut state = lock(&self.state);
+        let before = state.admission.stats();
+        let released = state.admission.set_matched(producers);
+        self.net.unbelieved.add(before, state.admission.stats());
+        for early in released {
+            self.accept(&mut state, now, early);
+        }
+        self.reschedule(&state);
+    }
+
+    /// What this consumer did not believe.
+    pub(crate) fn admission_stats(&self) -> AdmissionStats {
+        lock(&self.state).admission.stats()
+    }
+
     /// A reliable producer's heartbeat.
     pub(crate) fn on_heartbeat(&self, now: Instant, origin: &Origin, heartbeat: Heartbeat) {
-        self.with_stream(now, origin, |reader| {
-            reader.handle_heartbeat(now, heartbeat.first, heartbeat.last);
-        });
+        self.control(now, origin, Sent::Heartbeat(heartbeat));
     }
 
     /// A piece of a reliable producer's large sample arrived; the sample is not complete.
     pub(crate) fn on_partial(&self, now: Instant, origin: &Origin, seq: u64) {
-        self.with_stream(now, origin, |reader| reader.handle_partial(now, seq));
+        self.control(now, origin, Sent::Partial(seq));
     }
 
     /// A reliable producer's gap.
     pub(crate) fn on_gap(&self, now: Instant, origin: &Origin, gap: Gap) {
-        self.with_stream(now, origin, |reader| reader.handle_gap(gap.from, gap.to));
+        self.control(now, origin, Sent::Gap(gap));
     }
 
-    /// Hands `origin`'s reliable stream to `apply` (a reliable consumer only), then moves
-    /// what it can deliver and sends its acknowledgements.
-    fn with_stream(
-        &self,
-        now: Instant,
-        origin: &Origin,
-        apply: impl FnOnce(&mut ReliableReader<(Incoming, RawSample)>),
-    ) {
-        let Some(config) = self.reliable else {
+    /// Reliable-stream control (a reliable consumer only): acted on for a matched producer,
+    /// held like its samples for one not matched yet (its first heartbeat is what starts the
+    /// stream), dropped from anyone else. Then moves what it can deliver and sends the
+    /// acknowledgements.
+    fn control(&self, now: Instant, origin: &Origin, what: Sent) {
+        if self.reliable.is_none() {
             return;
-        };
+        }
         let mut state = lock(&self.state);
-        apply(&mut stream(&mut state, config, origin).reader);
-        self.pump(&mut state, now);
+        let before = state.admission.stats();
+        let early = Early {
+            origin: *origin,
+            what,
+        };
+        let admitted = state
+            .admission
+            .offer(now, origin.writer, origin.from, CONTROL_BYTES, early);
+        self.net.unbelieved.add(before, state.admission.stats());
+        if let Some(early) = admitted {
+            self.accept(&mut state, now, early);
+        }
         self.reschedule(&state);
     }
 
@@ -166,6 +273,11 @@ impl ConsumerSlot {
     /// Runs the due timers; returns the next one.
     pub(crate) fn timeout(&self, now: Instant) -> Option<Instant> {
         let mut state = lock(&self.state);
+        if state.admission.poll_timeout().is_some_and(|due| due <= now) {
+            let before = state.admission.stats();
+            state.admission.handle_timeout(now);
+            self.net.unbelieved.add(before, state.admission.stats());
+        }
         if state.arbiter.poll_timeout().is_some_and(|due| due <= now) {
             state.arbiter.handle_timeout(now);
             self.drain(&mut state.arbiter);
@@ -182,6 +294,7 @@ impl ConsumerSlot {
     /// A matched producer went away.
     pub(crate) fn writer_lost(&self, writer: Guid) {
         let mut state = lock(&self.state);
+        state.admission.unmatched(&writer);
         state.streams.remove(&writer);
         state.arbiter.handle_writer_lost(writer);
         self.drain(&mut state.arbiter);
@@ -220,6 +333,7 @@ impl ConsumerSlot {
             arbiter,
             streams,
             feedback,
+            ..
         } = state;
         for (writer, stream) in streams.iter_mut() {
             while self.sink.room() > 0 {
@@ -303,5 +417,6 @@ fn next_timer(state: &State) -> Option<Instant> {
         .values()
         .filter_map(|s| s.reader.poll_timeout())
         .chain(state.arbiter.poll_timeout())
+        .chain(state.admission.poll_timeout())
         .min()
 }

@@ -52,6 +52,7 @@ fn writer(depth: usize) -> ReliableWriter<u32, u64> {
         idle_heartbeat_period: 1000 * MS,
         // The fixed-period tests below assume no faster heartbeats while blocked.
         blocked_heartbeat_period: 20 * MS,
+        reader_liveness: Some(1000 * MS),
     })
 }
 
@@ -531,6 +532,7 @@ fn a_blocked_writer_heartbeats_quickly_then_backs_off_until_acknowledged() {
         heartbeat_period: 20 * MS,
         idle_heartbeat_period: 1000 * MS,
         blocked_heartbeat_period: MS,
+        reader_liveness: None,
     });
     w.add_reader(t0, 1);
     outputs(&mut w);
@@ -602,4 +604,66 @@ fn a_sample_arriving_in_pieces_is_not_asked_for_while_its_pieces_keep_coming() {
     r.handle_partial(t0 + 152 * MS, 40);
     assert!(r.poll_output().is_none());
     assert_eq!(r.poll_timeout(), None);
+}
+
+#[test]
+fn a_reader_that_stops_answering_leaves_the_window_and_joins_again_later() {
+    let t0 = Instant::now();
+    let mut w = writer(4);
+    w.add_reader(t0, 1);
+    w.add_reader(t0, 2);
+    write_n(&mut w, t0, 1..=4);
+    // Reader 1 acknowledges everything; reader 2 is silent: the window stays closed.
+    w.handle_acknack(t0 + MS, 1, 5, &[]);
+    assert!(!w.window_open());
+    for k in 1..=49 {
+        let now = t0 + 20 * MS * k;
+        w.handle_timeout(now);
+        outputs(&mut w);
+        assert!(!w.window_open(), "still held at {:?}", now - t0);
+    }
+    assert_eq!(w.poll_silenced(), None);
+    // One second without an answer while behind: silenced, and the window opens.
+    let now = t0 + 1000 * MS;
+    w.handle_timeout(now);
+    assert_eq!(w.poll_silenced(), Some(2));
+    assert!(w.is_silent(2));
+    assert!(w.window_open(), "the silent reader holds nothing");
+    assert_eq!(w.stats().silenced, 1);
+    // The writer goes on; reader 1 keeps up.
+    write_n(&mut w, now, 5..=12);
+    w.handle_acknack(now + MS, 1, 13, &[]);
+    assert!(w.window_open());
+    outputs(&mut w);
+    // Reader 2 answers at last: it is back, and its next heartbeat tells it what is gone.
+    w.handle_acknack(now + 2 * MS, 2, 1, &[]);
+    assert!(!w.is_silent(2));
+    let out = outputs(&mut w);
+    assert!(
+        out.iter()
+            .any(|o| matches!(o, WriterOutput::Heartbeat { reader: 2, first, .. } if *first > 1)),
+        "the returning reader learns that 1.. are gone: {out:?}"
+    );
+}
+
+#[test]
+fn a_reader_that_is_caught_up_and_idle_is_never_silenced() {
+    let t0 = Instant::now();
+    let mut w = writer(4);
+    w.add_reader(t0, 1);
+    write_n(&mut w, t0, 1..=2);
+    w.handle_acknack(t0 + MS, 1, 3, &[]);
+    // Ten quiet seconds (only idle heartbeats, which it need not answer: it has everything).
+    for s in 1..=10 {
+        w.handle_timeout(t0 + 1000 * MS * s);
+        outputs(&mut w);
+    }
+    assert_eq!(w.poll_silenced(), None);
+    // A write after the quiet: the liveness counts from that write, not from its last
+    // acknowledgement ten seconds ago.
+    let now = t0 + 10_500 * MS;
+    write_n(&mut w, now, 3..=3);
+    w.handle_timeout(now + 500 * MS);
+    assert_eq!(w.poll_silenced(), None);
+    assert!(!w.is_silent(1));
 }

@@ -50,6 +50,12 @@ pub struct WriterConfig {
     /// would otherwise hold it up for a whole `heartbeat_period`; the period doubles while
     /// no acknowledgement moves the window, up to `heartbeat_period`.
     pub blocked_heartbeat_period: Duration,
+    /// A reader that owes acknowledgements and sends none for this long is *silent*: it
+    /// stops holding samples in the history and the window (so one stopped reader does not
+    /// stall the writer), gets only the idle heartbeats, and joins again with its next
+    /// AckNack, learning what it missed as lost. `None`: readers are never silenced
+    /// (default 1 s).
+    pub reader_liveness: Option<Duration>,
 }
 
 impl Default for WriterConfig {
@@ -60,6 +66,7 @@ impl Default for WriterConfig {
             heartbeat_period: Duration::from_millis(20),
             idle_heartbeat_period: Duration::from_secs(1),
             blocked_heartbeat_period: Duration::from_millis(1),
+            reader_liveness: Some(Duration::from_secs(1)),
         }
     }
 }
@@ -118,6 +125,8 @@ pub struct WriterStats {
     pub unknown_reader: u64,
     /// AckNacks acknowledging or naming seqs never written (clamped or ignored).
     pub invalid_feedback: u64,
+    /// Readers found silent (see [`WriterConfig::reader_liveness`]).
+    pub silenced: u64,
 }
 
 /// Why a write was refused.
@@ -140,6 +149,11 @@ struct ReaderState {
     acked: u64,
     /// When its last AckNack arrived (`None`: never heard from).
     heard: Option<Instant>,
+    /// Since when it owes an answer: its last AckNack, or the write that put it behind, or
+    /// its match, whichever came last.
+    owes_since: Instant,
+    /// Silent: it holds nothing in the history until it answers again.
+    silent: bool,
     /// A heartbeat is due to it.
     heartbeat: bool,
     /// Seqs to resend.
@@ -149,10 +163,12 @@ struct ReaderState {
 }
 
 impl ReaderState {
-    fn new(acked: u64) -> Self {
+    fn new(acked: u64, now: Instant) -> Self {
         ReaderState {
             acked,
             heard: None,
+            owes_since: now,
+            silent: false,
             heartbeat: true,
             resend: BTreeSet::new(),
             gaps: RangeSet::default(),
@@ -161,7 +177,7 @@ impl ReaderState {
 
     /// Behind the newest write, or not yet heard from: heartbeats go to it every period.
     fn needy(&self, last: u64) -> bool {
-        self.acked <= last || self.heard.is_none()
+        !self.silent && (self.acked <= last || self.heard.is_none())
     }
 
     fn queue_gap(&mut self, from: u64, to: u64) {
@@ -219,6 +235,8 @@ pub struct ReliableWriter<K, S> {
     /// `blocked_heartbeat_period`, doubles at each heartbeat that finds the window still
     /// closed, and starts again when an acknowledgement makes progress.
     blocked_period: Duration,
+    /// Readers found silent, for the driver to report.
+    silenced: Vec<K>,
     stats: WriterStats,
 }
 
@@ -249,6 +267,7 @@ where
             idle_due: None,
             since_heartbeat: (0, 0),
             blocked_period: config.blocked_heartbeat_period,
+            silenced: Vec::new(),
             stats: WriterStats::default(),
         }
     }
@@ -302,7 +321,7 @@ where
             return false;
         }
         let next = self.last.saturating_add(1);
-        self.readers.insert(reader, ReaderState::new(next));
+        self.readers.insert(reader, ReaderState::new(next, now));
         self.dirty.insert(reader);
         self.arm_period(now);
         if self.idle_due.is_none() {
@@ -358,6 +377,12 @@ where
             return Ok(());
         }
         let was_open = self.window_open();
+        for state in self.readers.values_mut() {
+            if state.acked == seq {
+                // It had everything: from now on it owes an acknowledgement.
+                state.owes_since = now;
+            }
+        }
         self.history.push(seq, sample, bytes);
         self.evict();
         self.arm_period(now);
@@ -385,6 +410,13 @@ where
             return;
         };
         state.heard = Some(now);
+        state.owes_since = now;
+        if std::mem::take(&mut state.silent) {
+            // Back: it holds the history again from what it acknowledges (what was dropped
+            // meanwhile reaches it as lost through the next heartbeat).
+            state.heartbeat = true;
+            self.dirty.insert(reader);
+        }
         if acked > next {
             // Acknowledges seqs never written: settle what exists, ignore the bitmap.
             self.stats.invalid_feedback += 1;
@@ -420,8 +452,10 @@ where
         self.evict();
     }
 
-    /// Sends the heartbeats that are due at `now`.
+    /// Sends the heartbeats that are due at `now`, and silences readers that stopped
+    /// answering (checked at each heartbeat period while someone is behind).
     pub fn handle_timeout(&mut self, now: Instant) {
+        self.silence_quiet(now);
         if self.period_due.is_some_and(|due| due <= now) {
             self.period_due = None;
             self.heartbeat_needy(now);
@@ -435,6 +469,39 @@ where
             if !self.readers.is_empty() {
                 self.idle_due = now.checked_add(self.config.idle_heartbeat_period);
             }
+        }
+    }
+
+    /// The next reader found silent since the last call (to report).
+    pub fn poll_silenced(&mut self) -> Option<K> {
+        self.silenced.pop()
+    }
+
+    /// Whether `reader` is silent now.
+    pub fn is_silent(&self, reader: K) -> bool {
+        self.readers.get(&reader).is_some_and(|r| r.silent)
+    }
+
+    /// Silences the readers behind that owed an answer for longer than the liveness.
+    fn silence_quiet(&mut self, now: Instant) {
+        let Some(liveness) = self.config.reader_liveness else {
+            return;
+        };
+        let last = self.last;
+        let mut any = false;
+        for (&key, state) in &mut self.readers {
+            if !state.silent
+                && state.acked <= last
+                && now.saturating_duration_since(state.owes_since) >= liveness
+            {
+                state.silent = true;
+                self.stats.silenced += 1;
+                self.silenced.push(key);
+                any = true;
+            }
+        }
+        if any {
+            self.evict();
         }
     }
 
@@ -548,6 +615,7 @@ where
         let floor = self
             .readers
             .values()
+            .filter(|r| !r.silent)
             .map(|r| r.acked)
             .min()
             .unwrap_or_else(|| self.last.saturating_add(1));

@@ -140,6 +140,7 @@ pub fn run<T: TestSample>(participant: &Participant, args: &Args) -> anyhow::Res
     while Instant::now() < linger && started.elapsed() < max {
         std::thread::sleep(CHECK_EVERY);
     }
+    emit(json!({"event": "stats", "stats": report::stats(&participant.stats())}));
     Ok(())
 }
 

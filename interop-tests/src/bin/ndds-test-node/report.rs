@@ -131,6 +131,8 @@ pub fn stats(stats: &ParticipantStats) -> Value {
         "delivered": stats.delivered,
         "misaddressed": stats.misaddressed,
         "unknown_reader": stats.unknown_reader,
+        "unmatched_sender": stats.unmatched_sender,
+        "wrong_address": stats.wrong_address,
         "dropped": dropped,
     })
 }
