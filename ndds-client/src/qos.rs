@@ -101,8 +101,11 @@ impl ProducerQos {
 pub struct ConsumerQos {
     /// Immediate (queue, stream or callback) or polled (`poll()` returns the latest).
     pub mode: ConsumerMode,
-    /// Immediate mode: how many samples and notifications wait for the application; when
-    /// full, the oldest is dropped (and counted) so the application always finds the newest.
+    /// Immediate mode: how many samples wait for the application. When full, a best-effort
+    /// consumer drops the oldest (and counts it) so the application always finds the newest;
+    /// a reliable one takes no more samples from its producers until there is room.
+    /// Notifications have 64 places of their own beyond the depth and never push a sample
+    /// out (past those, further notifications are dropped and counted as overflow).
     pub depth: usize,
     /// At most one delivery per window; the newest sample wins when the window ends
     /// (zero: every accepted sample is delivered).

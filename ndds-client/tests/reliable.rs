@@ -341,3 +341,57 @@ fn a_relay_in_a_direct_callback_is_told_at_once_when_its_window_is_full() {
     );
     drop(stuck);
 }
+
+/// A reliable consumer's queued samples are acknowledged already: notifications (here a
+/// deadline missed again and again while the application does not read) never push one out.
+#[test]
+fn notifications_never_push_acknowledged_samples_out_of_a_full_queue() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    let consumer = reader_side
+        .consumer::<u64>(
+            "full-queue",
+            ConsumerQos {
+                depth: 4,
+                reliability: reliable(16),
+                deadline: Some(Duration::from_millis(20)),
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let producer = writer_side
+        .producer::<u64>(
+            "full-queue",
+            ProducerQos {
+                reliability: reliable(16),
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(producer.wait_for_consumers(1, WAIT));
+    for n in 1..=4 {
+        producer.write(&n).unwrap();
+    }
+    let deadline = Instant::now() + WAIT;
+    while consumer.stats().delivered < 4 {
+        assert!(Instant::now() < deadline, "{:?}", consumer.stats());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // Deadlines pass while nobody reads: "no new data", every 20 ms, into a full queue.
+    std::thread::sleep(Duration::from_millis(400));
+    let mut samples = Vec::new();
+    let mut notifications = 0;
+    while let Ok(event) = consumer.try_recv_event() {
+        match event {
+            Event::Sample(sample) => samples.push(sample.value),
+            Event::Notification(_) => notifications += 1,
+        }
+    }
+    assert_eq!(samples, [1, 2, 3, 4], "{notifications} notifications");
+    assert!(
+        notifications >= 5,
+        "the deadline was reported: {notifications}"
+    );
+    assert_eq!(consumer.stats().overflow, 0);
+}

@@ -16,6 +16,11 @@ use crate::sync::lock;
 /// Notifications a polled consumer keeps until it takes them.
 const POLLED_NOTIFICATIONS: usize = 64;
 
+/// Room a queue keeps for notifications beyond its depth: a notification never pushes a
+/// sample out (a reliable consumer's queued samples are acknowledged already); past this
+/// room, further notifications are dropped and counted as overflow.
+const NOTIFICATION_ROOM: usize = 64;
+
 /// A callback run on the participant's receive or timer thread.
 pub(crate) type Direct = Box<dyn FnMut(RawEvent) + Send>;
 
@@ -155,7 +160,7 @@ impl Sink {
         let (kind, rx) = match qos.mode {
             ConsumerMode::Immediate => {
                 let capacity = qos.depth.max(1);
-                let (tx, rx) = flume::bounded(capacity);
+                let (tx, rx) = flume::bounded(capacity.saturating_add(NOTIFICATION_ROOM));
                 let oldest = rx.clone();
                 let kind = Kind::Queue {
                     tx,
@@ -209,29 +214,45 @@ impl Sink {
             return;
         }
         match &self.kind {
-            Kind::Queue { tx, oldest, .. } => self.enqueue(tx, oldest, event),
+            Kind::Queue {
+                tx,
+                oldest,
+                capacity,
+            } => self.enqueue(tx, oldest, *capacity, event),
             Kind::Latest(latest) => self.replace(&mut lock(latest), event),
         }
     }
 
+    /// Queues `event`. A sample beyond the depth pushes the oldest event out (only a
+    /// best-effort consumer gets there: a reliable one takes samples only while there is
+    /// room); a notification uses the extra room and never pushes anything out.
     fn enqueue(
         &self,
         tx: &flume::Sender<RawEvent>,
         oldest: &flume::Receiver<RawEvent>,
-        mut event: RawEvent,
+        capacity: usize,
+        event: RawEvent,
     ) {
-        loop {
-            match tx.try_send(event) {
-                Ok(()) => return self.signal.notify(),
-                Err(flume::TrySendError::Full(back)) => {
-                    event = back;
-                    if oldest.try_recv().is_ok() {
-                        self.overflow.fetch_add(1, Ordering::Relaxed);
-                    }
+        match event {
+            RawEvent::Notification(_) => {
+                if tx.try_send(event).is_err() {
+                    self.overflow.fetch_add(1, Ordering::Relaxed);
+                    return;
                 }
-                Err(flume::TrySendError::Disconnected(_)) => return,
+            }
+            RawEvent::Sample(_) => {
+                while tx.len() >= capacity {
+                    if oldest.try_recv().is_err() {
+                        break;
+                    }
+                    self.overflow.fetch_add(1, Ordering::Relaxed);
+                }
+                if let Err(flume::TrySendError::Disconnected(_)) = tx.try_send(event) {
+                    return;
+                }
             }
         }
+        self.signal.notify()
     }
 
     fn replace(&self, latest: &mut Latest, event: RawEvent) {
