@@ -69,8 +69,14 @@ struct State {
     admission: Admission<Early>,
     arbiter: Arbiter<RawSample>,
     streams: HashMap<Guid, Stream>,
+    /// Where the streams of lost producers stood (next seq, when lost): a producer matched
+    /// again resumes there, so what it wrote meanwhile is reported lost.
+    resume: HashMap<Guid, (u64, Instant)>,
     feedback: Vec<u8>,
 }
+
+/// Lost producers whose stream position is remembered (the oldest is forgotten first).
+const RESUMABLE: usize = 256;
 
 /// A consumer's receiving end.
 #[derive(Debug)]
@@ -112,6 +118,7 @@ impl ConsumerSlot {
                 admission: Admission::new(AdmissionConfig::default()),
                 arbiter: Arbiter::new(qos.rules(), now),
                 streams: HashMap::new(),
+                resume: HashMap::new(),
                 feedback: Vec::new(),
             }),
             sink,
@@ -295,7 +302,22 @@ impl ConsumerSlot {
     pub(crate) fn writer_lost(&self, writer: Guid) {
         let mut state = lock(&self.state);
         state.admission.unmatched(&writer);
-        state.streams.remove(&writer);
+        if let Some(stream) = state.streams.remove(&writer)
+            && stream.reader.is_synced()
+        {
+            if state.resume.len() >= RESUMABLE
+                && let Some(oldest) = state
+                    .resume
+                    .iter()
+                    .min_by_key(|(_, (_, at))| *at)
+                    .map(|(guid, _)| *guid)
+            {
+                state.resume.remove(&oldest);
+            }
+            state
+                .resume
+                .insert(writer, (stream.reader.next_seq(), Instant::now()));
+        }
         state.arbiter.handle_writer_lost(writer);
         self.drain(&mut state.arbiter);
     }
@@ -399,13 +421,17 @@ impl ConsumerSlot {
 
 /// The stream of `origin`'s writer, created on first use.
 fn stream<'a>(state: &'a mut State, config: ReaderConfig, origin: &Origin) -> &'a mut Stream {
-    let stream = state
-        .streams
-        .entry(origin.writer)
-        .or_insert_with(|| Stream {
-            reader: ReliableReader::new(config),
+    let resume = &mut state.resume;
+    let stream = state.streams.entry(origin.writer).or_insert_with(|| {
+        let mut reader = ReliableReader::new(config);
+        if let Some((next, _)) = resume.remove(&origin.writer) {
+            reader.resume_at(next);
+        }
+        Stream {
+            reader,
             from: origin.from,
-        });
+        }
+    });
     stream.from = origin.from;
     stream
 }

@@ -533,6 +533,16 @@ impl<S> ReliableReader<S> {
         held
     }
 
+    /// A stream this reader followed before, up to `next` (its writer was lost, and is
+    /// matched again): it starts at `next` instead of at the writer's first heartbeat, so
+    /// what the writer shows as gone since is reported lost rather than silently skipped.
+    /// Does nothing once the stream is synced.
+    pub fn resume_at(&mut self, next: u64) {
+        if !self.synced {
+            self.sync(next.max(1));
+        }
+    }
+
     /// Before the first heartbeat: keep the lowest `depth` samples, hand out nothing.
     fn hold_unsynced(&mut self, seq: u64, sample: S) {
         if self.buf.contains_key(&seq) {

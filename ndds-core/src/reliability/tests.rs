@@ -667,3 +667,29 @@ fn a_reader_that_is_caught_up_and_idle_is_never_silenced() {
     assert_eq!(w.poll_silenced(), None);
     assert!(!w.is_silent(1));
 }
+
+#[test]
+fn a_resumed_stream_reports_what_it_missed_since() {
+    let t0 = Instant::now();
+    let mut r = reader(8);
+    // The stream had been followed up to 11 (10 delivered); the writer, back after an
+    // outage, starts this reader at 40.
+    r.resume_at(11);
+    r.handle_heartbeat(t0, 40, 41);
+    r.handle_sample(t0, 40, 400);
+    r.handle_sample(t0, 41, 410);
+    assert_eq!(
+        deliveries(&mut r),
+        vec![
+            Delivery::Lost { from: 11, to: 40 },
+            Delivery::Sample {
+                seq: 40,
+                sample: 400
+            },
+            Delivery::Sample {
+                seq: 41,
+                sample: 410
+            },
+        ]
+    );
+}
