@@ -70,6 +70,12 @@ pub struct ProducerQos {
     /// How long `write` of a reliable producer waits for its window to open before it fails
     /// with [`crate::WriteError::WouldBlock`] ([`WhenFull::Block`]).
     pub write_timeout: Duration,
+    /// Late joiners get the last values (DDS's TRANSIENT_LOCAL, ROS 2's latched topics): the
+    /// newest this many samples are kept for consumers that match later. A reliable
+    /// consumer gets them in order before what is written after its match; a best-effort
+    /// one gets the newest. 0 (the default): a new consumer gets only what follows its
+    /// match.
+    pub late_joiners: usize,
 }
 
 impl Default for ProducerQos {
@@ -81,6 +87,7 @@ impl Default for ProducerQos {
             batching: Batching::Off,
             when_full: WhenFull::Block,
             write_timeout: DEFAULT_WRITE_TIMEOUT,
+            late_joiners: 0,
         }
     }
 }

@@ -395,3 +395,50 @@ fn notifications_never_push_acknowledged_samples_out_of_a_full_queue() {
     );
     assert_eq!(consumer.stats().overflow, 0);
 }
+
+/// Late joiners get the last values: a producer keeping 3 samples for late joiners wrote
+/// 5 before anyone listened; a reliable consumer that joins gets 3, 4, 5 in order and then
+/// what follows, a best-effort one gets 5 and then what follows.
+#[test]
+fn late_joiners_get_the_kept_samples_reliable_in_order_best_effort_the_newest() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    for (reliability, expected) in [
+        (reliable(16), vec![3_u64, 4, 5, 6]),
+        (Reliability::BestEffort, vec![5, 6]),
+    ] {
+        let topic = format!("latched/{}", expected.len());
+        let producer = writer_side
+            .producer::<u64>(
+                &topic,
+                ProducerQos {
+                    reliability,
+                    late_joiners: 3,
+                    ..ProducerQos::default()
+                },
+            )
+            .unwrap();
+        for n in 1..=5 {
+            producer.write(&n).unwrap();
+        }
+        let consumer = reader_side
+            .consumer::<u64>(
+                &topic,
+                ConsumerQos {
+                    reliability,
+                    ..ConsumerQos::default()
+                },
+            )
+            .unwrap();
+        assert!(producer.wait_for_consumers(1, WAIT));
+        let mut got = Vec::new();
+        while got.len() < expected.len() - 1 {
+            got.push(consumer.recv_timeout(WAIT).expect("the kept samples").value);
+        }
+        producer.write(&6).unwrap();
+        got.push(consumer.recv_timeout(WAIT).expect("the next sample").value);
+        assert_eq!(got, expected, "{reliability:?}");
+        assert!(consumer.recv_timeout(Duration::from_millis(200)).is_err());
+    }
+}

@@ -4,6 +4,7 @@
 
 mod outbox;
 
+use std::collections::HashSet;
 use std::marker::PhantomData;
 use std::net::SocketAddrV4;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -56,6 +57,8 @@ struct Out {
     armed: Option<Instant>,
     /// The matched consumers: feedback from anyone else is not believed.
     believed: Believed,
+    /// The consumers matched at the last change (to tell the ones that join).
+    known: HashSet<Guid>,
 }
 
 /// The matched consumers of a producer, at their locators.
@@ -99,6 +102,7 @@ impl ProducerState {
             Reliability::Reliable { depth } => Some(Reliable {
                 writer: ReliableWriter::new(WriterConfig {
                     depth: usize::try_from(depth).unwrap_or(usize::MAX).max(1),
+                    late_joiners: qos.late_joiners,
                     ..WriterConfig::default()
                 }),
                 outputs: Vec::new(),
@@ -136,7 +140,17 @@ impl ProducerState {
                 .map(|info| (info.guid, SocketAddrV4::from(info.locator))),
         );
         out.outbox.set_matched(&self.net, matched.clone());
+        let consumers: HashSet<Guid> = matched
+            .clone()
+            .filter(|info| info.kind() == EndpointKind::Consumer)
+            .map(|info| info.guid)
+            .collect();
+        let joined: Vec<Guid> = consumers.difference(&out.known).copied().collect();
+        out.known = consumers;
         let Some(reliable) = out.reliable.as_mut() else {
+            if self.qos.late_joiners > 0 {
+                self.send_latest(&mut out, &joined);
+            }
             return;
         };
         let now = Instant::now();
@@ -164,6 +178,43 @@ impl ProducerState {
         self.drain(&mut out);
         if let Some(at) = self.arm(&mut out) {
             self.timer.schedule(at);
+        }
+    }
+
+    /// Best effort, keeping the newest sample for late joiners: sends it to the consumers
+    /// that just matched.
+    fn send_latest(&self, out: &mut Out, joined: &[Guid]) {
+        let Some(latest) = out.kept.clone() else {
+            return;
+        };
+        for &reader in joined {
+            let Some(dest) = out.outbox.dest_of(reader) else {
+                continue;
+            };
+            let sent = if latest.bytes.len() > whole_limit(&self.net) {
+                dest.send_fragments(
+                    &self.net,
+                    self.entity,
+                    Some(reader.entity),
+                    latest.meta,
+                    &latest.bytes,
+                    None,
+                )
+            } else {
+                let sample = DataSub::Sample(Sample {
+                    meta: latest.meta,
+                    payload: &latest.bytes,
+                });
+                dest.send_now(
+                    &self.net,
+                    self.entity,
+                    Some(reader.entity),
+                    std::iter::once(sample),
+                )
+            };
+            if let Err(err) = sent {
+                tracing::debug!(%reader, %err, "sending the latest sample to a late joiner failed");
+            }
         }
     }
 
@@ -254,9 +305,11 @@ impl ProducerState {
         // The monotonic clock only where something is timed: reliable streams and batches.
         let now = (out.reliable.is_some() || self.qos.batching != Batching::Off).then(Instant::now);
         let fragmented = payload.len() > whole_limit(&self.net);
+        // The newest sample of a best-effort producer that keeps it for late joiners.
+        let latest = out.reliable.is_none() && self.qos.late_joiners > 0;
         // Kept for repairs: every sample of a reliable producer (its history), the newest
-        // fragmented one of a best-effort producer.
-        let kept = (out.reliable.is_some() || fragmented).then(|| Kept {
+        // fragmented one of a best-effort producer (and the newest one for late joiners).
+        let kept = (out.reliable.is_some() || fragmented || latest).then(|| Kept {
             meta,
             bytes: kept.cloned().unwrap_or_else(|| out.pool.copy(payload)),
         });
@@ -277,7 +330,7 @@ impl ProducerState {
             now,
             self.qos.batching,
         );
-        if fragmented {
+        if fragmented || latest {
             out.kept = kept;
         }
         self.written.fetch_add(1, Ordering::Relaxed);

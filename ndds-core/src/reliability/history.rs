@@ -34,6 +34,16 @@ impl<S> History<S> {
         self.entries.push_back(Entry { seq, sample, bytes });
     }
 
+    /// Puts back a sample older than every stored one (a sample kept for late joiners that a
+    /// new reader is owed); ignored if it is not older.
+    pub(crate) fn push_older(&mut self, seq: u64, sample: S, bytes: usize) {
+        if self.first_seq().is_some_and(|first| first <= seq) {
+            return;
+        }
+        self.bytes = self.bytes.saturating_add(bytes);
+        self.entries.push_front(Entry { seq, sample, bytes });
+    }
+
     /// Removes the oldest sample.
     pub(crate) fn pop_front(&mut self) -> Option<Entry<S>> {
         let entry = self.entries.pop_front()?;

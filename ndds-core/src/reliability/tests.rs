@@ -53,6 +53,7 @@ fn writer(depth: usize) -> ReliableWriter<u32, u64> {
         // The fixed-period tests below assume no faster heartbeats while blocked.
         blocked_heartbeat_period: 20 * MS,
         reader_liveness: Some(1000 * MS),
+        late_joiners: 0,
     })
 }
 
@@ -533,6 +534,7 @@ fn a_blocked_writer_heartbeats_quickly_then_backs_off_until_acknowledged() {
         idle_heartbeat_period: 1000 * MS,
         blocked_heartbeat_period: MS,
         reader_liveness: None,
+        late_joiners: 0,
     });
     w.add_reader(t0, 1);
     outputs(&mut w);
@@ -692,4 +694,28 @@ fn a_resumed_stream_reports_what_it_missed_since() {
             },
         ]
     );
+}
+
+#[test]
+fn a_late_joiner_is_owed_the_kept_samples_and_gets_them_resent() {
+    let t0 = Instant::now();
+    let mut w = ReliableWriter::<u32, u64>::new(WriterConfig {
+        late_joiners: 3,
+        ..WriterConfig::default()
+    });
+    write_n(&mut w, t0, 1..=5);
+    w.add_reader(t0, 1);
+    assert_eq!(outputs(&mut w), vec![heartbeat(1, 3, 5)]);
+    // It asks for 3, 4 and 5 (bits 0..3 from 3).
+    w.handle_acknack(t0 + MS, 1, 3, &[0b0000_0111]);
+    let out = outputs(&mut w);
+    let resent: Vec<u64> = out
+        .iter()
+        .filter_map(|o| match o {
+            WriterOutput::Resend { seq, .. } => Some(*seq),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(resent, vec![3, 4, 5], "{out:?}");
+    assert!(w.window_open(), "kept samples never close the window");
 }

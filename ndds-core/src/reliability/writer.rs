@@ -56,6 +56,13 @@ pub struct WriterConfig {
     /// AckNack, learning what it missed as lost. `None`: readers are never silenced
     /// (default 1 s).
     pub reader_liveness: Option<Duration>,
+    /// The newest this many samples are kept for readers that match later (DDS's
+    /// TRANSIENT_LOCAL, ROS 2's latched topics): a new reader is owed them first, in order,
+    /// before what is written after its match. Kept apart from the history until a reader
+    /// joins (so they never close the window by themselves); then they are in the history
+    /// until that reader has them (default 0: a new reader is owed only what follows its
+    /// match).
+    pub late_joiners: usize,
 }
 
 impl Default for WriterConfig {
@@ -67,6 +74,7 @@ impl Default for WriterConfig {
             idle_heartbeat_period: Duration::from_secs(1),
             blocked_heartbeat_period: Duration::from_millis(1),
             reader_liveness: Some(Duration::from_secs(1)),
+            late_joiners: 0,
         }
     }
 }
@@ -237,6 +245,8 @@ pub struct ReliableWriter<K, S> {
     blocked_period: Duration,
     /// Readers found silent, for the driver to report.
     silenced: Vec<K>,
+    /// The newest `late_joiners` samples written, oldest first, with their sizes.
+    kept: std::collections::VecDeque<(u64, S, usize)>,
     stats: WriterStats,
 }
 
@@ -268,6 +278,7 @@ where
             since_heartbeat: (0, 0),
             blocked_period: config.blocked_heartbeat_period,
             silenced: Vec::new(),
+            kept: std::collections::VecDeque::with_capacity(config.late_joiners.min(1024)),
             stats: WriterStats::default(),
         }
     }
@@ -313,14 +324,25 @@ where
         self.readers.get(&reader).and_then(|r| r.heard)
     }
 
-    /// A reliable reader matched. It is owed every sample written from now on, not the
-    /// history; a heartbeat to it is queued at once. Returns false if it was already known
-    /// (its state is kept).
+    /// A reliable reader matched. It is owed every sample written from now on (and, with
+    /// [`WriterConfig::late_joiners`], the samples kept for late joiners), not the rest of
+    /// the history; a heartbeat to it is queued at once. Returns false if it was already
+    /// known (its state is kept).
     pub fn add_reader(&mut self, now: Instant, reader: K) -> bool {
         if self.readers.contains_key(&reader) {
             return false;
         }
-        let next = self.last.saturating_add(1);
+        // The samples kept for late joiners go (back) into the history, which holds them
+        // until this reader has them.
+        for (seq, sample, bytes) in self.kept.iter().rev() {
+            if self.history.first_seq().is_none_or(|first| *seq < first) {
+                self.history.push_older(*seq, sample.clone(), *bytes);
+            }
+        }
+        let next = self
+            .kept
+            .front()
+            .map_or_else(|| self.last.saturating_add(1), |(seq, _, _)| *seq);
         self.readers.insert(reader, ReaderState::new(next, now));
         self.dirty.insert(reader);
         self.arm_period(now);
@@ -373,6 +395,12 @@ where
         }
         self.last = seq;
         self.stats.written += 1;
+        if self.config.late_joiners > 0 {
+            if self.kept.len() >= self.config.late_joiners {
+                self.kept.pop_front();
+            }
+            self.kept.push_back((seq, sample.clone(), bytes));
+        }
         if self.readers.is_empty() {
             return Ok(());
         }

@@ -383,3 +383,40 @@ fn loss_costs_throughput_in_proportion() {
     println!("20000 samples: {clean:?} without loss, {lossy:?} with 10 % loss");
     assert!(lossy < clean * 3, "10 % loss: {lossy:?} against {clean:?}");
 }
+
+/// Late joiners get the last value (DDS TRANSIENT_LOCAL): with `late_joiners = 3`, a reader
+/// that matches after 0, 1 or 5 samples were written gets the newest of them (none, 1, or
+/// 3..=5) in order before everything written after, over a clean and a lossy link.
+#[test]
+fn late_joiners_get_the_kept_samples_first_in_order() {
+    for (written, lossy) in [(0, false), (1, false), (5, false), (5, true), (40, true)] {
+        let config = WriterConfig {
+            late_joiners: 3,
+            ..writer_config(64)
+        };
+        let mut sim = Sim::new(17 + written, config, producer(written + 50, MS, true));
+        if written > 0 {
+            sim.producer.total = written;
+            sim.run_until(sim.at_ms(10_000), |s| s.next_seq == written + 1);
+        }
+        let link = if lossy {
+            Link {
+                loss: 0.2,
+                ..Link::clean()
+            }
+        } else {
+            Link::clean()
+        };
+        let late = sim.add_node(reader_config(64), link, Consumer::Eager);
+        sim.attach(late);
+        sim.producer.total = written + 50;
+        sim.run_until(sim.at_ms(60_000), Sim::done);
+        assert!(sim.done(), "after {written} samples, lossy {lossy}");
+        let first = written.saturating_sub(2).max(1);
+        assert_eq!(
+            check_stream(&sim.nodes[late].got, first, written + 50),
+            Ok(vec![]),
+            "after {written} samples, lossy {lossy}"
+        );
+    }
+}
