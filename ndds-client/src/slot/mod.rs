@@ -151,22 +151,37 @@ impl ConsumerSlot {
             sample
         };
         let bytes = sample.payload.len();
+        let what = Sent::Sample {
+            meta,
+            flags,
+            sample,
+        };
+        self.admit(&mut state, before, now, origin, bytes, what);
+    }
+
+    /// Offers what `origin` sent to admission (`before`: its counters when the lock was
+    /// taken): acted on now if believed, held or dropped otherwise.
+    fn admit(
+        &self,
+        state: &mut State,
+        before: AdmissionStats,
+        now: Instant,
+        origin: &Origin,
+        bytes: usize,
+        what: Sent,
+    ) {
         let early = Early {
             origin: *origin,
-            what: Sent::Sample {
-                meta,
-                flags,
-                sample,
-            },
+            what,
         };
         let admitted = state
             .admission
             .offer(now, origin.writer, origin.from, bytes, early);
         self.net.unbelieved.add(before, state.admission.stats());
         if let Some(early) = admitted {
-            self.accept(&mut state, now, early);
+            self.accept(state, now, early);
         }
-        self.reschedule(&state);
+        self.reschedule(state);
     }
 
     /// Acts on what a matched producer sent.
@@ -253,18 +268,7 @@ impl ConsumerSlot {
         }
         let mut state = lock(&self.state);
         let before = state.admission.stats();
-        let early = Early {
-            origin: *origin,
-            what,
-        };
-        let admitted = state
-            .admission
-            .offer(now, origin.writer, origin.from, CONTROL_BYTES, early);
-        self.net.unbelieved.add(before, state.admission.stats());
-        if let Some(early) = admitted {
-            self.accept(&mut state, now, early);
-        }
-        self.reschedule(&state);
+        self.admit(&mut state, before, now, origin, CONTROL_BYTES, what);
     }
 
     /// The application took events: samples waiting for room move on (reliable only).
