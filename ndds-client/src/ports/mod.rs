@@ -38,7 +38,7 @@ pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Broadcast, BroadcastReply, Replies};
 pub use user::PortUser;
-pub use waitfor::{Arrival, REPEAT, Rendezvous};
+pub use waitfor::{Arrival, LINGER, REPEAT, Rendezvous};
 pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
 
 use crate::{

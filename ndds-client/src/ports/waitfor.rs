@@ -23,6 +23,11 @@ use crate::{Consumer, Participant, Producer};
 /// How often an arrival is repeated while the rendezvous is incomplete.
 pub const REPEAT: Duration = Duration::from_millis(20);
 
+/// How long a task leaving the rendezvous (its handle dropped) waits for its last arrival to
+/// be acknowledged by the others: they may still need it to learn that it has their
+/// messages, and once its producer is gone nobody could repair it.
+pub const LINGER: Duration = Duration::from_secs(1);
+
 /// One task's arrival at a rendezvous round.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Arrival {
@@ -199,5 +204,16 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
             messages.insert(task, value);
         }
         Ok(combine(&messages))
+    }
+}
+
+impl<T> Drop for Rendezvous<T> {
+    fn drop(&mut self) {
+        // The other tasks finish the last round only once they have this task's complete
+        // arrival: if that datagram was lost, only this producer can repair it.
+        if !self.producer.wait_for_acknowledgments(LINGER) {
+            tracing::debug!(rendezvous = %self.name, task = %self.task,
+                "left before every other task acknowledged the last arrival");
+        }
     }
 }
