@@ -37,6 +37,10 @@ pub struct AdmissionConfig {
     pub max_held_bytes: usize,
     /// A held sample whose sender is not matched within this is dropped.
     pub hold_for: Duration,
+    /// A sender that was matched stays believed this long after discovery let it go (at
+    /// its locator): what it sent before it left may still be on the way, overtaken by the
+    /// news of its leaving.
+    pub departed_grace: Duration,
 }
 
 impl Default for AdmissionConfig {
@@ -50,6 +54,7 @@ impl Default for AdmissionConfig {
             max_held: 1024,
             max_held_bytes: 1 << 20,
             hold_for: Duration::from_secs(2),
+            departed_grace: Duration::from_secs(2),
         }
     }
 }
@@ -80,6 +85,8 @@ struct Held<S> {
 pub struct Admission<S> {
     config: AdmissionConfig,
     matched: HashMap<Guid, SocketAddrV4>,
+    /// Senders discovery let go, believed until the instant given (see `departed_grace`).
+    departed: HashMap<Guid, (SocketAddrV4, Instant)>,
     held: VecDeque<Held<S>>,
     held_bytes: usize,
     stats: AdmissionStats,
@@ -91,6 +98,7 @@ impl<S> Admission<S> {
         Admission {
             config,
             matched: HashMap::new(),
+            departed: HashMap::new(),
             held: VecDeque::new(),
             held_bytes: 0,
             stats: AdmissionStats::default(),
@@ -115,7 +123,11 @@ impl<S> Admission<S> {
     /// What to make of something `sender` sent from `from`. A locator with an unspecified
     /// address (a socket bound to 0.0.0.0) is matched by its port alone.
     pub fn check(&self, sender: &Guid, from: SocketAddrV4) -> Verdict {
-        match self.matched.get(sender) {
+        let known = self
+            .matched
+            .get(sender)
+            .or_else(|| self.departed.get(sender).map(|(locator, _)| locator));
+        match known {
             Some(locator) if same_place(*locator, from) => Verdict::Matched,
             Some(_) => Verdict::WrongAddress,
             None => Verdict::Unmatched,
@@ -188,6 +200,7 @@ impl<S> Admission<S> {
     /// Records a match: `sender` sends from `locator`. Returns the samples held for it that
     /// came from there, oldest first (those from elsewhere are dropped as wrong address).
     pub fn matched(&mut self, sender: Guid, locator: SocketAddrV4) -> Vec<S> {
+        self.departed.remove(&sender);
         self.matched.insert(sender, locator);
         let mut released = Vec::new();
         let mut kept = VecDeque::with_capacity(self.held.len());
@@ -208,18 +221,31 @@ impl<S> Admission<S> {
         released
     }
 
-    /// Forgets a match (the sender left, or discovery dropped it).
-    pub fn unmatched(&mut self, sender: &Guid) {
-        self.matched.remove(sender);
+    /// Forgets a match at `now` (the sender left, or discovery dropped it); it stays believed
+    /// for the departed grace.
+    pub fn unmatched(&mut self, now: Instant, sender: &Guid) {
+        if let Some(locator) = self.matched.remove(sender) {
+            self.departed
+                .insert(*sender, (locator, now + self.config.departed_grace));
+        }
     }
 
     /// Keeps exactly these matches; returns the samples released for senders that are new.
     pub fn set_matched(
         &mut self,
+        now: Instant,
         senders: impl IntoIterator<Item = (Guid, SocketAddrV4)>,
     ) -> Vec<S> {
         let senders: HashMap<Guid, SocketAddrV4> = senders.into_iter().collect();
-        self.matched.retain(|guid, _| senders.contains_key(guid));
+        let gone: Vec<Guid> = self
+            .matched
+            .keys()
+            .filter(|guid| !senders.contains_key(guid))
+            .copied()
+            .collect();
+        for guid in gone {
+            self.unmatched(now, &guid);
+        }
         let mut released = Vec::new();
         for (guid, locator) in senders {
             if self.matched.get(&guid) != Some(&locator) {
@@ -229,16 +255,21 @@ impl<S> Admission<S> {
         released
     }
 
-    /// Drops held samples whose time ran out.
+    /// Drops held samples whose time ran out, and forgets departed senders whose grace did.
     pub fn handle_timeout(&mut self, now: Instant) {
         while self.held.front().is_some_and(|held| held.until <= now) {
             self.drop_oldest();
         }
+        self.departed.retain(|_, (_, until)| *until > now);
     }
 
-    /// When a held sample runs out next.
+    /// When a held sample or a departed sender's grace runs out next.
     pub fn poll_timeout(&self) -> Option<Instant> {
-        self.held.front().map(|held| held.until)
+        let departed = self.departed.values().map(|(_, until)| *until).min();
+        match (self.held.front().map(|held| held.until), departed) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 }
 
@@ -283,7 +314,13 @@ mod tests {
                 released: 0
             }
         );
-        a.unmatched(&guid(1));
+        a.unmatched(t0, &guid(1));
+        assert_eq!(
+            a.check(&guid(1), at(7000)),
+            Verdict::Matched,
+            "still on the way when it left"
+        );
+        a.handle_timeout(t0 + Duration::from_secs(2));
         assert_eq!(a.check(&guid(1), at(7000)), Verdict::Unmatched);
     }
 
@@ -344,10 +381,11 @@ mod tests {
         let mut a = Admission::new(AdmissionConfig::default());
         a.matched(guid(1), at(7000));
         a.offer(t0, guid(2), at(7200), 1, 'x');
-        let released = a.set_matched([(guid(2), at(7200))]);
+        let released = a.set_matched(t0, [(guid(2), at(7200))]);
         assert_eq!(released, vec!['x']);
         assert!(!a.is_matched(&guid(1)));
         assert_eq!(a.matched_len(), 1);
+        assert_eq!(a.poll_timeout(), Some(t0 + Duration::from_secs(1) * 2));
     }
 
     #[test]

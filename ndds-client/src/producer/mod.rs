@@ -134,6 +134,7 @@ impl ProducerState {
     pub(crate) fn set_matched(&self, matched: Matched<'_>) {
         let mut out = lock(&self.out);
         out.believed.0.set_matched(
+            Instant::now(),
             matched
                 .clone()
                 .filter(|info| info.kind() == EndpointKind::Consumer)

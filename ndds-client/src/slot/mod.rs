@@ -230,7 +230,7 @@ impl ConsumerSlot {
             .map(|info| (info.guid, SocketAddrV4::from(info.locator)));
         let mut state = lock(&self.state);
         let before = state.admission.stats();
-        let released = state.admission.set_matched(producers);
+        let released = state.admission.set_matched(now, producers);
         self.net.unbelieved.add(before, state.admission.stats());
         for early in released {
             self.accept(&mut state, now, early);
@@ -305,7 +305,7 @@ impl ConsumerSlot {
     /// A matched producer went away.
     pub(crate) fn writer_lost(&self, writer: Guid) {
         let mut state = lock(&self.state);
-        state.admission.unmatched(&writer);
+        state.admission.unmatched(Instant::now(), &writer);
         if let Some(stream) = state.streams.remove(&writer)
             && stream.reader.is_synced()
         {
