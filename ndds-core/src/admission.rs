@@ -151,8 +151,8 @@ impl<S> Admission<S> {
     }
 
     /// Offers a sample of `bytes` bytes: `Some(item)` back when its sender is matched (to be
-    /// acted on now); held when the sender is not matched yet; dropped (and counted) when it
-    /// came from the wrong address.
+    /// acted on now); held (as `hold(item)`, say a copy that frees a shared buffer) when the
+    /// sender is not matched yet; dropped (and counted) when it came from the wrong address.
     pub fn offer(
         &mut self,
         now: Instant,
@@ -160,6 +160,7 @@ impl<S> Admission<S> {
         from: SocketAddrV4,
         bytes: usize,
         item: S,
+        hold: impl FnOnce(S) -> S,
     ) -> Option<S> {
         match self.check(&sender, from) {
             Verdict::Matched => Some(item),
@@ -183,7 +184,7 @@ impl<S> Admission<S> {
                     from,
                     until: now + self.config.hold_for,
                     bytes,
-                    item,
+                    item: hold(item),
                 });
                 None
             }
@@ -301,8 +302,12 @@ mod tests {
         let t0 = Instant::now();
         let mut a = Admission::new(AdmissionConfig::default());
         assert!(a.matched(guid(1), at(7000)).is_empty());
-        assert_eq!(a.offer(t0, guid(1), at(7000), 1, 'a'), Some('a'));
-        assert_eq!(a.offer(t0, guid(1), at(7001), 1, 'b'), None, "another port");
+        assert_eq!(a.offer(t0, guid(1), at(7000), 1, 'a', |x| x), Some('a'));
+        assert_eq!(
+            a.offer(t0, guid(1), at(7001), 1, 'b', |x| x),
+            None,
+            "another port"
+        );
         let elsewhere = SocketAddrV4::new(Ipv4Addr::new(10, 0, 0, 9), 7000);
         assert!(!a.admit(&guid(1), elsewhere), "another host");
         assert!(!a.admit(&guid(2), at(7000)), "never matched");
@@ -328,11 +333,11 @@ mod tests {
     fn samples_before_the_match_are_held_and_handed_on_in_order() {
         let t0 = Instant::now();
         let mut a = Admission::new(AdmissionConfig::default());
-        assert_eq!(a.offer(t0, guid(1), at(7000), 8, 1), None);
-        assert_eq!(a.offer(t0, guid(2), at(7100), 8, 9), None);
-        assert_eq!(a.offer(t0, guid(1), at(7000), 8, 2), None);
+        assert_eq!(a.offer(t0, guid(1), at(7000), 8, 1, |x| x), None);
+        assert_eq!(a.offer(t0, guid(2), at(7100), 8, 9, |x| x), None);
+        assert_eq!(a.offer(t0, guid(1), at(7000), 8, 2, |x| x), None);
         assert_eq!(
-            a.offer(t0, guid(1), at(6666), 8, 3),
+            a.offer(t0, guid(1), at(6666), 8, 3, |x| x),
             None,
             "a forger's, held too"
         );
@@ -357,18 +362,18 @@ mod tests {
         let config = AdmissionConfig::default();
         let mut a = Admission::new(config);
         for n in 0..10_000_u64 {
-            a.offer(t0, guid(100 + n), at(9000), 8, n);
+            a.offer(t0, guid(100 + n), at(9000), 8, n, |x| x);
         }
         assert_eq!(a.held.len(), config.max_held);
         assert_eq!(a.stats().unmatched, 10_000 - config.max_held as u64);
         // And by bytes: large samples push the small ones out.
         for n in 0..100_u64 {
-            a.offer(t0, guid(50_000 + n), at(9000), 256 * 1024, n);
+            a.offer(t0, guid(50_000 + n), at(9000), 256 * 1024, n, |x| x);
         }
         assert!(a.held_bytes <= config.max_held_bytes);
         assert_eq!(a.held.len(), 4);
         assert_eq!(
-            a.offer(t0, guid(1), at(9000), 2 << 20, 0),
+            a.offer(t0, guid(1), at(9000), 2 << 20, 0, |x| x),
             None,
             "never held whole"
         );
@@ -380,7 +385,7 @@ mod tests {
         let t0 = Instant::now();
         let mut a = Admission::new(AdmissionConfig::default());
         a.matched(guid(1), at(7000));
-        a.offer(t0, guid(2), at(7200), 1, 'x');
+        a.offer(t0, guid(2), at(7200), 1, 'x', |x| x);
         let released = a.set_matched(t0, [(guid(2), at(7200))]);
         assert_eq!(released, vec!['x']);
         assert!(!a.is_matched(&guid(1)));

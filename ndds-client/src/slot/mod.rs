@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use ndds_core::admission::{Admission, AdmissionConfig, AdmissionStats, Verdict};
+use ndds_core::admission::{Admission, AdmissionConfig, AdmissionStats};
 use ndds_core::arbitration::{Arbiter, ArbiterStats, Incoming, Notification, Output};
 use ndds_core::reliability::{AckNack, Delivery, ReaderConfig, ReliableReader};
 use ndds_core::wire::data::{FLAG_RELIABLE, Gap, Heartbeat};
@@ -57,6 +57,25 @@ enum Sent {
     Heartbeat(Heartbeat),
     Gap(Gap),
     Partial(u64),
+}
+
+impl Early {
+    /// The same, a sample's payload in a buffer of its own.
+    fn detached(self) -> Self {
+        let what = match self.what {
+            Sent::Sample {
+                meta,
+                flags,
+                sample,
+            } => Sent::Sample {
+                meta,
+                flags,
+                sample: sample.detached(),
+            },
+            control => control,
+        };
+        Early { what, ..self }
+    }
 }
 
 /// The bytes a held control message is counted as.
@@ -142,14 +161,6 @@ impl ConsumerSlot {
         self.arrived.fetch_add(1, Ordering::Relaxed);
         let mut state = lock(&self.state);
         let before = state.admission.stats();
-        let verdict = state.admission.check(&origin.writer, origin.from);
-        // A sample held for a producer not matched yet gets a buffer of its own, so it does
-        // not keep a whole receive buffer alive.
-        let sample = if verdict == Verdict::Unmatched {
-            sample.detached()
-        } else {
-            sample
-        };
         let bytes = sample.payload.len();
         let what = Sent::Sample {
             meta,
@@ -174,9 +185,16 @@ impl ConsumerSlot {
             origin: *origin,
             what,
         };
-        let admitted = state
-            .admission
-            .offer(now, origin.writer, origin.from, bytes, early);
+        // What is held for a producer not matched yet gets a buffer of its own, so it does
+        // not keep a whole receive buffer alive.
+        let admitted = state.admission.offer(
+            now,
+            origin.writer,
+            origin.from,
+            bytes,
+            early,
+            Early::detached,
+        );
         self.net.unbelieved.add(before, state.admission.stats());
         if let Some(early) = admitted {
             self.accept(state, now, early);
