@@ -4,7 +4,6 @@
 
 mod outbox;
 
-use std::collections::HashSet;
 use std::marker::PhantomData;
 use std::net::SocketAddrV4;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -57,8 +56,6 @@ struct Out {
     armed: Option<Instant>,
     /// The matched consumers: feedback from anyone else is not believed.
     believed: Believed,
-    /// The consumers matched at the last change (to tell the ones that join).
-    known: HashSet<Guid>,
 }
 
 /// The matched consumers of a producer, at their locators.
@@ -133,21 +130,19 @@ impl ProducerState {
     /// serving the reliable consumers that appeared and forgets those that left.
     pub(crate) fn set_matched(&self, matched: Matched<'_>) {
         let mut out = lock(&self.out);
-        out.believed.0.set_matched(
-            Instant::now(),
-            matched
-                .clone()
-                .filter(|info| info.kind() == EndpointKind::Consumer)
-                .map(|info| (info.guid, SocketAddrV4::from(info.locator))),
-        );
-        out.outbox.set_matched(&self.net, matched.clone());
-        let consumers: HashSet<Guid> = matched
+        let consumers: Vec<(Guid, SocketAddrV4)> = matched
             .clone()
             .filter(|info| info.kind() == EndpointKind::Consumer)
-            .map(|info| info.guid)
+            .map(|info| (info.guid, SocketAddrV4::from(info.locator)))
             .collect();
-        let joined: Vec<Guid> = consumers.difference(&out.known).copied().collect();
-        out.known = consumers;
+        // The consumers that join now: not believed before this change.
+        let joined: Vec<Guid> = consumers
+            .iter()
+            .map(|(guid, _)| *guid)
+            .filter(|guid| !out.believed.0.is_matched(guid))
+            .collect();
+        out.believed.0.set_matched(Instant::now(), consumers);
+        out.outbox.set_matched(&self.net, matched.clone());
         let Some(reliable) = out.reliable.as_mut() else {
             if self.qos.late_joiners > 0 {
                 self.send_latest(&mut out, &joined);
