@@ -31,6 +31,7 @@ pub mod domain;
 pub mod dynamic;
 pub mod fragment;
 pub mod ipc;
+pub mod participant;
 pub mod ports;
 pub mod reliability;
 pub mod suggest;

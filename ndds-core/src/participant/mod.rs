@@ -1,0 +1,647 @@
+//! The data plane of one participant, without IO: every producer's and consumer's protocol
+//! state, driven like the discovery engine (and quinn-proto's `Connection`).
+//!
+//! A driver feeds it what arrives ([`ParticipantCore::handle_datagram`]) and the passing of
+//! time ([`ParticipantCore::handle_timeout`]), gives it commands (declare and withdraw
+//! endpoints, apply discovery's matches, write, acknowledge what the application took), and
+//! drains what it asks for: datagrams to send ([`ParticipantCore::poll_transmit`]), samples
+//! and notifications for the application and producer events
+//! ([`ParticipantCore::poll_event`]), and when to call it next
+//! ([`ParticipantCore::poll_timeout`]). It owns arbitration, minimum separation and
+//! deadline windows, reliable readers and writers, histories, batching, fragmentation and
+//! reassembly, repair scheduling, and the rule that only matched traffic is believed. It
+//! reads no clock and opens no socket: `ndds-client` drives it with one I/O thread, and the
+//! tests drive it over a simulated network in virtual time.
+//!
+//! ## Receiver rules
+//! A `Data` datagram is believed only for the consumers it names that were matched with its
+//! writer, and only from the locator discovery gave for that writer (see
+//! [`crate::admission`]); `Feedback` only by the producer it names, from a consumer matched
+//! with it, at that consumer's locator. Everything else is dropped and counted
+//! ([`CoreStats`], [`ConsumerCounters`]).
+
+mod consumer;
+mod outbox;
+mod producer;
+mod repair;
+mod sample;
+mod transmit;
+
+use std::collections::{HashMap, VecDeque};
+use std::net::SocketAddrV4;
+use std::sync::Arc;
+use std::time::{Instant, SystemTime};
+
+use bytes::Bytes;
+
+pub use consumer::{ConsumerCounters, ConsumerSpec};
+pub use outbox::{BatchConfig, BufferPool, MatchedConsumer};
+pub use producer::{ProducerSpec, WriteRefused};
+pub use sample::{RawSample, SampleInfo};
+pub use transmit::Transmit;
+
+use self::consumer::{ConsumerCore, Ctx, Origin, Sent};
+use self::outbox::Tx;
+use self::producer::ProducerCore;
+use self::repair::{PieceOutcome, Repair};
+use self::transmit::Transmits;
+use crate::admission::AdmissionStats;
+use crate::arbitration::Notification;
+use crate::wire::data::FLAG_RELIABLE;
+use crate::wire::{
+    self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MAX_DATAGRAM,
+    MessageKind,
+};
+
+/// What a participant's data plane is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CoreConfig {
+    /// The domain.
+    pub domain: u16,
+    /// This participant's id (the sender of its datagrams).
+    pub participant: u64,
+    /// Largest datagram sent (the path's MTU minus IP and UDP headers).
+    pub max_datagram: usize,
+    /// Largest sample accepted or written, in encoded bytes.
+    pub max_sample: usize,
+}
+
+impl CoreConfig {
+    /// A configuration for loopback-sized datagrams and 16 MiB samples.
+    pub fn new(domain: u16, participant: u64) -> Self {
+        CoreConfig {
+            domain,
+            participant,
+            max_datagram: MAX_DATAGRAM,
+            max_sample: 16 << 20,
+        }
+    }
+}
+
+/// What the core hands its driver besides datagrams.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// An accepted sample for a consumer.
+    Sample {
+        /// The consumer's entity number.
+        consumer: u32,
+        /// The sample.
+        sample: RawSample,
+    },
+    /// A notification for a consumer (deadline, producer lost, samples lost, ...).
+    Notification {
+        /// The consumer's entity number.
+        consumer: u32,
+        /// What happened.
+        notification: Notification,
+    },
+    /// A reliable producer's window opened: a writer waiting for room may go on.
+    WindowOpen {
+        /// The producer's entity number.
+        producer: u32,
+    },
+    /// A reliable consumer stopped acknowledging and no longer holds the producer's window.
+    ReaderSilenced {
+        /// The producer's entity number.
+        producer: u32,
+        /// The silent consumer.
+        reader: Guid,
+    },
+}
+
+/// Counters of the participant's data plane.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CoreStats {
+    /// Datagrams handed to [`ParticipantCore::handle_datagram`].
+    pub received: u64,
+    /// Samples handed to consumers (before admission and arbitration).
+    pub delivered: u64,
+    /// Datagrams addressed to another participant.
+    pub misaddressed: u64,
+    /// Samples addressed to a consumer that does not exist (any more).
+    pub unknown_reader: u64,
+    /// Fragments of large samples refused by reassembly.
+    pub fragments_refused: u64,
+    /// Samples, heartbeats, gaps and feedback dropped because discovery never matched their
+    /// sender with the endpoint they address.
+    pub unmatched_sender: u64,
+    /// Dropped because they carried a matched sender's id but came from another address.
+    pub wrong_address: u64,
+    /// Dropped datagrams, by [`DropReason::index`].
+    pub dropped: [u64; DropReason::ALL.len()],
+    /// Datagrams and bytes the core asked to send.
+    pub transmits: u64,
+    /// Bytes in those datagrams.
+    pub transmit_bytes: u64,
+}
+
+impl CoreStats {
+    /// The drop count for one reason.
+    pub fn dropped(&self, reason: DropReason) -> u64 {
+        self.dropped[reason.index()]
+    }
+}
+
+/// The consumers one datagram addresses.
+type Readers = smallvec::SmallVec<[u32; 8]>;
+
+/// The data plane of one participant (see the module documentation).
+#[derive(Debug)]
+pub struct ParticipantCore {
+    config: CoreConfig,
+    consumers: HashMap<u32, ConsumerCore>,
+    producers: HashMap<u32, ProducerCore>,
+    repair: Repair,
+    transmits: Transmits,
+    events: VecDeque<Event>,
+    stats: CoreStats,
+    /// Admission counters of endpoints already withdrawn, so totals never go down.
+    withdrawn: AdmissionStats,
+}
+
+impl ParticipantCore {
+    /// A data plane without endpoints.
+    pub fn new(config: CoreConfig) -> Self {
+        ParticipantCore {
+            config,
+            consumers: HashMap::new(),
+            producers: HashMap::new(),
+            repair: Repair::new(config.max_sample),
+            transmits: Transmits::default(),
+            events: VecDeque::new(),
+            stats: CoreStats::default(),
+            withdrawn: AdmissionStats::default(),
+        }
+    }
+
+    /// Its configuration.
+    pub fn config(&self) -> CoreConfig {
+        self.config
+    }
+
+    fn ctx(&mut self) -> (Ctx<'_>, &mut HashMap<u32, ConsumerCore>) {
+        (
+            Ctx {
+                domain: self.config.domain,
+                participant: self.config.participant,
+                out: &mut self.transmits,
+                events: &mut self.events,
+            },
+            &mut self.consumers,
+        )
+    }
+
+    fn tx(
+        &mut self,
+    ) -> (
+        Tx<'_>,
+        &mut HashMap<u32, ProducerCore>,
+        &mut VecDeque<Event>,
+    ) {
+        (
+            Tx {
+                domain: self.config.domain,
+                participant: self.config.participant,
+                max_datagram: self.config.max_datagram,
+                out: &mut self.transmits,
+            },
+            &mut self.producers,
+            &mut self.events,
+        )
+    }
+
+    // ---- consumers ----
+
+    /// Declares consumer `entity` (replacing one of the same number).
+    pub fn add_consumer(&mut self, now: Instant, entity: u32, spec: ConsumerSpec) {
+        let core = ConsumerCore::new(entity, spec, now);
+        if let Some(old) = self.consumers.insert(entity, core) {
+            self.withdrawn = add(self.withdrawn, old.admission_stats());
+        }
+    }
+
+    /// Withdraws consumer `entity`; false if there was none.
+    pub fn remove_consumer(&mut self, entity: u32) -> bool {
+        match self.consumers.remove(&entity) {
+            Some(old) => {
+                self.withdrawn = add(self.withdrawn, old.admission_stats());
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The producers consumer `entity` is matched with now (discovery's view), at their
+    /// locators: only their traffic is believed from now on, and what they sent before this
+    /// news (held a moment) is acted on.
+    pub fn set_consumer_matched(
+        &mut self,
+        now: Instant,
+        entity: u32,
+        producers: impl IntoIterator<Item = (Guid, SocketAddrV4)>,
+    ) {
+        let (mut ctx, consumers) = self.ctx();
+        if let Some(consumer) = consumers.get_mut(&entity) {
+            consumer.set_matched(&mut ctx, now, producers);
+        }
+    }
+
+    /// Discovery says producer `writer` is gone for consumer `entity`.
+    pub fn producer_lost(&mut self, now: Instant, entity: u32, writer: Guid) {
+        let (mut ctx, consumers) = self.ctx();
+        if let Some(consumer) = consumers.get_mut(&entity) {
+            consumer.writer_lost(&mut ctx, now, writer);
+        }
+    }
+
+    /// Queues a notification for consumer `entity` among its other events.
+    pub fn notify(&mut self, entity: u32, notification: Notification) {
+        let (mut ctx, consumers) = self.ctx();
+        if let Some(consumer) = consumers.get_mut(&entity) {
+            consumer.notify(&mut ctx, notification);
+        }
+    }
+
+    /// The application took `samples` samples of consumer `entity`: that much credit comes
+    /// back, and reliable streams waiting for room deliver again.
+    pub fn taken(&mut self, now: Instant, entity: u32, samples: usize) {
+        let (mut ctx, consumers) = self.ctx();
+        if let Some(consumer) = consumers.get_mut(&entity) {
+            consumer.taken(&mut ctx, now, samples);
+        }
+    }
+
+    /// Consumer `entity` no longer limits what it is handed (it delivers to a callback).
+    pub fn set_unlimited(&mut self, now: Instant, entity: u32) {
+        let (mut ctx, consumers) = self.ctx();
+        if let Some(consumer) = consumers.get_mut(&entity) {
+            consumer.set_unlimited(&mut ctx, now);
+        }
+    }
+
+    /// Counters of consumer `entity`.
+    pub fn consumer_counters(&self, entity: u32) -> Option<ConsumerCounters> {
+        self.consumers.get(&entity).map(ConsumerCore::counters)
+    }
+
+    // ---- producers ----
+
+    /// Declares producer `entity` (replacing one of the same number).
+    pub fn add_producer(&mut self, entity: u32, spec: ProducerSpec) {
+        if let Some(old) = self
+            .producers
+            .insert(entity, ProducerCore::new(entity, spec))
+        {
+            self.withdrawn = add(self.withdrawn, old.believed_stats());
+        }
+    }
+
+    /// Withdraws producer `entity`, sending what waits in its batches first; false if there
+    /// was none.
+    pub fn remove_producer(&mut self, entity: u32) -> bool {
+        self.flush(entity);
+        match self.producers.remove(&entity) {
+            Some(old) => {
+                self.withdrawn = add(self.withdrawn, old.believed_stats());
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The consumers producer `entity` is matched with now: its samples go to them, and
+    /// only their feedback is believed.
+    pub fn set_producer_matched(
+        &mut self,
+        now: Instant,
+        entity: u32,
+        consumers: &[MatchedConsumer],
+    ) {
+        let (mut tx, producers, events) = self.tx();
+        if let Some(producer) = producers.get_mut(&entity) {
+            producer.set_matched(&mut tx, events, now, consumers);
+        }
+    }
+
+    /// Writes one encoded sample with producer `entity`, stamped `timestamp_ns` (the source
+    /// time, nanoseconds since the Unix epoch); returns its sequence number. The payload is
+    /// shared with the datagrams that carry it (take it from a [`BufferPool`]).
+    pub fn write(
+        &mut self,
+        now: Instant,
+        timestamp_ns: u64,
+        entity: u32,
+        payload: Arc<Vec<u8>>,
+    ) -> Result<u64, WriteRefused> {
+        let max_sample = self.config.max_sample;
+        let (mut tx, producers, _) = self.tx();
+        let producer = producers
+            .get_mut(&entity)
+            .ok_or(WriteRefused::UnknownProducer(entity))?;
+        producer.write(&mut tx, now, timestamp_ns, max_sample, payload)
+    }
+
+    /// Queues what waits in producer `entity`'s batches.
+    pub fn flush(&mut self, entity: u32) {
+        let (mut tx, producers, _) = self.tx();
+        if let Some(producer) = producers.get_mut(&entity) {
+            producer.flush(&mut tx);
+        }
+    }
+
+    /// True when producer `entity` may write without waiting (always for best effort).
+    pub fn window_open(&self, entity: u32) -> bool {
+        self.producers
+            .get(&entity)
+            .is_none_or(ProducerCore::window_open)
+    }
+
+    /// Samples of producer `entity` not yet acknowledged by every reliable consumer.
+    pub fn unacknowledged(&self, entity: u32) -> usize {
+        self.producers
+            .get(&entity)
+            .map_or(0, ProducerCore::unacknowledged)
+    }
+
+    /// Samples producer `entity` wrote.
+    pub fn written(&self, entity: u32) -> u64 {
+        self.producers.get(&entity).map_or(0, |p| p.written)
+    }
+
+    // ---- input ----
+
+    /// A datagram arrived from `from` at `received` (the wall clock, for the samples' info).
+    /// Whatever it causes is queued: transmits, events, timers.
+    pub fn handle_datagram(
+        &mut self,
+        now: Instant,
+        received: SystemTime,
+        from: SocketAddrV4,
+        datagram: Bytes,
+    ) {
+        self.stats.received += 1;
+        let kind = match wire::Header::parse(&datagram) {
+            Ok((header, _)) if header.domain != self.config.domain => {
+                return self.count_drop(DropReason::OtherDomain);
+            }
+            Ok((header, _)) => header.kind,
+            Err(reason) => return self.count_drop(reason),
+        };
+        let result = match kind {
+            MessageKind::Data => self.on_data(now, received, &datagram, from),
+            MessageKind::Feedback => self.on_feedback(now, &datagram, from),
+            // A discovery message: counted as malformed when its body does not decode, else
+            // as unexpected here.
+            _ => match wire::decode_for_domain(&datagram, self.config.domain) {
+                Ok(_) => Err(DropReason::Unexpected),
+                Err(reason) => Err(reason),
+            },
+        };
+        if let Err(reason) = result {
+            self.count_drop(reason);
+        }
+    }
+
+    fn count_drop(&mut self, reason: DropReason) {
+        self.stats.dropped[reason.index()] += 1;
+    }
+
+    fn on_data(
+        &mut self,
+        now: Instant,
+        received: SystemTime,
+        datagram: &Bytes,
+        from: SocketAddrV4,
+    ) -> Result<(), DropReason> {
+        let parsed = DataDatagram::parse(datagram, self.config.domain)?;
+        if parsed.reader_participant != self.config.participant {
+            self.stats.misaddressed += 1;
+            return Ok(());
+        }
+        let origin = Origin {
+            writer: Guid {
+                participant: parsed.header.sender,
+                entity: parsed.writer,
+            },
+            from,
+            received,
+        };
+        let mut readers = Readers::new();
+        for reader in parsed.readers.iter() {
+            if self.consumers.contains_key(reader) {
+                readers.push(*reader);
+            } else {
+                self.stats.unknown_reader += 1;
+            }
+        }
+        if readers.is_empty() {
+            return Ok(());
+        }
+        for sub in parsed.subs() {
+            match sub? {
+                DataSub::Sample(sample) => {
+                    let (meta, info) = origin.describe(&sample.meta);
+                    let raw = RawSample {
+                        payload: datagram.slice_ref(sample.payload),
+                        info,
+                    };
+                    self.offer(&readers, now, &origin, meta, sample.meta.flags, raw);
+                }
+                DataSub::Fragment(fragment) => {
+                    let reader = readers[0];
+                    let outcome = self
+                        .repair
+                        .piece(now, origin.writer, from, reader, &fragment);
+                    match outcome {
+                        PieceOutcome::Complete(whole) => {
+                            let (meta, info) = origin.describe(&fragment.meta);
+                            let raw = RawSample {
+                                payload: Bytes::from(whole),
+                                info,
+                            };
+                            self.offer(&readers, now, &origin, meta, fragment.meta.flags, raw);
+                            if fragment.meta.flags & FLAG_RELIABLE != 0 {
+                                // Pieces of samples every reliable consumer here has moved
+                                // past are stale: they must not start a partial sample again.
+                                let floor = readers
+                                    .iter()
+                                    .filter_map(|r| self.consumers.get(r)?.next_seq(origin.writer))
+                                    .min();
+                                if let Some(floor) = floor {
+                                    self.repair.skip_before(origin.writer, floor);
+                                }
+                            }
+                        }
+                        PieceOutcome::Pending => {
+                            if fragment.meta.flags & FLAG_RELIABLE != 0 {
+                                self.control(&readers, now, &origin, || {
+                                    Sent::Partial(fragment.meta.seq)
+                                });
+                            }
+                        }
+                        PieceOutcome::Ignored => {}
+                        PieceOutcome::Refused => self.stats.fragments_refused += 1,
+                    }
+                }
+                DataSub::Heartbeat(heartbeat) => {
+                    self.control(&readers, now, &origin, || Sent::Heartbeat(heartbeat));
+                }
+                DataSub::Gap(gap) => self.control(&readers, now, &origin, || Sent::Gap(gap)),
+            }
+        }
+        Ok(())
+    }
+
+    /// Offers one sample to every addressed consumer (the last one takes it without a
+    /// reference-count increment).
+    fn offer(
+        &mut self,
+        readers: &[u32],
+        now: Instant,
+        origin: &Origin,
+        meta: crate::arbitration::Incoming,
+        flags: u8,
+        raw: RawSample,
+    ) {
+        let Some((last, others)) = readers.split_last() else {
+            return;
+        };
+        self.stats.delivered += readers.len() as u64;
+        let (mut ctx, consumers) = self.ctx();
+        for reader in others {
+            if let Some(consumer) = consumers.get_mut(reader) {
+                consumer.offer(&mut ctx, now, origin, meta, flags, raw.clone());
+            }
+        }
+        if let Some(consumer) = consumers.get_mut(last) {
+            consumer.offer(&mut ctx, now, origin, meta, flags, raw);
+        }
+    }
+
+    /// Hands reliable-stream control to every addressed reliable consumer.
+    fn control(&mut self, readers: &[u32], now: Instant, origin: &Origin, what: impl Fn() -> Sent) {
+        let (mut ctx, consumers) = self.ctx();
+        for reader in readers {
+            if let Some(consumer) = consumers.get_mut(reader)
+                && consumer.is_reliable()
+            {
+                consumer.control(&mut ctx, now, origin, what());
+            }
+        }
+    }
+
+    fn on_feedback(
+        &mut self,
+        now: Instant,
+        datagram: &Bytes,
+        from: SocketAddrV4,
+    ) -> Result<(), DropReason> {
+        let parsed = FeedbackDatagram::parse(datagram, self.config.domain)?;
+        if parsed.writer_participant != self.config.participant {
+            self.stats.misaddressed += 1;
+            return Ok(());
+        }
+        let sender = parsed.header.sender;
+        for sub in parsed.subs() {
+            let sub = sub?;
+            let (reader, writer) = match &sub {
+                FeedbackSub::AckNack(a) => (a.reader, a.writer),
+                FeedbackSub::NackFrag(n) => (n.reader, n.writer),
+            };
+            let reader = Guid {
+                participant: sender,
+                entity: reader,
+            };
+            let (mut tx, producers, events) = self.tx();
+            let Some(producer) = producers.get_mut(&writer) else {
+                continue;
+            };
+            producer.on_feedback(&mut tx, events, now, reader, from, &sub);
+        }
+        Ok(())
+    }
+
+    /// Runs every timer due at `now`: deadlines and separation windows, heartbeats,
+    /// acknowledgements and repairs, batch flushes, piece requests, admission hold expiry.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        self.repair.handle_timeout(
+            now,
+            self.config.domain,
+            self.config.participant,
+            &mut self.transmits,
+        );
+        let (mut ctx, consumers) = self.ctx();
+        for consumer in consumers.values_mut() {
+            if consumer.due.is_some_and(|due| due <= now) {
+                consumer.handle_timeout(&mut ctx, now);
+            }
+        }
+        let (mut tx, producers, events) = self.tx();
+        for producer in producers.values_mut() {
+            if producer.due.is_some_and(|due| due <= now) {
+                producer.handle_timeout(&mut tx, events, now);
+            }
+        }
+    }
+
+    // ---- output ----
+
+    /// When [`ParticipantCore::handle_timeout`] must be called next.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        self.consumers
+            .values()
+            .filter_map(|c| c.due)
+            .chain(self.producers.values().filter_map(|p| p.due))
+            .chain(self.repair.poll_timeout())
+            .min()
+    }
+
+    /// The next datagram to send.
+    pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        self.transmits.pop()
+    }
+
+    /// Datagrams waiting to be sent.
+    pub fn pending_transmits(&self) -> usize {
+        self.transmits.len()
+    }
+
+    /// Gives a sent datagram's buffer back for reuse.
+    pub fn recycle(&mut self, transmit: Transmit) {
+        self.transmits.recycle(transmit);
+    }
+
+    /// The next event for the application or the producers' handles.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// True when events wait.
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> CoreStats {
+        let mut stats = self.stats.clone();
+        let unbelieved = self
+            .consumers
+            .values()
+            .map(ConsumerCore::admission_stats)
+            .chain(self.producers.values().map(ProducerCore::believed_stats))
+            .fold(self.withdrawn, add);
+        stats.unmatched_sender = unbelieved.unmatched;
+        stats.wrong_address = unbelieved.wrong_address;
+        stats.transmits = self.transmits.datagrams;
+        stats.transmit_bytes = self.transmits.bytes;
+        stats
+    }
+}
+
+fn add(a: AdmissionStats, b: AdmissionStats) -> AdmissionStats {
+    AdmissionStats {
+        unmatched: a.unmatched + b.unmatched,
+        wrong_address: a.wrong_address + b.wrong_address,
+        released: a.released + b.released,
+    }
+}

@@ -1,0 +1,101 @@
+//! The datagrams the core asks its driver to send, and the buffers they are built in.
+
+use std::collections::VecDeque;
+use std::net::SocketAddrV4;
+use std::ops::Range;
+use std::sync::Arc;
+
+/// Head buffers kept for reuse: a driver that recycles what it sent allocates nothing per
+/// datagram once this many exist.
+const FREE_HEADS: usize = 256;
+
+/// One datagram to send: `head` followed by `tail`, which the driver hands to the kernel
+/// together (scatter-gather), so a sample's payload is never copied into the datagram.
+#[derive(Debug)]
+pub struct Transmit {
+    /// Where it goes.
+    pub to: SocketAddrV4,
+    head: Vec<u8>,
+    tail: Option<(Arc<Vec<u8>>, Range<usize>)>,
+}
+
+impl Transmit {
+    /// The encoded header and submessages.
+    pub fn head(&self) -> &[u8] {
+        &self.head
+    }
+
+    /// The payload that follows the head (empty for most datagrams).
+    pub fn tail(&self) -> &[u8] {
+        match &self.tail {
+            Some((bytes, range)) => bytes.get(range.clone()).unwrap_or_default(),
+            None => &[],
+        }
+    }
+
+    /// The datagram's size in bytes.
+    pub fn len(&self) -> usize {
+        self.head.len() + self.tail().len()
+    }
+
+    /// True for an empty datagram (never queued).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The whole datagram in one buffer (for tests and simulated networks).
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut all = Vec::with_capacity(self.len());
+        all.extend_from_slice(&self.head);
+        all.extend_from_slice(self.tail());
+        all
+    }
+}
+
+/// The queue of datagrams to send and the spare head buffers.
+#[derive(Debug, Default)]
+pub(crate) struct Transmits {
+    queue: VecDeque<Transmit>,
+    free: Vec<Vec<u8>>,
+    /// Datagrams and bytes queued so far.
+    pub(crate) datagrams: u64,
+    pub(crate) bytes: u64,
+}
+
+impl Transmits {
+    /// Queues `head ++ tail` for `to` (the head is copied into a spare buffer).
+    pub(crate) fn push(
+        &mut self,
+        to: SocketAddrV4,
+        head: &[u8],
+        tail: Option<(&Arc<Vec<u8>>, Range<usize>)>,
+    ) {
+        let mut buffer = self.free.pop().unwrap_or_default();
+        buffer.clear();
+        buffer.extend_from_slice(head);
+        let tail = tail.map(|(bytes, range)| (Arc::clone(bytes), range));
+        let transmit = Transmit {
+            to,
+            head: buffer,
+            tail,
+        };
+        self.datagrams += 1;
+        self.bytes += transmit.len() as u64;
+        self.queue.push_back(transmit);
+    }
+
+    pub(crate) fn pop(&mut self) -> Option<Transmit> {
+        self.queue.pop_front()
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.queue.len()
+    }
+
+    /// Takes a sent datagram's head buffer back (its payload reference is dropped).
+    pub(crate) fn recycle(&mut self, transmit: Transmit) {
+        if self.free.len() < FREE_HEADS {
+            self.free.push(transmit.head);
+        }
+    }
+}
