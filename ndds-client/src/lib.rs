@@ -53,25 +53,25 @@
 #![warn(missing_docs)]
 
 pub mod consumer;
+mod data_plane;
 pub mod embedded;
 pub mod error;
 mod link;
 pub mod participant;
 mod peers;
-mod plane;
 pub mod ports;
 pub mod producer;
 pub mod qos;
 mod router;
 pub mod sample;
 mod session;
-mod slot;
 mod sync;
 
 pub use consumer::{
     CallbackConsumer, Consumer, ConsumerStats, DirectConsumer, EventStream, RawConsumer,
     SampleStream,
 };
+pub use data_plane::{DEFAULT_MAX_SAMPLE, ParticipantStats};
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{
     ConnectError, DeclareError, Mismatch, QueryError, RecvError, Unmatched, UnmatchedProducer,
@@ -84,7 +84,6 @@ pub use ndds_core::types::TypeDescription;
 pub use ndds_core::wire::{EndpointInfo, Guid};
 pub use ndds_daemon::DaemonConfig;
 pub use participant::{EmbeddedPolicy, Participant, ParticipantBuilder};
-pub use plane::{DEFAULT_MAX_SAMPLE, ParticipantStats};
 pub use producer::{Producer, RawProducer};
 pub use qos::{Batching, ConsumerMode, ConsumerQos, ProducerQos, Reliability, WhenFull};
 pub use sample::{

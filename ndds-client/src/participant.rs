@@ -15,22 +15,23 @@ use std::time::{Duration, Instant};
 
 use ndds_core::domain;
 use ndds_core::ipc::{ClientMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome};
+use ndds_core::participant::ConsumerSpec;
+use ndds_core::reliability::ReaderConfig;
 use ndds_core::types::TypeDescription;
-use ndds_core::wire::EndpointQos;
+use ndds_core::wire::{EndpointQos, Reliability};
 use ndds_daemon::{DaemonConfig, DaemonError, EmbedError};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use crate::consumer::{Consumer, ConsumerState, RawConsumer};
+use crate::consumer::{Consumer, ConsumerState, Delivery, RawConsumer};
+use crate::data_plane::{DataPlane, Limits, ParticipantStats};
 use crate::embedded::{self, Ensured};
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::link;
-use crate::plane::{DataPlane, Limits, ParticipantStats};
 use crate::producer::{Producer, ProducerState, RawProducer};
-use crate::qos::{ConsumerQos, ProducerQos};
+use crate::qos::{ConsumerMode, ConsumerQos, ProducerQos};
 use crate::router::{Endpoint, Router};
 use crate::session::{self, Session, Takeover};
-use crate::slot::ConsumerSlot;
 use crate::sync::lock;
 
 /// Whether a participant may start a daemon inside its own process.
@@ -280,7 +281,7 @@ impl Drop for EndpointHandle {
     fn drop(&mut self) {
         match self.inner.router.remove(self.entity) {
             Some(Endpoint::Consumer(_)) => self.inner.data.remove_consumer(self.entity),
-            Some(Endpoint::Producer(_)) => self.inner.data.remove_writer(self.entity),
+            Some(Endpoint::Producer(_)) => self.inner.data.remove_producer(self.entity),
             None => {}
         }
         let _ = self.inner.session.send(&ClientMessage::Undeclare {
@@ -484,12 +485,13 @@ impl Participant {
     ) -> Result<RawProducer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
         let wire_qos = qos.to_wire();
-        let net = self.inner.data.net.clone();
-        let timer = self.inner.data.timer.clone();
         let state = Arc::new(ProducerState::new(
-            entity, topic, type_desc, qos, net, timer,
+            entity,
+            topic,
+            type_desc,
+            qos,
+            self.inner.data.clone(),
         ));
-        self.inner.data.add_writer(entity, state.clone());
         let handle = self.declare(
             entity,
             Endpoint::Producer(state.clone()),
@@ -516,19 +518,31 @@ impl Participant {
         qos: ConsumerQos,
     ) -> Result<RawConsumer, DeclareError> {
         let entity = self.inner.next_entity.fetch_add(1, Ordering::Relaxed);
-        let (slot, rx) = ConsumerSlot::new(
+        let (delivery, rx) = Delivery::new(&qos);
+        let delivery = Arc::new(delivery);
+        let reliable = match qos.reliability {
+            Reliability::Reliable { depth } => Some(ReaderConfig {
+                depth: usize::try_from(depth).unwrap_or(usize::MAX).max(1),
+                ..ReaderConfig::default()
+            }),
+            Reliability::BestEffort => None,
+        };
+        // A queue limits what reliable streams hand over; a latest-value cell does not.
+        let credit = (qos.mode == ConsumerMode::Immediate).then(|| qos.depth.max(1));
+        let spec = ConsumerSpec {
+            rules: qos.rules(),
+            reliable,
+            credit,
+        };
+        let state = Arc::new(ConsumerState::new(
+            topic,
+            type_desc,
             entity,
-            qos,
-            std::time::Instant::now(),
-            self.inner.data.net.clone(),
-            self.inner.data.timer.clone(),
-        );
-        let slot = Arc::new(slot);
-        if let Some(at) = slot.timeout(std::time::Instant::now()) {
-            self.inner.data.schedule(at);
-        }
-        let state = Arc::new(ConsumerState::new(topic, type_desc, slot.clone()));
-        self.inner.data.add_consumer(entity, slot);
+            reliable.is_some() && credit.is_some(),
+            delivery.clone(),
+            self.inner.data.clone(),
+        ));
+        self.inner.data.add_consumer(entity, spec, delivery);
         let handle = self.declare(
             entity,
             Endpoint::Consumer(state.clone()),
@@ -574,21 +588,16 @@ impl Inner {
         reader: std::os::unix::net::UnixStream,
     ) -> Result<(), ConnectError> {
         let data = self.data.clone();
-        let data_thread = std::thread::Builder::new()
-            .name("ndds-data".into())
+        let io_thread = std::thread::Builder::new()
+            .name("ndds-io".into())
             .spawn(move || data.run())
-            .map_err(ConnectError::Thread)?;
-        let timers = self.data.clone();
-        let timer_thread = std::thread::Builder::new()
-            .name("ndds-timer".into())
-            .spawn(move || timers.run_timers())
             .map_err(ConnectError::Thread)?;
         let (session, router) = (self.session.clone(), self.router.clone());
         let session_thread = std::thread::Builder::new()
             .name("ndds-session".into())
             .spawn(move || link::run(reader, &session, &router))
             .map_err(ConnectError::Thread)?;
-        lock(&self.threads).extend([data_thread, timer_thread, session_thread]);
+        lock(&self.threads).extend([io_thread, session_thread]);
         Ok(())
     }
 }

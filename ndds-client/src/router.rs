@@ -2,12 +2,13 @@
 //! after a daemon restart) and the state the daemon's match events update.
 
 use std::collections::HashMap;
+use std::net::SocketAddrV4;
 use std::sync::{Arc, RwLock};
-use std::time::Instant;
 
 use ndds_core::arbitration::Notification;
 use ndds_core::discovery::Incompatibility;
 use ndds_core::ipc::{DaemonMessage, EndpointDecl};
+use ndds_core::wire::EndpointKind;
 
 use crate::consumer::ConsumerState;
 use crate::peers::{Matched, Peers};
@@ -34,14 +35,19 @@ impl Endpoint {
     fn on_change(&self, all: Matched<'_>) {
         match self {
             Endpoint::Producer(state) => state.set_matched(all),
-            Endpoint::Consumer(state) => state.slot.set_matched(Instant::now(), all),
+            Endpoint::Consumer(state) => {
+                let producers = all
+                    .filter(|info| info.kind() == EndpointKind::Producer)
+                    .map(|info| (info.guid, SocketAddrV4::from(info.locator)));
+                state.plane.set_consumer_matched(state.entity, producers);
+            }
         }
     }
 
     /// Tells a consumer that a matched producer went away.
     fn lost(&self, writer: ndds_core::wire::Guid) {
         if let Endpoint::Consumer(state) = self {
-            state.slot.writer_lost(writer);
+            state.plane.producer_lost(state.entity, writer);
         }
     }
 }
@@ -129,14 +135,17 @@ impl Router {
                     } else {
                         Incompatibility::Type
                     };
-                    state.slot.notify(Notification::Incompatible {
-                        reason,
-                        writer: remote.guid,
-                        type_name: remote.type_desc.name.clone(),
-                        fingerprint: remote.fingerprint,
-                        local_type: peers.type_desc.name.clone(),
-                        local_fingerprint: peers.fingerprint,
-                    });
+                    state.plane.notify(
+                        state.entity,
+                        Notification::Incompatible {
+                            reason,
+                            writer: remote.guid,
+                            type_name: remote.type_desc.name.clone(),
+                            fingerprint: remote.fingerprint,
+                            local_type: peers.type_desc.name.clone(),
+                            local_fingerprint: peers.fingerprint,
+                        },
+                    );
                 }
                 peers.incompatible(remote);
             }

@@ -1,29 +1,8 @@
 //! What consumers receive: samples with their status, and notifications.
 
-use std::time::SystemTime;
-
-use bytes::Bytes;
-
-use ndds_core::wire::Guid;
-
 pub use ndds_core::arbitration::{Notification, SampleStatus};
 
-/// Where a sample came from, when, and how it was accepted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SampleInfo {
-    /// The producer that wrote it.
-    pub writer: Guid,
-    /// The producer's sequence number (1, 2, ...).
-    pub seq: u64,
-    /// When the producer wrote it (the producer host's clock).
-    pub source_timestamp: SystemTime,
-    /// When this process received it.
-    pub reception_timestamp: SystemTime,
-    /// The producer's strength.
-    pub strength: i32,
-    /// Fresh, or the first sample of a producer that took over.
-    pub status: SampleStatus,
-}
+pub use ndds_core::participant::{RawSample, SampleInfo};
 
 /// A typed sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -32,26 +11,6 @@ pub struct Sample<T> {
     pub value: T,
     /// Its metadata.
     pub info: SampleInfo,
-}
-
-/// An undecoded sample: the postcard bytes of the value.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct RawSample {
-    /// postcard encoding of the value; shared by every consumer of this process that received
-    /// the same datagram.
-    pub payload: Bytes,
-    /// Its metadata.
-    pub info: SampleInfo,
-}
-
-impl RawSample {
-    /// The same sample in a buffer of its own (not sharing the datagram's).
-    pub(crate) fn detached(self) -> Self {
-        RawSample {
-            payload: Bytes::copy_from_slice(&self.payload),
-            info: self.info,
-        }
-    }
 }
 
 /// What an immediate consumer receives: a sample, or a notification without one.

@@ -2,7 +2,6 @@
 
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::Instant;
 
 use serde::de::DeserializeOwned;
 
@@ -36,16 +35,16 @@ impl<T: DeserializeOwned> Consumer<T> {
     {
         let rx = self.raw.queue()?.clone();
         let decoder = Arc::clone(&self.raw.state.decoder);
-        // Weak: the slot holds the queue's sender, which must go when the consumer does.
-        let slot = Arc::downgrade(&self.raw.state.slot);
-        let signal = Arc::clone(&self.raw.state.slot.sink.signal);
+        // Weak: the state holds the queue's sender, which must go when the consumer does.
+        let state = Arc::downgrade(&self.raw.state);
+        let signal = Arc::clone(&self.raw.state.delivery.signal);
         let thread = std::thread::Builder::new()
             .name(format!("ndds-cb-{}", decoder.topic))
             .spawn(move || {
                 while let Ok(event) = signal.recv(&rx, None) {
                     // Room was made: a reliable stream waiting for it moves on.
-                    if let Some(slot) = slot.upgrade() {
-                        slot.resume(Instant::now());
+                    if let Some(state) = state.upgrade() {
+                        state.took(&event);
                     }
                     callback(decode_event(&decoder, event));
                 }
@@ -73,7 +72,7 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
     {
         self.raw.queue()?;
         let decoder = Arc::clone(&self.raw.state.decoder);
-        self.raw.state.slot.set_direct(Box::new(move |event| {
+        self.raw.state.set_direct(Box::new(move |event| {
             if let Event::Sample(sample) = decode_event::<T>(&decoder, event) {
                 callback(sample);
             }
@@ -93,7 +92,7 @@ impl RawConsumer {
         F: FnMut(RawSample) + Send + 'static,
     {
         self.queue()?;
-        self.state.slot.set_direct(Box::new(move |event| {
+        self.state.set_direct(Box::new(move |event| {
             if let RawEvent::Sample(sample) = event {
                 callback(sample);
             }

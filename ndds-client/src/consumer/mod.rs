@@ -12,11 +12,13 @@
 //! `recv_event` reports it as a notification, and both count it.
 
 mod callback;
+mod delivery;
 mod raw;
 mod stream;
 mod typed;
 
 pub use callback::{CallbackConsumer, DirectConsumer};
+pub(crate) use delivery::{Delivery, Direct};
 pub(crate) use raw::ConsumerState;
 pub use raw::{ConsumerStats, RawConsumer};
 pub use stream::{EventStream, SampleStream};

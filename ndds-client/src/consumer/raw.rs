@@ -8,19 +8,26 @@ use ndds_core::arbitration::Notification;
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{EndpointInfo, EndpointQos};
 
+use super::Delivery;
+use crate::data_plane::DataPlane;
 use crate::error::{Mismatch, RecvError, Unmatched, UnmatchedProducer};
 use crate::participant::EndpointHandle;
 use crate::peers::Peers;
 use crate::qos::ConsumerMode;
 use crate::sample::{PollStatus, RawEvent, RawSample};
-use crate::slot::ConsumerSlot;
 use crate::sync::{deadline, lock};
 
 /// State of one consumer shared with the participant's event router.
 #[derive(Debug)]
 pub(crate) struct ConsumerState {
     pub(crate) peers: Peers,
-    pub(crate) slot: Arc<ConsumerSlot>,
+    /// Its entity number in the participant's data plane.
+    pub(crate) entity: u32,
+    /// True when what the application takes is credited back to the data plane (a reliable
+    /// consumer with a queue: its streams deliver only while the queue has room).
+    credited: bool,
+    pub(crate) delivery: Arc<Delivery>,
+    pub(crate) plane: Arc<DataPlane>,
     pub(crate) decoder: Arc<Decoder>,
 }
 
@@ -32,14 +39,39 @@ pub(crate) struct Decoder {
 }
 
 impl ConsumerState {
-    pub(crate) fn new(topic: &str, type_desc: TypeDescription, slot: Arc<ConsumerSlot>) -> Self {
+    pub(crate) fn new(
+        topic: &str,
+        type_desc: TypeDescription,
+        entity: u32,
+        credited: bool,
+        delivery: Arc<Delivery>,
+        plane: Arc<DataPlane>,
+    ) -> Self {
         ConsumerState {
             peers: Peers::new(topic, type_desc),
-            slot,
+            entity,
+            credited,
+            delivery,
+            plane,
             decoder: Arc::new(Decoder {
                 topic: topic.to_owned(),
                 errors: AtomicU64::new(0),
             }),
+        }
+    }
+
+    /// Sends every later event to `callback` on the participant's I/O thread.
+    pub(crate) fn set_direct(&self, callback: super::Direct) {
+        self.delivery.set_direct(callback);
+        self.plane.set_unlimited(self.entity);
+    }
+
+    /// The application took `event` from the queue: a reliable stream waiting for room
+    /// moves on.
+    pub(crate) fn took(&self, event: &RawEvent) {
+        self.delivery.took(event);
+        if self.credited && matches!(event, RawEvent::Sample(_)) {
+            self.plane.taken(self.entity, 1);
         }
     }
 }
@@ -105,14 +137,13 @@ impl RawConsumer {
 
     pub(crate) fn next_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
         let event = self.take_event(wait)?;
-        // Room was made: a reliable stream waiting for it moves on.
-        self.state.slot.resume(Instant::now());
+        self.state.took(&event);
         Ok(event)
     }
 
     fn take_event(&self, wait: Wait) -> Result<RawEvent, RecvError> {
         let rx = self.queue()?;
-        let signal = &self.state.slot.sink.signal;
+        let signal = &self.state.delivery.signal;
         match wait {
             Wait::Block => signal.recv(rx, None),
             Wait::Try => rx.try_recv().map_err(|err| match err {
@@ -201,8 +232,7 @@ impl RawConsumer {
     pub fn poll_raw(&self) -> Result<(Option<RawSample>, PollStatus), RecvError> {
         let latest = self
             .state
-            .slot
-            .sink
+            .delivery
             .latest()
             .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
         Ok(lock(latest).take_view())
@@ -212,8 +242,7 @@ impl RawConsumer {
     pub fn take_notifications(&self) -> Result<Vec<Notification>, RecvError> {
         let latest = self
             .state
-            .slot
-            .sink
+            .delivery
             .latest()
             .ok_or(RecvError::WrongMode(ConsumerMode::Immediate))?;
         Ok(lock(latest).take_notifications())
@@ -251,18 +280,17 @@ impl RawConsumer {
 
     /// Counters.
     pub fn stats(&self) -> ConsumerStats {
-        let slot = &self.state.slot;
-        let arbiter = slot.arbiter_stats();
-        let admission = slot.admission_stats();
+        let counters = self.state.plane.consumer_counters(self.state.entity);
+        let (arbiter, admission) = (counters.arbiter, counters.admission);
         ConsumerStats {
-            received: slot.arrived.load(Ordering::Relaxed),
+            received: counters.arrived,
             accepted: arbiter.accepted,
             delivered: arbiter.delivered,
             weaker: arbiter.weaker,
             old_data: arbiter.old_data,
             superseded: arbiter.superseded,
             deadline_misses: arbiter.deadline_misses,
-            overflow: slot.sink.overflow.load(Ordering::Relaxed),
+            overflow: self.state.delivery.overflow.load(Ordering::Relaxed),
             decode_errors: self.state.decoder.errors.load(Ordering::Relaxed),
             unmatched: admission.unmatched,
             wrong_address: admission.wrong_address,

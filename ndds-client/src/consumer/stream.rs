@@ -3,15 +3,14 @@
 use std::marker::PhantomData;
 use std::pin::Pin;
 use std::task::{Context, Poll};
-use std::time::Instant;
 
 use futures_core::Stream;
 use serde::de::DeserializeOwned;
 
+use super::raw::ConsumerState;
 use super::raw::Decoder;
 use super::typed::{decode, decode_event};
 use crate::sample::{Event, RawEvent, Sample};
-use crate::slot::ConsumerSlot;
 
 type Inner<'a> = flume::r#async::RecvStream<'a, RawEvent>;
 
@@ -22,16 +21,16 @@ pub struct SampleStream<'a, T> {
     inner: Inner<'a>,
     decoder: &'a Decoder,
     /// Told when an event was taken (a reliable stream may be waiting for room).
-    slot: &'a ConsumerSlot,
+    state: &'a ConsumerState,
     _type: PhantomData<fn() -> T>,
 }
 
 impl<'a, T> SampleStream<'a, T> {
-    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, slot: &'a ConsumerSlot) -> Self {
+    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, state: &'a ConsumerState) -> Self {
         SampleStream {
             inner,
             decoder,
-            slot,
+            state,
             _type: PhantomData,
         }
     }
@@ -43,8 +42,8 @@ impl<T: DeserializeOwned> Stream for SampleStream<'_, T> {
     fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Sample<T>>> {
         loop {
             let event = Pin::new(&mut self.inner).poll_next(cx);
-            if let Poll::Ready(Some(_)) = event {
-                self.slot.resume(Instant::now());
+            if let Poll::Ready(Some(event)) = &event {
+                self.state.took(event);
             }
             match event {
                 Poll::Ready(Some(RawEvent::Sample(raw))) => {
@@ -66,16 +65,16 @@ pub struct EventStream<'a, T> {
     inner: Inner<'a>,
     decoder: &'a Decoder,
     /// Told when an event was taken (a reliable stream may be waiting for room).
-    slot: &'a ConsumerSlot,
+    state: &'a ConsumerState,
     _type: PhantomData<fn() -> T>,
 }
 
 impl<'a, T> EventStream<'a, T> {
-    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, slot: &'a ConsumerSlot) -> Self {
+    pub(crate) fn new(inner: Inner<'a>, decoder: &'a Decoder, state: &'a ConsumerState) -> Self {
         EventStream {
             inner,
             decoder,
-            slot,
+            state,
             _type: PhantomData,
         }
     }
@@ -87,8 +86,8 @@ impl<T: DeserializeOwned> Stream for EventStream<'_, T> {
     fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Event<T>>> {
         let decoder = self.decoder;
         let event = Pin::new(&mut self.inner).poll_next(cx);
-        if let Poll::Ready(Some(_)) = event {
-            self.slot.resume(Instant::now());
+        if let Poll::Ready(Some(event)) = &event {
+            self.state.took(event);
         }
         event.map(|event| event.map(|event| decode_event(decoder, event)))
     }

@@ -99,7 +99,7 @@ impl<T: DeserializeOwned> Consumer<T> {
         Ok(SampleStream::new(
             self.raw.queue()?.stream(),
             &self.raw.state.decoder,
-            &self.raw.state.slot,
+            &self.raw.state,
         ))
     }
 
@@ -108,7 +108,7 @@ impl<T: DeserializeOwned> Consumer<T> {
         Ok(EventStream::new(
             self.raw.queue()?.stream(),
             &self.raw.state.decoder,
-            &self.raw.state.slot,
+            &self.raw.state,
         ))
     }
 }

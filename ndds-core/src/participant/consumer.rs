@@ -166,7 +166,7 @@ pub(crate) struct ConsumerCore {
 
 impl ConsumerCore {
     pub(crate) fn new(entity: u32, spec: ConsumerSpec, now: Instant) -> Self {
-        ConsumerCore {
+        let mut core = ConsumerCore {
             entity,
             reliable: spec.reliable,
             admission: Admission::new(AdmissionConfig::default()),
@@ -178,7 +178,10 @@ impl ConsumerCore {
             feedback: Vec::new(),
             arrived: 0,
             due: None,
-        }
+        };
+        // The deadline runs from the consumer's creation.
+        core.reschedule();
+        core
     }
 
     pub(crate) fn is_reliable(&self) -> bool {

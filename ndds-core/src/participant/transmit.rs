@@ -43,6 +43,12 @@ impl Transmit {
         self.len() == 0
     }
 
+    /// Drops the reference to the payload (once sent), so its buffer can be reused while
+    /// the head waits to be recycled.
+    pub fn release_tail(&mut self) {
+        self.tail = None;
+    }
+
     /// The whole datagram in one buffer (for tests and simulated networks).
     pub fn to_vec(&self) -> Vec<u8> {
         let mut all = Vec::with_capacity(self.len());

@@ -1,5 +1,6 @@
 //! Where a consumer's accepted samples and notifications go: a bounded queue (immediate
-//! mode), a latest-sample cell (polled mode), or a callback on the producing thread (direct).
+//! mode), a latest-sample cell (polled mode), or a callback on the participant's I/O thread
+//! (direct). The I/O thread is the only one that pushes.
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -21,7 +22,7 @@ const POLLED_NOTIFICATIONS: usize = 64;
 /// room, further notifications are dropped and counted as overflow.
 const NOTIFICATION_ROOM: usize = 64;
 
-/// A callback run on the participant's receive or timer thread.
+/// A callback run on the participant's I/O thread.
 pub(crate) type Direct = Box<dyn FnMut(RawEvent) + Send>;
 
 /// A [`Direct`] callback (opaque to `Debug`).
@@ -142,10 +143,12 @@ impl Signal {
     }
 }
 
-/// A consumer's sink.
+/// A consumer's delivery end.
 #[derive(Debug)]
-pub(crate) struct Sink {
+pub(crate) struct Delivery {
     kind: Kind,
+    /// Samples in the queue (notifications are not counted: they have room of their own).
+    samples: AtomicUsize,
     /// Wakes the application's threads waiting for the queue.
     pub(crate) signal: Arc<Signal>,
     direct: Mutex<Option<DirectBox>>,
@@ -154,8 +157,8 @@ pub(crate) struct Sink {
     pub(crate) overflow: AtomicU64,
 }
 
-impl Sink {
-    /// A sink for `qos`; in immediate mode, also the application's receiver.
+impl Delivery {
+    /// A delivery end for `qos`; in immediate mode, also the application's receiver.
     pub(crate) fn new(qos: &ConsumerQos) -> (Self, Option<flume::Receiver<RawEvent>>) {
         let (kind, rx) = match qos.mode {
             ConsumerMode::Immediate => {
@@ -171,8 +174,9 @@ impl Sink {
             }
             ConsumerMode::Polled => (Kind::Latest(Mutex::default()), None),
         };
-        let sink = Sink {
+        let sink = Delivery {
             kind,
+            samples: AtomicUsize::new(0),
             signal: Arc::default(),
             direct: Mutex::new(None),
             has_direct: AtomicBool::new(false),
@@ -187,14 +191,17 @@ impl Sink {
         self.has_direct.store(true, Ordering::Release);
     }
 
-    /// How many more events fit without dropping any.
-    pub(crate) fn room(&self) -> usize {
-        match &self.kind {
-            Kind::Queue { tx, capacity, .. } if !self.has_direct.load(Ordering::Acquire) => {
-                capacity.saturating_sub(tx.len())
-            }
-            _ => usize::MAX,
+    /// The application took `event` from the queue.
+    pub(crate) fn took(&self, event: &RawEvent) {
+        if matches!(event, RawEvent::Sample(_)) {
+            self.uncount();
         }
+    }
+
+    fn uncount(&self) {
+        let _ = self
+            .samples
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1));
     }
 
     /// The latest-sample cell (polled mode only).
@@ -241,14 +248,35 @@ impl Sink {
                 }
             }
             RawEvent::Sample(_) => {
-                while tx.len() >= capacity {
-                    if oldest.try_recv().is_err() {
-                        break;
+                // Only a best-effort stream gets here with the queue full: a reliable one is
+                // handed samples only while the application has made room for them.
+                while self.samples.load(Ordering::Acquire) >= capacity {
+                    match oldest.try_recv() {
+                        Ok(dropped) => {
+                            self.took(&dropped);
+                            self.overflow.fetch_add(1, Ordering::Relaxed);
+                        }
+                        Err(_) => break,
                     }
-                    self.overflow.fetch_add(1, Ordering::Relaxed);
                 }
-                if let Err(flume::TrySendError::Disconnected(_)) = tx.try_send(event) {
-                    return;
+                self.samples.fetch_add(1, Ordering::AcqRel);
+                let event = match tx.try_send(event) {
+                    Ok(()) => None,
+                    Err(flume::TrySendError::Full(event)) => Some(event),
+                    Err(flume::TrySendError::Disconnected(_)) => return,
+                };
+                if let Some(event) = event {
+                    // Notifications filled the queue's own room and the samples' too: the
+                    // oldest event goes.
+                    if let Ok(dropped) = oldest.try_recv() {
+                        self.took(&dropped);
+                        self.overflow.fetch_add(1, Ordering::Relaxed);
+                    }
+                    if tx.try_send(event).is_err() {
+                        self.uncount();
+                        self.overflow.fetch_add(1, Ordering::Relaxed);
+                        return;
+                    }
                 }
             }
         }
@@ -276,7 +304,7 @@ impl Sink {
     }
 }
 
-impl Drop for Sink {
+impl Drop for Delivery {
     fn drop(&mut self) {
         self.signal.close();
     }

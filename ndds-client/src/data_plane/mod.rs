@@ -1,0 +1,582 @@
+//! The driver of one participant's data plane. The protocol — every producer's and
+//! consumer's state, arbitration, reliability, batching, fragments, who is believed — is
+//! `ndds_core::participant::ParticipantCore`, without IO. This module gives it a UDP socket
+//! on the daemon's interface, the clock, and one I/O thread (`ndds-io`) that waits for
+//! datagrams with the core's next timer as its timeout, hands them to the core, runs its
+//! timers, and moves the events it produces to the consumers' queues.
+//!
+//! The core sits behind one mutex, held only while it changes state: datagrams are received
+//! before it is taken and sent after it is released, samples are encoded before (by the
+//! producer's handle, into a pooled buffer), and no user code ever runs under it. An
+//! application thread that writes sends its own datagrams, so a write costs no thread
+//! switch; when a command moves the core's next timer earlier than the I/O thread's wake-up,
+//! or leaves events for it, the I/O thread is woken through an eventfd (mio's `Waker`).
+
+mod socket;
+
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::io;
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
+use std::os::fd::AsRawFd;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, RwLock};
+use std::time::{Duration, Instant, SystemTime};
+
+use bytes::{Bytes, BytesMut};
+use ndds_core::arbitration::Notification;
+use ndds_core::participant::{
+    ConsumerCounters, ConsumerSpec, CoreConfig, Event, MatchedConsumer, ParticipantCore,
+    ProducerSpec, Transmit, WriteRefused,
+};
+use ndds_core::wire::{DropReason, Guid, Locator};
+
+pub use socket::{DEFAULT_MAX_SAMPLE, Limits};
+
+use crate::consumer::Delivery;
+use crate::error::WriteError;
+use crate::sample::RawEvent;
+use crate::sync::{lock, read, write};
+
+/// Receive buffer per datagram: one byte more than the largest datagram, so an oversized
+/// one is seen as such.
+const RECV_SIZE: usize = ndds_core::wire::MAX_DATAGRAM + 1;
+/// The receive buffer's regions: datagrams are received one after another into a region,
+/// so the samples the application keeps share a few regions instead of each pinning a buffer
+/// of the largest datagram's size; a region is reused once nothing cut from it is alive.
+const RECV_REGION: usize = 4 * RECV_SIZE;
+/// Datagrams received before the core is taken to handle them together.
+const RECV_BATCH: usize = 32;
+/// The I/O thread's tokens.
+const SOCKET: mio::Token = mio::Token(0);
+const WAKE: mio::Token = mio::Token(1);
+
+thread_local! {
+    /// Set on a participant's I/O thread.
+    static IO_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Datagrams this thread took from a core and sent; their buffers go back to the core
+    /// the next time this thread holds it, so sending allocates nothing.
+    static SENT: RefCell<Vec<Transmit>> = const { RefCell::new(Vec::new()) };
+}
+
+/// True on a participant's I/O thread (where direct callbacks run).
+pub(crate) fn on_io_thread() -> bool {
+    IO_THREAD.with(std::cell::Cell::get)
+}
+
+/// A snapshot of a participant's data-plane counters.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ParticipantStats {
+    /// Datagrams received on the data socket.
+    pub received: u64,
+    /// Samples handed to consumers (before arbitration).
+    pub delivered: u64,
+    /// Datagrams addressed to another participant.
+    pub misaddressed: u64,
+    /// Samples addressed to a consumer that no longer exists.
+    pub unknown_reader: u64,
+    /// Fragments of large samples refused by reassembly.
+    pub fragments_refused: u64,
+    /// Samples, heartbeats, gaps and feedback dropped because discovery never matched their
+    /// sender with the endpoint they address (forged, or from an endpoint gone long ago).
+    pub unmatched_sender: u64,
+    /// Dropped because they carried a matched sender's id but came from another address.
+    pub wrong_address: u64,
+    /// Dropped datagrams by reason name (see `DropReason::name`).
+    pub dropped: Vec<(&'static str, u64)>,
+    /// Datagrams sent.
+    pub sent: u64,
+    /// Datagrams the operating system refused to send.
+    pub send_errors: u64,
+}
+
+impl ParticipantStats {
+    /// The drop count for one reason name (`"malformed"`, `"other_domain"`, ...).
+    pub fn dropped(&self, reason: &str) -> u64 {
+        self.dropped
+            .iter()
+            .find(|(name, _)| *name == reason)
+            .map_or(0, |(_, count)| *count)
+    }
+}
+
+/// What the I/O thread needs to know of the local endpoints to hand out events.
+#[derive(Debug, Default)]
+struct Endpoints {
+    consumers: HashMap<u32, Arc<Delivery>>,
+    producers: HashMap<u32, Arc<str>>,
+}
+
+/// The core and what the driver keeps beside it, under one lock.
+#[derive(Debug)]
+struct Locked {
+    core: ParticipantCore,
+    /// When the I/O thread will next wake by itself (`None`: only for a datagram).
+    io_wakes_at: Option<Instant>,
+}
+
+/// The participant's data socket, its core and its I/O thread.
+#[derive(Debug)]
+pub(crate) struct DataPlane {
+    socket: UdpSocket,
+    pub(crate) locator: Locator,
+    locked: Mutex<Locked>,
+    /// Signalled (with `locked`) when a reliable producer's window may have opened.
+    window: Condvar,
+    endpoints: RwLock<Endpoints>,
+    /// The I/O thread's poller, until the thread takes it.
+    poll: Mutex<Option<mio::Poll>>,
+    waker: mio::Waker,
+    closed: AtomicBool,
+    /// Datagrams sent, and datagrams the operating system refused.
+    sent: AtomicU64,
+    send_errors: AtomicU64,
+}
+
+/// What sending the datagrams of one command came to.
+#[derive(Debug, Default)]
+struct Sent {
+    ok: usize,
+    last_error: Option<io::Error>,
+}
+
+impl DataPlane {
+    /// Binds the data socket to `interface` on any free port.
+    pub(crate) fn open(
+        interface: Ipv4Addr,
+        domain: u16,
+        participant: u64,
+        limits: Limits,
+    ) -> io::Result<Self> {
+        let socket = UdpSocket::bind(SocketAddrV4::new(interface, 0))?;
+        socket::set_buffers(&socket);
+        let locator = match socket.local_addr()? {
+            SocketAddr::V4(addr) => Locator::from(addr),
+            SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
+        };
+        let poll = mio::Poll::new()?;
+        poll.registry().register(
+            &mut mio::unix::SourceFd(&socket.as_raw_fd()),
+            SOCKET,
+            mio::Interest::READABLE,
+        )?;
+        let waker = mio::Waker::new(poll.registry(), WAKE)?;
+        let core = ParticipantCore::new(CoreConfig {
+            domain,
+            participant,
+            max_datagram: limits.max_datagram,
+            max_sample: limits.max_sample,
+        });
+        Ok(DataPlane {
+            socket,
+            locator,
+            locked: Mutex::new(Locked {
+                core,
+                io_wakes_at: None,
+            }),
+            window: Condvar::new(),
+            endpoints: RwLock::default(),
+            poll: Mutex::new(Some(poll)),
+            waker,
+            closed: AtomicBool::new(false),
+            sent: AtomicU64::new(0),
+            send_errors: AtomicU64::new(0),
+        })
+    }
+
+    /// Takes the core: first hands back the buffers this thread sent since it last held it.
+    fn lock(&self) -> MutexGuard<'_, Locked> {
+        let mut locked = lock(&self.locked);
+        SENT.with(|sent| {
+            if let Ok(mut sent) = sent.try_borrow_mut() {
+                for transmit in sent.drain(..) {
+                    locked.core.recycle(transmit);
+                }
+            }
+        });
+        locked
+    }
+
+    /// Releases the core after a command: wakes the I/O thread if the command left it work
+    /// (events, or a timer earlier than its wake-up), then sends the datagrams the command
+    /// produced, outside the lock.
+    fn release(&self, mut locked: MutexGuard<'_, Locked>) -> Sent {
+        let core = &mut locked.core;
+        let wake = core.has_events()
+            || core
+                .poll_timeout()
+                .is_some_and(|at| locked.io_wakes_at.is_none_or(|wakes| at < wakes));
+        if wake && !on_io_thread() {
+            // Told once: the I/O thread recomputes its wake-up when it runs.
+            locked.io_wakes_at = Some(Instant::now());
+        }
+        SENT.with(|sent| {
+            let Ok(mut sent) = sent.try_borrow_mut() else {
+                drop(locked);
+                return Sent::default();
+            };
+            let first = sent.len();
+            while let Some(transmit) = locked.core.poll_transmit() {
+                sent.push(transmit);
+            }
+            drop(locked);
+            if wake && !on_io_thread() {
+                let _ = self.waker.wake();
+            }
+            let mut result = Sent::default();
+            for transmit in &mut sent[first..] {
+                match socket::send(&self.socket, transmit) {
+                    Ok(()) => result.ok += 1,
+                    Err(err) => {
+                        tracing::debug!(to = %transmit.to, %err, "data send failed");
+                        result.last_error = Some(err);
+                    }
+                }
+                // The payload goes back to its producer's pool now, not at the next lock.
+                transmit.release_tail();
+            }
+            result
+        })
+    }
+
+    /// Runs `command` on the core, then [`DataPlane::release`].
+    fn command<R>(&self, command: impl FnOnce(&mut ParticipantCore, Instant) -> R) -> R {
+        let mut locked = self.lock();
+        let result = command(&mut locked.core, Instant::now());
+        self.count(&self.release(locked));
+        result
+    }
+
+    fn count(&self, sent: &Sent) {
+        if sent.ok > 0 {
+            self.sent.fetch_add(sent.ok as u64, Ordering::Relaxed);
+        }
+        if sent.last_error.is_some() {
+            self.send_errors.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    pub(crate) fn snapshot(&self) -> ParticipantStats {
+        let locked = lock(&self.locked);
+        let stats = locked.core.stats();
+        ParticipantStats {
+            received: stats.received,
+            delivered: stats.delivered,
+            misaddressed: stats.misaddressed,
+            unknown_reader: stats.unknown_reader,
+            fragments_refused: stats.fragments_refused,
+            unmatched_sender: stats.unmatched_sender,
+            wrong_address: stats.wrong_address,
+            dropped: DropReason::ALL
+                .iter()
+                .map(|reason| (reason.name(), stats.dropped(*reason)))
+                .collect(),
+            sent: self.sent.load(Ordering::Relaxed),
+            send_errors: self.send_errors.load(Ordering::Relaxed),
+        }
+    }
+
+    // ---- consumers ----
+
+    pub(crate) fn add_consumer(&self, entity: u32, spec: ConsumerSpec, delivery: Arc<Delivery>) {
+        write(&self.endpoints).consumers.insert(entity, delivery);
+        self.command(|core, now| core.add_consumer(now, entity, spec));
+    }
+
+    pub(crate) fn remove_consumer(&self, entity: u32) {
+        self.command(|core, _| core.remove_consumer(entity));
+        write(&self.endpoints).consumers.remove(&entity);
+    }
+
+    pub(crate) fn set_consumer_matched(
+        &self,
+        entity: u32,
+        producers: impl IntoIterator<Item = (Guid, SocketAddrV4)>,
+    ) {
+        self.command(|core, now| core.set_consumer_matched(now, entity, producers));
+    }
+
+    pub(crate) fn producer_lost(&self, entity: u32, writer: Guid) {
+        self.command(|core, now| core.producer_lost(now, entity, writer));
+    }
+
+    pub(crate) fn notify(&self, entity: u32, notification: Notification) {
+        self.command(|core, _| core.notify(entity, notification));
+    }
+
+    /// The application took `samples` samples of a reliable consumer.
+    pub(crate) fn taken(&self, entity: u32, samples: usize) {
+        self.command(|core, now| core.taken(now, entity, samples));
+    }
+
+    pub(crate) fn set_unlimited(&self, entity: u32) {
+        self.command(|core, now| core.set_unlimited(now, entity));
+    }
+
+    pub(crate) fn consumer_counters(&self, entity: u32) -> ConsumerCounters {
+        lock(&self.locked)
+            .core
+            .consumer_counters(entity)
+            .unwrap_or_default()
+    }
+
+    // ---- producers ----
+
+    pub(crate) fn add_producer(&self, entity: u32, spec: ProducerSpec, topic: &str) {
+        write(&self.endpoints)
+            .producers
+            .insert(entity, Arc::from(topic));
+        self.command(|core, _| core.add_producer(entity, spec));
+    }
+
+    pub(crate) fn remove_producer(&self, entity: u32) {
+        self.command(|core, _| core.remove_producer(entity));
+        write(&self.endpoints).producers.remove(&entity);
+        // A writer waiting for its window must see that the producer is gone.
+        self.window.notify_all();
+    }
+
+    pub(crate) fn set_producer_matched(&self, entity: u32, consumers: &[MatchedConsumer]) {
+        self.command(|core, now| core.set_producer_matched(now, entity, consumers));
+        self.window.notify_all();
+    }
+
+    /// Writes one encoded sample, waiting up to `timeout` for a reliable producer's window
+    /// (never on the I/O thread, where the acknowledgements that would open it arrive).
+    pub(crate) fn write(
+        &self,
+        entity: u32,
+        payload: Arc<Vec<u8>>,
+        timeout: Duration,
+    ) -> Result<(), WriteError> {
+        let timestamp_ns = now_ns();
+        let mut locked = self.lock();
+        let mut started = None;
+        loop {
+            let now = Instant::now();
+            match locked
+                .core
+                .write(now, timestamp_ns, entity, Arc::clone(&payload))
+            {
+                Ok(_) => break,
+                Err(WriteRefused::TooLarge { size, max }) => {
+                    return Err(WriteError::TooLarge { size, max });
+                }
+                Err(WriteRefused::UnknownProducer(_)) => {
+                    return Err(WriteError::Io(io::Error::other(
+                        "the producer was withdrawn",
+                    )));
+                }
+                Err(WriteRefused::WindowFull { unacknowledged }) => {
+                    let started = *started.get_or_insert(now);
+                    let waited = now.saturating_duration_since(started);
+                    let left = timeout
+                        .checked_sub(waited)
+                        .filter(|left| !left.is_zero() && !on_io_thread());
+                    let Some(left) = left else {
+                        return Err(WriteError::WouldBlock {
+                            waited,
+                            unacknowledged,
+                        });
+                    };
+                    locked = self
+                        .window
+                        .wait_timeout(locked, left)
+                        .map(|(guard, _)| guard)
+                        .unwrap_or_else(|poison| poison.into_inner().0);
+                }
+            }
+        }
+        let sent = self.release(locked);
+        self.count(&sent);
+        match sent.last_error {
+            // Only when no destination got it (as one unreachable consumer must not fail
+            // the write for the others).
+            Some(err) if sent.ok == 0 => Err(WriteError::Io(err)),
+            _ => Ok(()),
+        }
+    }
+
+    pub(crate) fn flush(&self, entity: u32) -> Result<(), WriteError> {
+        let mut locked = self.lock();
+        locked.core.flush(entity);
+        let sent = self.release(locked);
+        self.count(&sent);
+        match sent.last_error {
+            Some(err) => Err(WriteError::Io(err)),
+            None => Ok(()),
+        }
+    }
+
+    pub(crate) fn written(&self, entity: u32) -> u64 {
+        lock(&self.locked).core.written(entity)
+    }
+
+    /// Waits until every reliable consumer acknowledged everything producer `entity` wrote;
+    /// false at the timeout.
+    pub(crate) fn wait_acknowledged(&self, entity: u32, timeout: Duration) -> bool {
+        let deadline = crate::sync::deadline(timeout);
+        let mut locked = self.lock();
+        loop {
+            if locked.core.unacknowledged(entity) == 0 {
+                return true;
+            }
+            let left = deadline.map_or(Duration::from_secs(3600), |d| {
+                d.saturating_duration_since(Instant::now())
+            });
+            if left.is_zero() {
+                return false;
+            }
+            // Acknowledgements that do not open a closed window signal nothing: look again
+            // every few milliseconds.
+            locked = self
+                .window
+                .wait_timeout(locked, left.min(Duration::from_millis(5)))
+                .map(|(guard, _)| guard)
+                .unwrap_or_else(|poison| poison.into_inner().0);
+        }
+    }
+
+    // ---- the I/O thread ----
+
+    /// Receives, runs the timers and hands out events until [`DataPlane::close`]. Runs on
+    /// its own thread.
+    pub(crate) fn run(&self) {
+        IO_THREAD.with(|t| t.set(true));
+        let Some(mut poll) = lock(&self.poll).take() else {
+            return;
+        };
+        let mut ready = mio::Events::with_capacity(4);
+        let mut buf = BytesMut::new();
+        let mut batch: Vec<(Bytes, SocketAddrV4)> = Vec::with_capacity(RECV_BATCH);
+        let mut events: Vec<Event> = Vec::new();
+        let mut next: Option<Instant> = None;
+        while !self.closed.load(Ordering::Acquire) {
+            let timeout = next.map(|at| at.saturating_duration_since(Instant::now()));
+            if let Err(err) = poll.poll(&mut ready, timeout)
+                && err.kind() != io::ErrorKind::Interrupted
+            {
+                tracing::debug!(%err, "data plane poll failed");
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            if self.closed.load(Ordering::Acquire) {
+                break;
+            }
+            // Edge-triggered: read until the socket is empty.
+            loop {
+                let full = self.receive(&mut buf, &mut batch);
+                let now = Instant::now();
+                let received = SystemTime::now();
+                let mut locked = self.lock();
+                for (datagram, from) in batch.drain(..) {
+                    locked.core.handle_datagram(now, received, from, datagram);
+                }
+                if locked.core.poll_timeout().is_some_and(|at| at <= now) {
+                    locked.core.handle_timeout(now);
+                }
+                while let Some(event) = locked.core.poll_event() {
+                    events.push(event);
+                }
+                next = locked.core.poll_timeout();
+                locked.io_wakes_at = next;
+                let sent = self.release(locked);
+                self.count(&sent);
+                self.dispatch(&mut events);
+                if !full {
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Receives up to [`RECV_BATCH`] datagrams without waiting; true if it got that many
+    /// (more may wait).
+    fn receive(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) -> bool {
+        let socket = socket2::SockRef::from(&self.socket);
+        while batch.len() < RECV_BATCH {
+            // Room for the largest datagram; a region is reused once every sample cut from it
+            // has been dropped.
+            if buf.capacity() - buf.len() < RECV_SIZE {
+                if !batch.is_empty() {
+                    // The datagrams of this batch still hold the region: handle them first,
+                    // so the region can be reused instead of another one allocated.
+                    return true;
+                }
+                buf.reserve(RECV_REGION);
+            }
+            match socket.recv_from_with_flags(
+                &mut buf.spare_capacity_mut()[..RECV_SIZE],
+                libc::MSG_DONTWAIT,
+            ) {
+                Ok((len, from)) => {
+                    // SAFETY: `recv_from_with_flags` initialised the first `len` bytes of the
+                    // spare capacity it was given.
+                    unsafe { buf.set_len(len) };
+                    let datagram = buf.split_to(len).freeze();
+                    if let Some(from) = from.as_socket_ipv4() {
+                        batch.push((datagram, from));
+                    }
+                }
+                Err(err) if err.kind() == io::ErrorKind::WouldBlock => return false,
+                Err(err) if err.kind() == io::ErrorKind::Interrupted => {}
+                Err(err) => {
+                    // ICMP errors reported on the socket (a peer's port closed) and the like.
+                    tracing::trace!(%err, "data receive error");
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// Hands the core's events to the consumers' queues and the producers' waiters, outside
+    /// every lock of the core (a direct callback runs here).
+    fn dispatch(&self, events: &mut Vec<Event>) {
+        let mut window = false;
+        for event in events.drain(..) {
+            let (consumer, event) = match event {
+                Event::Sample { consumer, sample } => (consumer, RawEvent::Sample(sample)),
+                Event::Notification {
+                    consumer,
+                    notification,
+                } => (consumer, RawEvent::Notification(notification)),
+                Event::WindowOpen { .. } => {
+                    window = true;
+                    continue;
+                }
+                Event::ReaderSilenced { producer, reader } => {
+                    let topic = read(&self.endpoints).producers.get(&producer).cloned();
+                    tracing::warn!(
+                        topic = topic.as_deref().unwrap_or("?"),
+                        consumer = %reader,
+                        "a reliable consumer stopped acknowledging: it no longer holds this producer's window (it gets SamplesLost for what it misses if it comes back)"
+                    );
+                    continue;
+                }
+            };
+            let delivery = read(&self.endpoints).consumers.get(&consumer).cloned();
+            if let Some(delivery) = delivery {
+                delivery.push(event);
+            }
+        }
+        // The window changed under the lock, before this: a writer that looked before is
+        // waiting by now, one that looks after sees it open.
+        if window {
+            self.window.notify_all();
+        }
+    }
+
+    /// Stops the I/O thread promptly.
+    pub(crate) fn close(&self) {
+        self.closed.store(true, Ordering::Release);
+        let _ = self.waker.wake();
+        self.window.notify_all();
+    }
+}
+
+/// The wall clock in nanoseconds since the Unix epoch (a sample's source timestamp).
+fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
