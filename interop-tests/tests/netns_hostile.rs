@@ -287,7 +287,7 @@ fn a_blast_of_junk_at_discovery_and_data_ports_leaves_traffic_and_memory_intact(
     assert!(alive, "every daemon and client survives");
     let lost = notifications(&lines, "ProducerLost");
     assert!(lost.is_empty(), "discovery lost the producer: {lost:?}");
-    // The consumer's receive thread discards junk after a 16-byte header check, far faster
+    // The consumer's I/O thread discards junk after a 16-byte header check, far faster
     // than one sender host can produce it (about 80 000 small and 1 200 maximum-size
     // datagrams a second here, a third of them at the data port), and its 4 MiB receive
     // buffer absorbs the bursts: every sample arrived in every run, also with both cores

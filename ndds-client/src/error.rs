@@ -94,7 +94,7 @@ pub enum WriteError {
     /// A reliable producer's flow-control window stayed closed for its whole write timeout:
     /// its slowest reliable consumer has not taken (and acknowledged) the samples written
     /// before. Nothing was sent; the sample can be written again later. A write from a direct
-    /// callback (on the participant's receive thread) fails so at once, without waiting.
+    /// callback (on the participant's I/O thread) fails so at once, without waiting.
     #[error(
         "reliable write blocked for {waited:?}: the slowest reliable consumer has {unacknowledged} samples not yet acknowledged"
     )]

@@ -29,9 +29,10 @@
 //! `ndds echo` decode the topic without the Rust type.
 //!
 //! ## What it does not do
-//! - Protocol logic: the wire format, type descriptions, the discovery engine and the rules
-//!   of arbitration (strength, persistence, minimum separation, deadlines) are `ndds-core`'s,
-//!   without IO; this crate drives them with sockets, threads and the clock.
+//! - Protocol logic: the wire format, type descriptions, the discovery engine and the whole
+//!   data plane (arbitration with strength, persistence, minimum separation and deadlines;
+//!   reliable streams; batching; fragments; who is believed) are `ndds-core`'s, without IO;
+//!   this crate drives them with a socket, two threads and the clock.
 //! - Discovery: the host's daemon (`ndds-daemon`) runs it; the SDK asks the daemon over a
 //!   Unix socket, or embeds one when none answers.
 //! - ControlShell: CSMats, sample modules, habitats, configurations, state machines and
@@ -45,24 +46,26 @@
 //!   [`qos`]: what endpoints are declared with; [`error`]: one error enum per operation.
 //! - [`ports`]: port-directed communication over reliable topics (send, receive and reply;
 //!   query and response; `waitfor`; `sendall`; a priority select).
-//! - Internal: `session` (the daemon connection) and `link` (its reader thread, which also
-//!   reconnects); `router` (the local endpoints by entity number) and `peers` (what each one
-//!   is matched with); `plane` (the UDP data plane: its socket, receive and timer threads);
-//!   `slot` (one consumer's receiving end: reliable streams, arbiter, sink); `sync` (lock
-//!   helpers).
+//! - Internal: `session` (the daemon connection) and `daemon_link` (its reader thread, which
+//!   also reconnects); `local_endpoints` (the local endpoints by entity number, updated by the
+//!   daemon's match events) and `matches` (what each one is matched or incompatible with);
+//!   `data_plane` (the driver of the data plane: the UDP socket and the I/O thread around
+//!   `ndds_core::participant::ParticipantCore`, which holds every endpoint's protocol state);
+//!   `consumer::delivery` (a consumer's queue, latest-value cell or direct callback) and
+//!   `consumer::dispatch` (the participant's one callback thread); `sync` (lock helpers).
 #![warn(missing_docs)]
 
 pub mod consumer;
+mod daemon_link;
 mod data_plane;
 pub mod embedded;
 pub mod error;
-mod link;
+mod local_endpoints;
+mod matches;
 pub mod participant;
-mod peers;
 pub mod ports;
 pub mod producer;
 pub mod qos;
-mod router;
 pub mod sample;
 mod session;
 mod sync;
@@ -71,13 +74,13 @@ pub use consumer::{
     CallbackConsumer, Consumer, ConsumerStats, DirectConsumer, EventStream, RawConsumer,
     SampleStream,
 };
+pub use daemon_link::RECONNECT_GRACE;
 pub use data_plane::{DEFAULT_MAX_SAMPLE, ParticipantStats};
 pub use embedded::{stop_embedded_daemon, stop_embedded_daemons};
 pub use error::{
     ConnectError, DeclareError, Mismatch, QueryError, RecvError, Unmatched, UnmatchedProducer,
     WriteError,
 };
-pub use link::RECONNECT_GRACE;
 pub use ndds_core::discovery::Incompatibility;
 pub use ndds_core::ipc::Graph;
 pub use ndds_core::types::TypeDescription;

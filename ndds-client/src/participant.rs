@@ -23,14 +23,14 @@ use ndds_daemon::{DaemonConfig, DaemonError, EmbedError};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use crate::consumer::{Consumer, ConsumerState, Delivery, RawConsumer};
+use crate::consumer::{Consumer, ConsumerState, Delivery, Dispatcher, RawConsumer};
+use crate::daemon_link;
 use crate::data_plane::{DataPlane, Limits, ParticipantStats};
 use crate::embedded::{self, Ensured};
 use crate::error::{ConnectError, DeclareError, QueryError};
-use crate::link;
+use crate::local_endpoints::{Endpoint, LocalEndpoints};
 use crate::producer::{Producer, ProducerState, RawProducer};
 use crate::qos::{ConsumerMode, ConsumerQos, ProducerQos};
-use crate::router::{Endpoint, Router};
 use crate::session::{self, Session, Takeover};
 use crate::sync::lock;
 
@@ -240,7 +240,9 @@ pub(crate) struct Inner {
     pub(crate) welcome: Welcome,
     session: Arc<Session>,
     pub(crate) data: Arc<DataPlane>,
-    router: Arc<Router>,
+    endpoints: Arc<LocalEndpoints>,
+    /// Runs the callbacks of the participant's callback consumers.
+    pub(crate) dispatcher: Dispatcher,
     next_entity: AtomicU32,
     threads: Mutex<Vec<JoinHandle<()>>>,
 }
@@ -248,6 +250,7 @@ pub(crate) struct Inner {
 impl Drop for Inner {
     fn drop(&mut self) {
         self.session.shutdown();
+        self.dispatcher.close();
         self.data.close();
         let current = std::thread::current().id();
         for thread in lock(&self.threads).drain(..) {
@@ -279,7 +282,7 @@ impl EndpointHandle {
 
 impl Drop for EndpointHandle {
     fn drop(&mut self) {
-        match self.inner.router.remove(self.entity) {
+        match self.inner.endpoints.remove(self.entity) {
             Some(Endpoint::Consumer(_)) => self.inner.data.remove_consumer(self.entity),
             Some(Endpoint::Producer(_)) => self.inner.data.remove_producer(self.entity),
             None => {}
@@ -371,7 +374,8 @@ impl Participant {
             welcome,
             session,
             data: Arc::new(data),
-            router: Arc::new(Router::default()),
+            endpoints: Arc::new(LocalEndpoints::default()),
+            dispatcher: Dispatcher::default(),
             next_entity: AtomicU32::new(1),
             threads: Mutex::new(Vec::new()),
         });
@@ -571,7 +575,7 @@ impl Participant {
             qos,
             locator: self.inner.data.locator,
         };
-        self.inner.router.insert(endpoint, decl.clone());
+        self.inner.endpoints.insert(endpoint, decl.clone());
         // From here on, dropping the handle undoes the local registration.
         let handle = EndpointHandle {
             inner: self.inner.clone(),
@@ -592,10 +596,10 @@ impl Inner {
             .name("ndds-io".into())
             .spawn(move || data.run())
             .map_err(ConnectError::Thread)?;
-        let (session, router) = (self.session.clone(), self.router.clone());
+        let (session, endpoints) = (self.session.clone(), self.endpoints.clone());
         let session_thread = std::thread::Builder::new()
             .name("ndds-session".into())
-            .spawn(move || link::run(reader, &session, &router))
+            .spawn(move || daemon_link::run(reader, &session, &endpoints))
             .map_err(ConnectError::Thread)?;
         lock(&self.threads).extend([io_thread, session_thread]);
         Ok(())

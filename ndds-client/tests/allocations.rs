@@ -1,10 +1,10 @@
 //! Steady-state publishing and delivery allocate nothing per sample: a counting global
 //! allocator counts the allocations made on the threads a sample passes through (the writing
-//! thread, the participant's receive thread, the thread taking samples) while thousands of
+//! thread, the participant's I/O thread, the thread taking samples) while thousands of
 //! samples flow, after a warm-up that lets every reused buffer reach its size.
 //!
 //! Only allocations made on the tracked threads are counted: the embedded daemon's threads
-//! (discovery) and the participant's timer thread do their own periodic work, not work per
+//! (discovery) and the participant's I/O thread do their own periodic work, not work per
 //! sample.
 
 mod counting;
@@ -61,8 +61,8 @@ fn write_paced(
     }
 }
 
-/// A direct consumer (callback on the receive thread) and a producer: counts allocations on
-/// the writing thread and the receive thread.
+/// A direct consumer (callback on the I/O thread) and a producer: counts allocations on
+/// the writing thread and the I/O thread.
 fn measure_direct(producer_qos: ProducerQos, consumer_qos: ConsumerQos) -> u64 {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
@@ -149,7 +149,7 @@ fn a_queued_consumer_taking_with_a_blocking_recv_allocates_nothing_per_sample() 
     };
     run(1, WARM_UP);
     ALLOCATIONS.store(0, Ordering::Relaxed);
-    // The receive thread is not tracked here (the direct tests cover it); this thread writes
+    // The I/O thread is not tracked here (the direct tests cover it); this thread writes
     // and takes.
     track(true);
     run(WARM_UP + 1, MEASURED);

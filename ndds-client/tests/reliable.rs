@@ -333,7 +333,7 @@ fn a_relay_in_a_direct_callback_is_told_at_once_when_its_window_is_full() {
     assert!(message.contains("blocked"), "{message}");
     assert!(
         took < Duration::from_secs(1),
-        "waited {took:?} on the receive thread"
+        "waited {took:?} on the I/O thread"
     );
     assert!(
         at > 4,
@@ -441,4 +441,50 @@ fn late_joiners_get_the_kept_samples_reliable_in_order_best_effort_the_newest() 
         assert_eq!(got, expected, "{reliability:?}");
         assert!(consumer.recv_timeout(Duration::from_millis(200)).is_err());
     }
+}
+
+#[test]
+fn an_async_write_waits_for_the_window_without_blocking_its_thread() {
+    let (_hosts, consumer, producer) = reliable_pair("async-cmd", 4, 8, ProducerQos::default());
+    const COUNT: u64 = 200;
+    // One runtime thread: if a write blocked it, the reader task below could not run.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .unwrap();
+    let got = runtime.block_on(async move {
+        let reader = tokio::task::spawn_blocking(move || {
+            let mut got = Vec::new();
+            while got.len() < COUNT as usize {
+                got.push(consumer.recv_timeout(WAIT).unwrap().value);
+                if got.len() % 40 == 0 {
+                    // Stops now and then, so the window fills and the writer must wait.
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+            got
+        });
+        let ticks = tokio::spawn(async {
+            // Runs on the same thread as the writer: counts while the writer waits.
+            let mut ticks = 0u32;
+            for _ in 0..100 {
+                tokio::time::sleep(Duration::from_millis(2)).await;
+                ticks += 1;
+            }
+            ticks
+        });
+        for i in 1..=COUNT {
+            tokio::time::timeout(WAIT, producer.write_async(&i))
+                .await
+                .expect("the window opened")
+                .unwrap();
+        }
+        assert_eq!(
+            ticks.await.unwrap(),
+            100,
+            "the runtime's thread was never blocked"
+        );
+        reader.await.unwrap()
+    });
+    assert_eq!(got, (1..=COUNT).collect::<Vec<_>>());
 }

@@ -1,19 +1,20 @@
-//! Delivering a consumer's samples or events to a callback on a thread of its own.
+//! Delivering a consumer's samples or events to a callback: on the participant's callback
+//! thread, or directly on its I/O thread.
 
 use std::sync::Arc;
-use std::thread::JoinHandle;
 
 use serde::de::DeserializeOwned;
 
+use super::dispatch::Registration;
 use super::raw::RawConsumer;
 use super::typed::{Consumer, decode_event};
 use crate::error::RecvError;
 use crate::sample::{Event, RawEvent, RawSample, Sample};
 
 impl<T: DeserializeOwned> Consumer<T> {
-    /// Hands every sample to `callback` on a thread of its own until the returned handle is
-    /// dropped (notifications are skipped; see [`Consumer::on_event`]). A slow callback delays
-    /// only this consumer. Fails in polled mode.
+    /// Hands every sample to `callback` until the returned handle is dropped (notifications
+    /// are skipped; see [`Consumer::on_event`], which says where callbacks run). Fails in
+    /// polled mode.
     pub fn on_sample<F>(self, mut callback: F) -> Result<CallbackConsumer, RecvError>
     where
         T: Send + 'static,
@@ -26,8 +27,11 @@ impl<T: DeserializeOwned> Consumer<T> {
         })
     }
 
-    /// Hands every sample and notification to `callback` on a thread of its own until the
-    /// returned handle is dropped. Fails in polled mode.
+    /// Hands every sample and notification to `callback` until the returned handle is
+    /// dropped. Callbacks run on the participant's callback thread (`ndds-callbacks`, one per
+    /// participant, started with its first callback consumer), one consumer's events after
+    /// another's: a callback that takes long delays the other callbacks of the participant,
+    /// never its I/O. Fails in polled mode.
     pub fn on_event<F>(self, mut callback: F) -> Result<CallbackConsumer, RecvError>
     where
         T: Send + 'static,
@@ -35,32 +39,27 @@ impl<T: DeserializeOwned> Consumer<T> {
     {
         let rx = self.raw.queue()?.clone();
         let decoder = Arc::clone(&self.raw.state.decoder);
-        // Weak: the state holds the queue's sender, which must go when the consumer does.
-        let state = Arc::downgrade(&self.raw.state);
-        let signal = Arc::clone(&self.raw.state.delivery.signal);
-        let thread = std::thread::Builder::new()
-            .name(format!("ndds-cb-{}", decoder.topic))
-            .spawn(move || {
-                while let Ok(event) = signal.recv(&rx, None) {
-                    // Room was made: a reliable stream waiting for it moves on.
-                    if let Some(state) = state.upgrade() {
-                        state.took(&event);
-                    }
-                    callback(decode_event(&decoder, event));
-                }
-            })
+        let registration = self
+            .raw
+            ._handle
+            .inner
+            .dispatcher
+            .register(
+                &self.raw.state,
+                rx,
+                Box::new(move |event| callback(decode_event(&decoder, event))),
+            )
             .map_err(|err| RecvError::Thread(err.to_string()))?;
         Ok(CallbackConsumer {
             raw: Some(self.raw),
-            thread: Some(thread),
+            registration: Some(registration),
         })
     }
 }
 
 impl<T: DeserializeOwned + 'static> Consumer<T> {
-    /// Hands every sample to `callback` *on the participant's receive thread* (or timer
-    /// thread, for samples released by a minimum-separation window), with no thread switch:
-    /// the lowest latency ndds offers, as NDDS's immediate consumers had. The callback must be
+    /// Hands every sample to `callback` *on the participant's I/O thread* (`ndds-io`), with
+    /// no thread switch: the lowest latency ndds offers, as NDDS's immediate consumers had. The callback must be
     /// quick and must not block: every consumer of the participant waits while it runs. It
     /// must not call back into this consumer. It may write with producers (a relay, a pong);
     /// a reliable producer whose window is full then fails at once with
@@ -82,7 +81,7 @@ impl<T: DeserializeOwned + 'static> Consumer<T> {
 }
 
 impl RawConsumer {
-    /// Hands every sample, still encoded, to `callback` on the participant's receive thread:
+    /// Hands every sample, still encoded, to `callback` on the participant's I/O thread:
     /// [`Consumer::on_sample_direct`] without decoding, for tools that forward, record or
     /// decode samples their own way (the payload is a view into the received datagram, not a
     /// copy). Notifications are skipped. The same rules as for `on_sample_direct` apply.
@@ -101,7 +100,7 @@ impl RawConsumer {
     }
 }
 
-/// A consumer delivering to a callback on the receive thread; dropping it withdraws the
+/// A consumer delivering to a callback on the I/O thread; dropping it withdraws the
 /// consumer (see [`Consumer::on_sample_direct`]).
 #[derive(Debug)]
 pub struct DirectConsumer {
@@ -115,12 +114,12 @@ impl DirectConsumer {
     }
 }
 
-/// A consumer delivering to a callback; dropping it withdraws the consumer and stops the
-/// callback thread (a callback already running finishes first).
+/// A consumer delivering to a callback; dropping it stops the callback (one already running
+/// finishes first, unless the handle is dropped by a callback) and withdraws the consumer.
 #[derive(Debug)]
 pub struct CallbackConsumer {
     raw: Option<RawConsumer>,
-    thread: Option<JoinHandle<()>>,
+    registration: Option<Registration>,
 }
 
 impl CallbackConsumer {
@@ -132,12 +131,7 @@ impl CallbackConsumer {
 
 impl Drop for CallbackConsumer {
     fn drop(&mut self) {
-        // Withdrawing drops the queue's sender, which ends the callback thread's loop.
+        drop(self.registration.take());
         drop(self.raw.take());
-        if let Some(thread) = self.thread.take()
-            && thread.thread().id() != std::thread::current().id()
-        {
-            let _ = thread.join();
-        }
     }
 }

@@ -83,6 +83,8 @@ pub(crate) struct Signal {
     /// True once the sink is gone.
     closed: Mutex<bool>,
     wake: Condvar,
+    /// The participant's callback dispatcher, for a callback consumer.
+    listener: std::sync::OnceLock<super::dispatch::Listener>,
 }
 
 /// Longest single wait: a waiter looks again at least this often.
@@ -94,6 +96,14 @@ impl Signal {
             let _closed = lock(&self.closed);
             self.wake.notify_all();
         }
+        if let Some(listener) = self.listener.get() {
+            listener.ready();
+        }
+    }
+
+    /// Also tells `listener` of every event queued from now on.
+    pub(crate) fn listen(&self, listener: super::dispatch::Listener) {
+        let _ = self.listener.set(listener);
     }
 
     fn close(&self) {

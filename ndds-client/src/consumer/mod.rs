@@ -13,12 +13,14 @@
 
 mod callback;
 mod delivery;
+mod dispatch;
 mod raw;
 mod stream;
 mod typed;
 
 pub use callback::{CallbackConsumer, DirectConsumer};
 pub(crate) use delivery::{Delivery, Direct};
+pub(crate) use dispatch::Dispatcher;
 pub(crate) use raw::ConsumerState;
 pub use raw::{ConsumerStats, RawConsumer};
 pub use stream::{EventStream, SampleStream};

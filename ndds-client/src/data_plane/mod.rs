@@ -113,6 +113,8 @@ struct Locked {
     core: ParticipantCore,
     /// When the I/O thread will next wake by itself (`None`: only for a datagram).
     io_wakes_at: Option<Instant>,
+    /// Async writers waiting for a reliable producer's window.
+    window_wakers: Vec<std::task::Waker>,
 }
 
 /// The participant's data socket, its core and its I/O thread.
@@ -173,6 +175,7 @@ impl DataPlane {
             locked: Mutex::new(Locked {
                 core,
                 io_wakes_at: None,
+                window_wakers: Vec::new(),
             }),
             window: Condvar::new(),
             endpoints: RwLock::default(),
@@ -333,12 +336,34 @@ impl DataPlane {
         self.command(|core, _| core.remove_producer(entity));
         write(&self.endpoints).producers.remove(&entity);
         // A writer waiting for its window must see that the producer is gone.
-        self.window.notify_all();
+        self.wake_writers();
     }
 
     pub(crate) fn set_producer_matched(&self, entity: u32, consumers: &[MatchedConsumer]) {
         self.command(|core, now| core.set_producer_matched(now, entity, consumers));
+        self.wake_writers();
+    }
+
+    /// Wakes every writer waiting for a window, blocking or async.
+    fn wake_writers(&self) {
         self.window.notify_all();
+        let wakers = std::mem::take(&mut lock(&self.locked).window_wakers);
+        for waker in wakers {
+            waker.wake();
+        }
+    }
+
+    /// Ready when producer `entity` may write without waiting (or is gone); otherwise wakes
+    /// `cx` when its window may have opened.
+    pub(crate) fn poll_window(&self, entity: u32, cx: &mut std::task::Context<'_>) -> bool {
+        let mut locked = lock(&self.locked);
+        if locked.core.window_open(entity) || self.closed.load(Ordering::Acquire) {
+            return true;
+        }
+        if !locked.window_wakers.iter().any(|w| w.will_wake(cx.waker())) {
+            locked.window_wakers.push(cx.waker().clone());
+        }
+        false
     }
 
     /// Writes one encoded sample, waiting up to `timeout` for a reliable producer's window
@@ -562,7 +587,7 @@ impl DataPlane {
         // The window changed under the lock, before this: a writer that looked before is
         // waiting by now, one that looks after sees it open.
         if window {
-            self.window.notify_all();
+            self.wake_writers();
         }
     }
 
@@ -570,7 +595,7 @@ impl DataPlane {
     pub(crate) fn close(&self) {
         self.closed.store(true, Ordering::Release);
         let _ = self.waker.wake();
-        self.window.notify_all();
+        self.wake_writers();
     }
 }
 

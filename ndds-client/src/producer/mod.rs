@@ -15,8 +15,8 @@ use serde::Serialize;
 
 use crate::data_plane::DataPlane;
 use crate::error::WriteError;
+use crate::matches::{Matched, Peers};
 use crate::participant::EndpointHandle;
-use crate::peers::{Matched, Peers};
 use crate::qos::{Batching, ProducerQos, WhenFull, duration_us};
 use crate::sync::lock;
 
@@ -130,6 +130,39 @@ impl<T: Serialize> Producer<T> {
             *payload = postcard::to_extend(value, buffer)?;
             Ok(())
         })
+    }
+
+    /// [`Producer::write`] for async code: a reliable producer whose window is full waits
+    /// for it without blocking the thread (and without a thread per call: the participant's
+    /// I/O thread wakes the task when acknowledgements open the window). It waits as long as
+    /// it takes, not `write_timeout`; bound it with the runtime's timeout if needed. A
+    /// consumer that stops acknowledging leaves the window within its liveness timeout, so
+    /// the wait ends.
+    pub async fn write_async(&self, value: &T) -> Result<(), WriteError> {
+        let state = &self.raw.state;
+        let payload = lock(&state.pool).fill(|payload| {
+            let buffer = std::mem::take(payload);
+            *payload = postcard::to_extend(value, buffer)?;
+            Ok::<(), WriteError>(())
+        })?;
+        loop {
+            match state
+                .plane
+                .write(state.entity, Arc::clone(&payload), Duration::ZERO)
+            {
+                Err(WriteError::WouldBlock { .. }) => {
+                    std::future::poll_fn(|cx| {
+                        if state.plane.poll_window(state.entity, cx) {
+                            std::task::Poll::Ready(())
+                        } else {
+                            std::task::Poll::Pending
+                        }
+                    })
+                    .await;
+                }
+                other => return other,
+            }
+        }
     }
 
     /// See [`RawProducer::wait_for_acknowledgments`].

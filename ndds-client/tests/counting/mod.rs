@@ -1,5 +1,6 @@
 //! A counting global allocator for the allocation tests: it counts the allocations made on the
-//! threads that turned tracking on, and forwards everything to the system allocator.
+//! threads that turned tracking on, and the bytes live on all threads, and forwards everything
+//! to the system allocator.
 //!
 //! A test file that includes this module (`mod counting;`) gets it as its global allocator.
 
@@ -7,7 +8,7 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 
 struct Counting;
 
@@ -17,6 +18,13 @@ thread_local! {
 
 /// Allocations counted so far, process-wide.
 pub static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+/// Bytes allocated and not yet freed, on every thread (tracked or not).
+pub static LIVE_BYTES: AtomicI64 = AtomicI64::new(0);
+
+fn live(delta: i64) {
+    LIVE_BYTES.fetch_add(delta, Ordering::Relaxed);
+}
 
 fn count() {
     if TRACKED.try_with(Cell::get).unwrap_or(false) {
@@ -29,23 +37,27 @@ fn count() {
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         count();
+        live(layout.size() as i64);
         // SAFETY: the caller's contract is passed on.
         unsafe { System.alloc(layout) }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         count();
+        live(layout.size() as i64);
         // SAFETY: the caller's contract is passed on.
         unsafe { System.alloc_zeroed(layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         count();
+        live(new_size as i64 - layout.size() as i64);
         // SAFETY: the caller's contract is passed on.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        live(-(layout.size() as i64));
         // SAFETY: the caller's contract is passed on.
         unsafe { System.dealloc(ptr, layout) }
     }

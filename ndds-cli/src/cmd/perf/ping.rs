@@ -1,7 +1,7 @@
 //! `ndds perf ping`: round trips through `ndds perf pong`.
 //!
 //! Pings go out on `PREFIX/ping`; the pong writes each back on `PREFIX/pong`. Replies are
-//! taken by a direct consumer (on the participant's receive thread), which records the round
+//! taken by a direct consumer (on the participant's I/O thread), which records the round
 //! trip and writes the next ping at once: no thread switch anywhere in the loop, as in a raw
 //! UDP loop that sends and receives on one thread. The main thread only watches: it resends
 //! when a ping or its reply was lost, and stops the run. With `--rate`, the main thread sends
@@ -132,7 +132,7 @@ impl Pinger {
         }
     }
 
-    /// A reply, on the participant's receive thread.
+    /// A reply, on the participant's I/O thread.
     fn on_reply(&self, reply: &PerfView<'_>) {
         let arrived = mono_ns();
         let now = Instant::now();
@@ -191,7 +191,7 @@ fn ping_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Progress> {
         closed_loop: run.rate.is_none(),
     });
     // The callback holds no strong reference: the producer is dropped here, never on the
-    // receive thread.
+    // I/O thread.
     let replies = Arc::downgrade(&pinger);
     // Replies are read in place (no copy of their payload), as raw UDP reads them.
     let direct = consumer.on_raw_sample_direct(move |reply| {

@@ -1,5 +1,5 @@
 //! `ndds perf pong`: writes every ping back as it came, from a direct consumer (on the
-//! participant's receive thread, no thread switch), until its ping goes away or `--duration`
+//! participant's I/O thread, no thread switch), until its ping goes away or `--duration`
 //! passes.
 
 use std::net::SocketAddrV4;
@@ -107,7 +107,7 @@ fn pong_ndds(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<Echoed> {
         errors: AtomicU64::new(0),
         first_error: Mutex::new(None),
     });
-    // A weak reference, so the producer is dropped here and never on the receive thread.
+    // A weak reference, so the producer is dropped here and never on the I/O thread.
     let answers = Arc::downgrade(&echo);
     let direct = consumer.on_raw_sample_direct(move |ping| {
         if let Some(echo) = answers.upgrade() {

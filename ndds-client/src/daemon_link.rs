@@ -19,7 +19,7 @@ use ndds_daemon::DaemonConfig;
 
 use crate::embedded::{self, Ensured};
 use crate::error::ConnectError;
-use crate::router::Router;
+use crate::local_endpoints::LocalEndpoints;
 use crate::session::{self, Session};
 
 /// How long a new daemon has to report the matches of the old one before they are dropped.
@@ -32,10 +32,10 @@ const RETRY_MAX: Duration = Duration::from_millis(500);
 const TAKEOVER_AFTER: Duration = Duration::from_millis(500);
 
 /// Runs the session thread until the participant ends.
-pub(crate) fn run(mut reader: UnixStream, session: &Session, router: &Router) {
+pub(crate) fn run(mut reader: UnixStream, session: &Session, endpoints: &LocalEndpoints) {
     let mut sweep_at: Option<Instant> = None;
     loop {
-        read_until_lost(&mut reader, session, router, &mut sweep_at);
+        read_until_lost(&mut reader, session, endpoints, &mut sweep_at);
         session.mark_closed();
         if session.is_ending() {
             return;
@@ -43,8 +43,8 @@ pub(crate) fn run(mut reader: UnixStream, session: &Session, router: &Router) {
         match reconnect(session) {
             Some(new_reader) => {
                 reader = new_reader;
-                router.mark_stale();
-                for decl in router.declarations() {
+                endpoints.mark_stale();
+                for decl in endpoints.declarations() {
                     if let Err(err) = session.declare_async(decl) {
                         tracing::warn!(%err, "re-declaring after reconnection failed");
                     }
@@ -60,7 +60,7 @@ pub(crate) fn run(mut reader: UnixStream, session: &Session, router: &Router) {
 fn read_until_lost(
     reader: &mut UnixStream,
     session: &Session,
-    router: &Router,
+    endpoints: &LocalEndpoints,
     sweep_at: &mut Option<Instant>,
 ) {
     loop {
@@ -76,7 +76,7 @@ fn read_until_lost(
             }
             Ok(Some(message)) => {
                 if let Some(event) = session.complete(message) {
-                    router.route(event);
+                    endpoints.route(event);
                 }
             }
             Err(err)
@@ -96,7 +96,7 @@ fn read_until_lost(
         }
         if sweep_at.is_some_and(|at| Instant::now() >= at) {
             *sweep_at = None;
-            let swept = router.sweep_stale();
+            let swept = endpoints.sweep_stale();
             tracing::info!(swept, "matches the new daemon did not confirm were dropped");
         }
     }

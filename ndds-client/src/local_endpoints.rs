@@ -11,7 +11,7 @@ use ndds_core::ipc::{DaemonMessage, EndpointDecl};
 use ndds_core::wire::EndpointKind;
 
 use crate::consumer::ConsumerState;
-use crate::peers::{Matched, Peers};
+use crate::matches::{Matched, Peers};
 use crate::producer::ProducerState;
 use crate::sync::{read, write};
 
@@ -54,11 +54,11 @@ impl Endpoint {
 
 /// Local endpoints by entity number.
 #[derive(Debug, Default)]
-pub(crate) struct Router {
+pub(crate) struct LocalEndpoints {
     endpoints: RwLock<HashMap<u32, (Endpoint, EndpointDecl)>>,
 }
 
-impl Router {
+impl LocalEndpoints {
     pub(crate) fn insert(&self, endpoint: Endpoint, decl: EndpointDecl) {
         write(&self.endpoints).insert(decl.entity, (endpoint, decl));
     }
