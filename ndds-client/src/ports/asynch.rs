@@ -1,6 +1,7 @@
-//! Async forms of the blocking primitives: each runs the blocking form on a thread of its own
-//! and returns a future of its result, so an async task never blocks its executor. The
-//! timeouts are the same as the blocking forms'.
+//! Async forms of the blocking primitives: the same futures the blocking forms run on the
+//! calling thread, awaited on the caller's executor instead — no call starts a thread. They
+//! sleep on the consumers' queues like the blocking forms; their timeouts are the same, kept
+//! by the process's one port timer thread (see `wait`).
 
 use std::collections::BTreeMap;
 use std::future::Future;
@@ -12,32 +13,9 @@ use serde::de::DeserializeOwned;
 
 use super::error::PortError;
 use super::owner::{PortOwner, ReplyHandle};
-use super::spawn_error;
 use super::user::PortUser;
 use super::waitfor::Rendezvous;
-
-/// Runs `work` on a new thread; the future resolves to its result.
-fn off_thread<T, W>(port: &str, work: W) -> impl Future<Output = Result<T, PortError>> + use<T, W>
-where
-    T: Send + 'static,
-    W: FnOnce() -> Result<T, PortError> + Send + 'static,
-{
-    let (tx, rx) = flume::bounded(1);
-    let port = port.to_owned();
-    let thread = format!("port-async-{port}");
-    let spawned = std::thread::Builder::new()
-        .name(thread.clone())
-        .spawn(move || {
-            let _ = tx.send(work());
-        })
-        .map_err(spawn_error(&port, &thread));
-    async move {
-        spawned?;
-        rx.recv_async()
-            .await
-            .unwrap_or(Err(PortError::ThreadEnded { port }))
-    }
-}
+use super::wire::Usage;
 
 impl<Q, R> PortUser<Q, R>
 where
@@ -49,9 +27,12 @@ where
         self: &Arc<Self>,
         value: Q,
         timeout: Duration,
-    ) -> impl Future<Output = Result<R, PortError>> + use<Q, R> {
+    ) -> impl Future<Output = Result<R, PortError>> + Send + use<Q, R> {
         let user = Arc::clone(self);
-        off_thread(self.port(), move || user.send(&value, timeout))
+        async move {
+            user.require(Usage::Send)?;
+            user.exchange(&value, timeout).await
+        }
     }
 
     /// [`query`](Self::query), as a future.
@@ -59,9 +40,12 @@ where
         self: &Arc<Self>,
         value: Q,
         timeout: Duration,
-    ) -> impl Future<Output = Result<R, PortError>> + use<Q, R> {
+    ) -> impl Future<Output = Result<R, PortError>> + Send + use<Q, R> {
         let user = Arc::clone(self);
-        off_thread(self.port(), move || user.query(&value, timeout))
+        async move {
+            user.require(Usage::Query)?;
+            user.exchange(&value, timeout).await
+        }
     }
 
     /// [`receive_all`](Self::receive_all), as a future.
@@ -69,9 +53,9 @@ where
         self: &Arc<Self>,
         timeout: Duration,
         answer: F,
-    ) -> impl Future<Output = Result<Q, PortError>> + use<Q, R, F> {
+    ) -> impl Future<Output = Result<Q, PortError>> + Send + use<Q, R, F> {
         let user = Arc::clone(self);
-        off_thread(self.port(), move || user.receive_all(timeout, answer))
+        async move { user.receive_all_future(timeout, answer).await }
     }
 }
 
@@ -85,9 +69,9 @@ where
     pub fn receive_async(
         self: &Arc<Self>,
         timeout: Duration,
-    ) -> impl Future<Output = Result<(Q, ReplyHandle<R>), PortError>> + use<Q, R> {
+    ) -> impl Future<Output = Result<(Q, ReplyHandle<R>), PortError>> + Send + use<Q, R> {
         let owner = Arc::clone(self);
-        off_thread(self.port(), move || owner.receive(timeout))
+        async move { owner.receive_future(timeout).await }
     }
 
     /// [`sendall`](Self::sendall), as a future of the first reply (later replies: use the
@@ -96,16 +80,15 @@ where
         self: &Arc<Self>,
         value: Q,
         timeout: Duration,
-    ) -> impl Future<Output = Result<(String, R), PortError>> + use<Q, R>
+    ) -> impl Future<Output = Result<(String, R), PortError>> + Send + use<Q, R>
     where
         R: Clone,
     {
         let owner = Arc::clone(self);
-        off_thread(self.port(), move || {
-            owner
-                .sendall(&value, timeout)
-                .map(|replies| replies.first().clone())
-        })
+        async move {
+            let replies = owner.sendall_future(&value, timeout).await?;
+            Ok(replies.first().clone())
+        }
     }
 }
 
@@ -119,14 +102,12 @@ where
         message: T,
         timeout: Duration,
         combine: C,
-    ) -> impl Future<Output = Result<O, PortError>> + use<T, O, C>
+    ) -> impl Future<Output = Result<O, PortError>> + Send + use<T, O, C>
     where
         O: Send + 'static,
         C: FnOnce(&BTreeMap<String, T>) -> O + Send + 'static,
     {
         let rendezvous = Arc::clone(self);
-        off_thread(self.name(), move || {
-            rendezvous.wait(&message, timeout, combine)
-        })
+        async move { rendezvous.wait_future(&message, timeout, combine).await }
     }
 }

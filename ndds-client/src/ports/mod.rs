@@ -13,31 +13,43 @@
 //! `receive_all_async`, `wait_async`). The pure logic lives in `ndds_core::ports` (the priority select).
 //!
 //! On the network, port `P` uses the reliable topics `port/P/request` (users to owner),
-//! `port/P/reply/<user>` (owner to one user handle) and `port/P/owner` (the owner's
-//! declaration, repeated every [`ANNOUNCE_PERIOD`]).
+//! `port/P/reply/<user>` (owner to one user handle), `port/P/owner` and `port/P/users` (the
+//! owner's and the users' declarations, written once and kept for late joiners: who is there
+//! is what discovery matched, see `declaration`).
+//!
+//! No primitive polls: each is a future that sleeps on the queues and conditions it waits for
+//! (`wait`); the blocking forms run it on the calling thread, the async forms on the caller's
+//! executor.
 
 mod asynch;
+mod declaration;
 mod error;
 mod existing;
 mod owner;
 mod respond;
 mod sendall;
 mod user;
+mod wait;
 mod waitfor;
 mod wire;
 
-use std::time::Duration;
+use std::future::Future;
+use std::pin::Pin;
+use std::time::{Duration, Instant};
+
+use ndds_core::ports::PrioritySelect;
 
 use ndds_core::types::builtin;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+pub use declaration::QUEUE_REPORT;
 pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Broadcast, BroadcastReply, Replies};
-pub use user::PortUser;
+pub use user::{ADMISSION_WAIT, PortUser};
 pub use waitfor::{Arrival, LINGER, REPEAT, Rendezvous};
 pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
 
@@ -53,47 +65,69 @@ pub trait Selectable {
     fn priority(&self) -> i32;
     /// Requests waiting now (taking them off the network into the owner's buffer).
     fn waiting(&self) -> usize;
+    /// Resolves once a request may be waiting (it may be taken into the owner's buffer on
+    /// the way): what [`select`] sleeps on.
+    fn arrival(&self) -> Pin<Box<dyn Future<Output = ()> + '_>>;
 }
 
 /// Waits (at most `timeout`) until one of `ports` has a request and returns the index of the
 /// one to receive from: the highest priority among those with requests waiting, the first
 /// listed among equal priorities (deterministic); its oldest request is received next (FIFO
-/// within a port).
+/// within a port). The choice is [`PrioritySelect`]'s, as for a [`Responder`]'s handlers.
 pub fn select(ports: &[&dyn Selectable], timeout: Duration) -> Result<usize, PortError> {
-    let start = std::time::Instant::now();
-    loop {
-        let best = ports
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| p.waiting() > 0)
-            .max_by_key(|(i, p)| (p.priority(), std::cmp::Reverse(*i)))
-            .map(|(i, _)| i);
-        if let Some(index) = best {
-            return Ok(index);
+    let start = Instant::now();
+    let chosen = wait::block_on(wait::timeout_at(wait::deadline(start, timeout), async {
+        loop {
+            if let Some(index) = choose(ports) {
+                return index;
+            }
+            let arrivals: Vec<_> = ports.iter().map(|p| p.arrival()).collect();
+            any(arrivals).await;
         }
-        if start.elapsed() >= timeout {
-            return Err(PortError::Timeout {
-                port: ports
-                    .iter()
-                    .map(|p| p.port())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                operation: "select",
-                task: String::new(),
-                owner: None,
-                waited: start.elapsed(),
-            });
+    }));
+    // At the deadline, a request that is there already is still chosen.
+    chosen
+        .or_else(|| choose(ports))
+        .ok_or_else(|| PortError::Timeout {
+            port: ports
+                .iter()
+                .map(|p| p.port())
+                .collect::<Vec<_>>()
+                .join(", "),
+            operation: "select",
+            task: String::new(),
+            owner: None,
+            waited: start.elapsed(),
+        })
+}
+
+/// The port among `ports` to receive from now, if any has a request.
+fn choose(ports: &[&dyn Selectable]) -> Option<usize> {
+    let mut ready = PrioritySelect::new();
+    for (index, port) in ports.iter().enumerate() {
+        let name = index.to_string();
+        if ready.add_port(&name, port.priority(), 1).is_ok() && port.waiting() > 0 {
+            let _ = ready.push(&name, index);
         }
-        std::thread::sleep(Duration::from_millis(1));
     }
+    ready.pop().map(|(_, index)| index)
+}
+
+/// Resolves when the first of `futures` does.
+async fn any(mut futures: Vec<Pin<Box<dyn Future<Output = ()> + '_>>>) {
+    std::future::poll_fn(|cx| {
+        if futures.iter_mut().any(|f| f.as_mut().poll(cx).is_ready()) {
+            std::task::Poll::Ready(())
+        } else {
+            std::task::Poll::Pending
+        }
+    })
+    .await;
 }
 
 /// The reply of a command port (a machine's `fsm.NAME`, a runtime's `cs.NAME`): what the
 /// command did, or why not, in words for the person who asked.
 pub type CommandReply = Result<String, String>;
-
-/// How often an owner repeats its declaration; users forget an owner not heard for three.
-pub const ANNOUNCE_PERIOD: Duration = Duration::from_millis(250);
 
 fn topic(port: &str, leaf: &str) -> String {
     format!("port/{port}/{leaf}")
@@ -208,6 +242,23 @@ fn reliable_producer<T: PortWire>(
 ) -> Result<Producer<T>, PortError> {
     let qos = ProducerQos {
         reliability: Reliability::Reliable { depth: 256 },
+        ..ProducerQos::default()
+    };
+    participant
+        .producer_with_type::<T>(topic, T::description(), qos)
+        .map_err(|e| declare_error(port, topic, e))
+}
+
+/// A reliable producer of declarations: its last sample is kept for endpoints that match
+/// later, so a declaration is written once (and again when it changes).
+fn declaring_producer<T: PortWire>(
+    participant: &Participant,
+    port: &str,
+    topic: &str,
+) -> Result<Producer<T>, PortError> {
+    let qos = ProducerQos {
+        reliability: Reliability::Reliable { depth: 256 },
+        late_joiners: 1,
         ..ProducerQos::default()
     };
     participant

@@ -1,74 +1,90 @@
 //! [`PortOwner`]: the one task that owns a port — `receive` requests, `reply` later and in any
 //! order.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
+use std::future::Future;
 use std::marker::PhantomData;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::declaration::{Declaration, Presence};
 use super::error::PortError;
+use super::sendall::{Broadcast, BroadcastReply};
+use super::wait::{self, Either, Notify};
 use super::wire::{Filter, OwnerInfo, Reply, Request, Restrictions, UserInfo};
 use super::{
-    ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, spawn_error, topic,
+    check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error, topic,
 };
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
 pub(crate) struct OwnerShared {
-    port: String,
-    task: String,
+    pub(crate) port: String,
+    pub(crate) task: String,
     participant: Participant,
     /// Reply streams by user handle, with when each was last used.
     replies: Mutex<HashMap<String, (Producer<Reply>, Instant)>>,
-    /// Another owner seen on the port (its task), if any.
-    conflict: Mutex<Option<(String, Instant)>>,
-    stop: AtomicBool,
+    pub(crate) stop: AtomicBool,
+    /// Told when the owner stops, another owner comes or goes, and `pending` changes.
+    pub(crate) changed: Notify,
     restrictions: Restrictions,
-    /// Users heard recently, in the order first heard: (info, last heard).
-    active: Mutex<Vec<(UserInfo, Instant)>>,
-    /// Refusals so far, in words.
-    refused: Mutex<Vec<String>>,
+    presence: Mutex<Presence>,
+    /// Requests taken off the topic (by [`select`](super::select) or the filter) and not
+    /// received yet.
+    pending: Mutex<VecDeque<Request>>,
 }
 
 impl OwnerShared {
-    /// Drops the reply streams of users that went away: no reply consumer matched any more,
-    /// and none used for four announcement periods (a user that has just declared is given
-    /// that long to match). A domain where tools come and go keeps no stream per past call.
-    fn prune_replies(&self) {
-        let mut replies = self.replies.lock().unwrap_or_else(|p| p.into_inner());
-        replies.retain(|_, (producer, used)| {
-            used.elapsed() < ANNOUNCE_PERIOD * 4 || producer.wait_for_consumers(1, Duration::ZERO)
-        });
+    pub(crate) fn presence(&self) -> MutexGuard<'_, Presence> {
+        self.presence.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Takes user declarations, forgets users not heard for three periods, and returns the
-    /// user handles admitted under `max_users` (all of them without it).
-    fn admit(&self, users: &Consumer<UserInfo>) -> Vec<String> {
-        let mut active = self.active.lock().unwrap_or_else(|p| p.into_inner());
-        while let Ok(sample) = users.try_recv() {
-            let info = sample.value;
-            let full = active.len() >= ACTIVE_LIMIT;
-            match active.iter_mut().find(|(u, _)| u.user == info.user) {
-                Some(entry) => entry.1 = Instant::now(),
-                None if full => {}
-                None => {
-                    if let Some(why) = self.refusal(&info) {
-                        self.note_refusal(&info, &why);
-                    }
-                    active.push((info, Instant::now()));
-                }
-            }
+    fn pending(&self) -> MutexGuard<'_, VecDeque<Request>> {
+        self.pending.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub(crate) fn queue_len(&self) -> usize {
+        self.pending().len()
+    }
+
+    /// Drops the reply stream of a user that went away.
+    pub(crate) fn forget_replies(&self, user: &str) {
+        self.replies
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(user);
+    }
+
+    /// Why the user list or usage restriction refuses `user`, if it does.
+    pub(crate) fn refusal(&self, user: &UserInfo) -> Option<String> {
+        self.restrictions
+            .refusal(&user.task, &user.usages)
+            .map(|(what, why)| format!("{what}: {why}"))
+    }
+
+    pub(crate) fn note_refusal(&self, presence: &mut Presence, user: &UserInfo, why: &str) {
+        let text = format!("`{}` ({}): {why}", user.task, user.user);
+        tracing::warn!(port = %self.port, owner = %self.task, refusal = %text, "port user refused");
+        if presence.refused.len() < 256 && !presence.refused.contains(&text) {
+            presence.refused.push(text);
         }
-        active.retain(|(_, seen)| seen.elapsed() < ANNOUNCE_PERIOD * 3);
+    }
+
+    /// The user handles admitted now: the present users the restrictions allow, first heard
+    /// first, up to `max_users` (all of them without it).
+    pub(crate) fn admitted_users(&self) -> Vec<String> {
+        let presence = self.presence();
         let limit = self
             .restrictions
             .max_users
             .map_or(usize::MAX, |m| m as usize);
-        active
+        presence
+            .active
             .iter()
             .filter(|(u, _)| self.refusal(u).is_none())
             .take(limit)
@@ -76,57 +92,30 @@ impl OwnerShared {
             .collect()
     }
 
-    /// Why the user list or usage restriction refuses `user`, if it does.
-    fn refusal(&self, user: &UserInfo) -> Option<String> {
-        self.restrictions
-            .refusal(&user.task, &user.usages)
-            .map(|(what, why)| format!("{what}: {why}"))
-    }
-
-    fn note_refusal(&self, user: &UserInfo, why: &str) {
-        let text = format!("`{}` ({}): {why}", user.task, user.user);
-        tracing::warn!(port = %self.port, owner = %self.task, refusal = %text, "port user refused");
-        let mut refused = self.refused.lock().unwrap_or_else(|p| p.into_inner());
-        if refused.len() < 256 && !refused.contains(&text) {
-            refused.push(text);
-        }
-    }
-
     /// Whether a request from user handle `user` may be served.
     fn admitted(&self, user: &str) -> bool {
-        let active = self.active.lock().unwrap_or_else(|p| p.into_inner());
-        let limit = self
-            .restrictions
-            .max_users
-            .map_or(usize::MAX, |m| m as usize);
-        if !self.restrictions.restricted() {
-            return true;
-        }
-        active
-            .iter()
-            .filter(|(u, _)| self.refusal(u).is_none())
-            .take(limit)
-            .any(|(u, _)| u.user == user)
+        !self.restrictions.restricted() || self.admitted_users().iter().any(|u| u == user)
+    }
+
+    /// The other owner of the port, if one is present.
+    fn conflict(&self) -> Option<String> {
+        self.presence().others.values().min().cloned()
     }
 }
 
 /// The owner of a port: receives requests of type `Q` and replies with `R`.
 pub struct PortOwner<Q, R> {
     shared: Arc<OwnerShared>,
-    broadcast: Producer<super::sendall::Broadcast>,
-    broadcast_replies: Consumer<super::sendall::BroadcastReply>,
-    broadcasts: std::sync::atomic::AtomicU64,
+    broadcast: Producer<Broadcast>,
+    broadcast_replies: Consumer<BroadcastReply>,
+    broadcasts: AtomicU64,
     sendall_turn: Mutex<()>,
     /// `None` when a filter thread reads the topic.
     requests: Option<Consumer<Request>>,
-    /// Requests taken off the topic (by [`select`](super::select) or the filter) and not
-    /// received yet.
-    pending: Arc<Mutex<std::collections::VecDeque<Request>>>,
     filter: Option<JoinHandle<()>>,
-    priority: std::sync::atomic::AtomicI32,
-    owners: Consumer<OwnerInfo>,
+    priority: AtomicI32,
     incarnation: u64,
-    announcer: Option<JoinHandle<()>>,
+    declaration: Option<JoinHandle<()>>,
     _types: PhantomData<fn(Q) -> R>,
 }
 
@@ -162,7 +151,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         let users = reliable_consumer::<UserInfo>(participant, port, &topic(port, "users"))?;
         let requests = reliable_consumer::<Request>(participant, port, &topic(port, "request"))?;
         let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
-        let announce = reliable_producer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
+        let announce = declaring_producer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
         let incarnation = fastrand::u64(..);
         let info = OwnerInfo {
             task: task.to_owned(),
@@ -180,13 +169,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             task: task.to_owned(),
             participant: participant.clone(),
             replies: Mutex::new(HashMap::new()),
-            conflict: Mutex::new(None),
             stop: AtomicBool::new(false),
+            changed: Notify::default(),
             restrictions,
-            active: Mutex::new(Vec::new()),
-            refused: Mutex::new(Vec::new()),
+            presence: Mutex::new(Presence::default()),
+            pending: Mutex::new(VecDeque::new()),
         });
-        let pending = Arc::new(Mutex::new(std::collections::VecDeque::new()));
         let (requests, filter) = match shared.restrictions.filter {
             None => (Some(requests), None),
             Some(Filter::BoundedBuffer { capacity: 0 }) => {
@@ -205,48 +193,37 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     });
                 }
                 let shared = Arc::clone(&shared);
-                let buffer = Arc::clone(&pending);
                 let name = format!("port-filter-{port}");
                 let thread = std::thread::Builder::new()
                     .name(name.clone())
-                    .spawn(move || bounded_buffer(&shared, &requests, &buffer, capacity as usize))
+                    .spawn(move || bounded_buffer(&shared, &requests, capacity as usize))
                     .map_err(spawn_error(port, &name))?;
                 (None, Some(thread))
             }
         };
-        let flag = Arc::clone(&shared);
-        let queued = Arc::clone(&pending);
+        let declaring = Arc::clone(&shared);
         let thread = format!("port-{port}");
-        let announcer = std::thread::Builder::new()
+        let declaration = Declaration {
+            users,
+            owners,
+            announce,
+            info,
+        };
+        let declaration = std::thread::Builder::new()
             .name(thread.clone())
-            .spawn(move || {
-                let mut info = info;
-                while !flag.stop.load(Ordering::Acquire) {
-                    info.admitted = flag.admit(&users);
-                    flag.prune_replies();
-                    let queue = queued.lock().unwrap_or_else(|p| p.into_inner()).len();
-                    info.queue = u32::try_from(queue).unwrap_or(u32::MAX);
-                    let _ = announce.write(&info);
-                    let until = Instant::now() + ANNOUNCE_PERIOD;
-                    while Instant::now() < until && !flag.stop.load(Ordering::Acquire) {
-                        std::thread::sleep(Duration::from_millis(10));
-                    }
-                }
-            })
+            .spawn(move || declaration.run(&declaring))
             .map_err(spawn_error(port, &thread))?;
         Ok(Self {
             broadcast: reliable_producer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_consumer(participant, port, &topic(port, "all-reply"))?,
-            broadcasts: std::sync::atomic::AtomicU64::new(1),
+            broadcasts: AtomicU64::new(1),
             sendall_turn: Mutex::new(()),
             shared,
             requests,
-            pending,
             filter,
-            priority: std::sync::atomic::AtomicI32::new(priority),
-            owners,
+            priority: AtomicI32::new(priority),
             incarnation,
-            announcer: Some(announcer),
+            declaration: Some(declaration),
             _types: PhantomData,
         })
     }
@@ -264,35 +241,47 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         value: &Q,
         timeout: Duration,
     ) -> Result<super::Replies<'_, R>, PortError> {
+        wait::block_on(self.sendall_future(value, timeout))
+    }
+
+    pub(crate) async fn sendall_future(
+        &self,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<super::Replies<'_, R>, PortError> {
         let start = Instant::now();
         let port = &self.shared.port;
-        // One broadcast at a time per owner: they share the reply stream.
-        let _turn = self.sendall_turn.lock().unwrap_or_else(|p| p.into_inner());
-        let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
         let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
             port: port.clone(),
             what: "encoding a broadcast",
             reason: e.to_string(),
         })?;
-        self.broadcast
-            .write(&super::sendall::Broadcast {
-                owner: self.incarnation,
-                id,
-                task: self.shared.task.clone(),
-                payload,
-            })
-            .map_err(|source| PortError::Write {
-                port: port.clone(),
-                what: "a broadcast".to_owned(),
-                source,
-            })?;
+        let id = {
+            // One broadcast at a time per owner: they share the reply stream.
+            let _turn = self.sendall_turn.lock().unwrap_or_else(|p| p.into_inner());
+            let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
+            self.broadcast
+                .write(&Broadcast {
+                    owner: self.incarnation,
+                    id,
+                    task: self.shared.task.clone(),
+                    payload,
+                })
+                .map_err(|source| PortError::Write {
+                    port: port.clone(),
+                    what: "a broadcast".to_owned(),
+                    source,
+                })?;
+            id
+        };
         let first = super::sendall::next_reply(
             port,
             &self.broadcast_replies,
             self.incarnation,
             id,
-            timeout,
+            wait::deadline(start, timeout),
         )
+        .await
         .ok_or_else(|| PortError::Timeout {
             port: port.clone(),
             operation: "sendall",
@@ -317,11 +306,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
 
     /// The users refused so far by the port's restrictions, in words.
     pub fn refusals(&self) -> Vec<String> {
-        self.shared
-            .refused
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone()
+        self.shared.presence().refused.clone()
     }
 
     /// The port's restrictions.
@@ -334,52 +319,22 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         self.priority.store(priority, Ordering::Relaxed);
     }
 
-    /// The other owner of this port, if one was seen.
+    /// The other owner of this port, while one is present (its declaration matched).
     pub fn conflict(&self) -> Option<String> {
-        self.note_other_owners();
-        let mut conflict = self
-            .shared
-            .conflict
-            .lock()
-            .unwrap_or_else(|p| p.into_inner());
-        // The other owner is gone once it has not been heard for three periods.
-        if conflict
-            .as_ref()
-            .is_some_and(|(_, seen)| seen.elapsed() >= ANNOUNCE_PERIOD * 3)
-        {
-            *conflict = None;
-        }
-        conflict.as_ref().map(|(other, _)| other.clone())
-    }
-
-    fn note_other_owners(&self) {
-        while let Ok(sample) = self.owners.try_recv() {
-            if sample.value.incarnation != self.incarnation {
-                let other = format!("{} (pid {})", sample.value.task, sample.value.pid);
-                let mut conflict = self
-                    .shared
-                    .conflict
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner());
-                if conflict.is_none() {
-                    tracing::warn!(port = %self.shared.port, owner = %self.shared.task, other = %other,
-                        "a second owner declared this port");
-                }
-                *conflict = Some((other, Instant::now()));
-            }
-        }
+        self.shared.conflict()
     }
 
     /// [`receive`](Self::receive) for a loop that serves the port: `None` at the timeout, for
     /// a request that does not decode (its sender's problem: the next one is taken at once),
     /// and for a failure that lasts (a second owner), which is logged as an error when it
     /// begins or changes (`failing` remembers it between calls) and then waited out for
-    /// `timeout`.
+    /// `timeout` (or until the other owner goes).
     pub fn serve_next(
         &self,
         timeout: Duration,
         failing: &mut Option<String>,
     ) -> Option<(Q, ReplyHandle<R>)> {
+        let start = Instant::now();
         match self.receive(timeout) {
             Ok(request) => {
                 *failing = None;
@@ -392,7 +347,16 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     tracing::error!(port = %self.shared.port, "{text}; requests wait until it is resolved");
                     *failing = Some(text);
                 }
-                std::thread::sleep(timeout);
+                let shared = &self.shared;
+                wait::block_on(wait::timeout_at(wait::deadline(start, timeout), async {
+                    loop {
+                        let seen = shared.changed.generation();
+                        if shared.conflict().is_none() || shared.stop.load(Ordering::Acquire) {
+                            return;
+                        }
+                        shared.changed.changed(seen).await;
+                    }
+                }));
                 None
             }
         }
@@ -401,81 +365,122 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// Waits for the next request (at most `timeout`): the message and the handle to reply
     /// with. Fails while another owner of the port exists.
     pub fn receive(&self, timeout: Duration) -> Result<(Q, ReplyHandle<R>), PortError> {
+        wait::block_on(self.receive_future(timeout))
+    }
+
+    pub(crate) async fn receive_future(
+        &self,
+        timeout: Duration,
+    ) -> Result<(Q, ReplyHandle<R>), PortError> {
         let start = Instant::now();
+        let at = wait::deadline(start, timeout);
+        match wait::timeout_at(at, self.next_request()).await {
+            Some(Ok(request)) => self.handle(request),
+            Some(Err(err)) => Err(err),
+            None => {
+                // At the deadline, what is already there is still taken.
+                match self.take_request() {
+                    Some(request) => self.handle(request),
+                    None => Err(PortError::Timeout {
+                        port: self.shared.port.clone(),
+                        operation: "receive",
+                        task: self.shared.task.clone(),
+                        owner: None,
+                        waited: start.elapsed(),
+                    }),
+                }
+            }
+        }
+    }
+
+    /// The next request from an admitted user, as soon as there is one.
+    async fn next_request(&self) -> Result<Request, PortError> {
         loop {
-            if let Some(other) = self.conflict() {
+            let seen = self.shared.changed.generation();
+            if let Some(other) = self.shared.conflict() {
                 return Err(PortError::SecondOwner {
                     port: self.shared.port.clone(),
                     first: self.shared.task.clone(),
                     second: other,
                 });
             }
-            let left = timeout.saturating_sub(start.elapsed());
-            let slice = left.min(Duration::from_millis(50));
-            let buffered = self
-                .pending
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .pop_front();
-            let next = match buffered {
-                Some(request) => Ok(request),
-                None => match &self.requests {
-                    Some(requests) => requests
-                        .recv_timeout(slice)
-                        .map(|s| s.value)
-                        .map_err(|_| ()),
-                    None => {
-                        std::thread::sleep(slice.min(Duration::from_millis(2)));
-                        Err(())
-                    }
-                },
-            };
-            match next {
-                Ok(request) if !self.shared.admitted(&request.user) => {
-                    tracing::debug!(port = %self.shared.port, user = %request.task,
-                        "request from a user the port's restrictions refuse: dropped");
-                    if left.is_zero() {
-                        return Err(PortError::Timeout {
-                            port: self.shared.port.clone(),
-                            operation: "receive",
-                            task: self.shared.task.clone(),
-                            owner: None,
-                            waited: start.elapsed(),
-                        });
-                    }
-                }
-                Ok(request) => {
-                    let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| {
-                        PortError::Codec {
-                            port: self.shared.port.clone(),
-                            what: "decoding a request",
-                            reason: e.to_string(),
+            if let Some(request) = self.take_request() {
+                return Ok(request);
+            }
+            let arrived = match &self.requests {
+                Some(requests) => {
+                    match wait::race(
+                        wait::next_sample(requests),
+                        self.shared.changed.changed(seen),
+                    )
+                    .await
+                    {
+                        Either::Left(Some(sample)) => Some(sample.value),
+                        // The topic closed: only a change can help now.
+                        Either::Left(None) => {
+                            self.shared.changed.changed(seen).await;
+                            None
                         }
-                    })?;
-                    return Ok((
-                        value,
-                        ReplyHandle {
-                            shared: Arc::clone(&self.shared),
-                            answered: self.filter.is_some(),
-                            id: request.id,
-                            user: request.user,
-                            task: request.task,
-                            _reply: PhantomData,
-                        },
-                    ));
+                        Either::Right(()) => None,
+                    }
                 }
-                Err(_) if left.is_zero() => {
-                    return Err(PortError::Timeout {
-                        port: self.shared.port.clone(),
-                        operation: "receive",
-                        task: self.shared.task.clone(),
-                        owner: None,
-                        waited: start.elapsed(),
-                    });
+                None => {
+                    self.shared.changed.changed(seen).await;
+                    None
                 }
-                Err(_) => {}
+            };
+            if let Some(request) = arrived
+                && self.admit(&request)
+            {
+                return Ok(request);
             }
         }
+    }
+
+    /// A request waiting now, buffered or on the topic, from an admitted user.
+    fn take_request(&self) -> Option<Request> {
+        loop {
+            let buffered = self.shared.pending().pop_front();
+            let request = match buffered {
+                Some(request) => {
+                    self.shared.changed.notify();
+                    request
+                }
+                None => self.requests.as_ref()?.try_recv().ok()?.value,
+            };
+            if self.admit(&request) {
+                return Some(request);
+            }
+        }
+    }
+
+    /// Whether `request` comes from an admitted user (else it is dropped).
+    fn admit(&self, request: &Request) -> bool {
+        if self.shared.admitted(&request.user) {
+            return true;
+        }
+        tracing::debug!(port = %self.shared.port, user = %request.task,
+            "request from a user the port's restrictions refuse: dropped");
+        false
+    }
+
+    fn handle(&self, request: Request) -> Result<(Q, ReplyHandle<R>), PortError> {
+        let value = postcard::from_bytes::<Q>(&request.payload).map_err(|e| PortError::Codec {
+            port: self.shared.port.clone(),
+            what: "decoding a request",
+            reason: e.to_string(),
+        })?;
+        Ok((
+            value,
+            ReplyHandle {
+                shared: Arc::clone(&self.shared),
+                answered: self.filter.is_some(),
+                id: request.id,
+                user: request.user,
+                task: request.task,
+                _reply: PhantomData,
+            },
+        ))
     }
 }
 
@@ -491,7 +496,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
     }
 
     fn waiting(&self) -> usize {
-        let mut pending = self.pending.lock().unwrap_or_else(|p| p.into_inner());
+        let mut pending = self.shared.pending();
+        let before = pending.len();
         if let Some(requests) = &self.requests {
             // Taken off the topic up to a bound; the rest waits there (flow control).
             while pending.len() < PENDING_LIMIT {
@@ -501,14 +507,44 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
                 }
             }
         }
-        pending.len()
+        let waiting = pending.len();
+        drop(pending);
+        if waiting != before {
+            self.shared.changed.notify();
+        }
+        waiting
+    }
+
+    fn arrival(&self) -> Pin<Box<dyn Future<Output = ()> + '_>> {
+        Box::pin(async move {
+            let seen = self.shared.changed.generation();
+            let room = self.shared.queue_len() < PENDING_LIMIT;
+            match &self.requests {
+                Some(requests) if room => {
+                    let arrived = wait::race(
+                        wait::next_sample(requests),
+                        self.shared.changed.changed(seen),
+                    );
+                    match arrived.await {
+                        Either::Left(Some(sample)) => {
+                            self.shared.pending().push_back(sample.value);
+                            self.shared.changed.notify();
+                        }
+                        Either::Left(None) => self.shared.changed.changed(seen).await,
+                        Either::Right(()) => {}
+                    }
+                }
+                _ => self.shared.changed.changed(seen).await,
+            }
+        })
     }
 }
 
 impl<Q, R> Drop for PortOwner<Q, R> {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
-        for thread in [self.announcer.take(), self.filter.take()]
+        self.shared.changed.notify();
+        for thread in [self.declaration.take(), self.filter.take()]
             .into_iter()
             .flatten()
         {
@@ -521,8 +557,6 @@ impl<Q, R> Drop for PortOwner<Q, R> {
 const PENDING_LIMIT: usize = 1024;
 /// Users whose reply streams an owner keeps at most (the least recently used goes first).
 const REPLY_STREAMS: usize = 1024;
-/// Users an owner tracks at most.
-const ACTIVE_LIMIT: usize = 1024;
 
 /// How long an owner waits for a new user's reply topic to match before replying anyway.
 pub(crate) const REPLY_MATCH: Duration = Duration::from_secs(2);
@@ -608,22 +642,26 @@ fn send_reply(
 
 /// The bounded-buffer filter: takes requests off the topic while the buffer has room and
 /// answers each at once (so the sender goes on); when the buffer is full, it stops taking
-/// them, and senders wait for room.
-fn bounded_buffer(
-    shared: &OwnerShared,
-    requests: &Consumer<Request>,
-    buffer: &Mutex<std::collections::VecDeque<Request>>,
-    capacity: usize,
-) {
+/// them, and senders wait for room. It sleeps on the topic and on the owner's changes.
+fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: usize) {
     let empty = postcard::to_stdvec(&()).unwrap_or_default();
     while !shared.stop.load(Ordering::Acquire) {
-        let room = buffer.lock().unwrap_or_else(|p| p.into_inner()).len() < capacity;
-        if !room {
-            std::thread::sleep(Duration::from_millis(1));
+        let seen = shared.changed.generation();
+        if shared.queue_len() >= capacity {
+            wait::block_on(shared.changed.changed(seen));
             continue;
         }
-        let Ok(sample) = requests.recv_timeout(Duration::from_millis(20)) else {
-            continue;
+        let arrived = wait::block_on(wait::race(
+            wait::next_sample(requests),
+            shared.changed.changed(seen),
+        ));
+        let sample = match arrived {
+            Either::Left(Some(sample)) => sample,
+            Either::Left(None) => {
+                wait::block_on(shared.changed.changed(seen));
+                continue;
+            }
+            Either::Right(()) => continue,
         };
         let request = sample.value;
         if !shared.admitted(&request.user) {
@@ -638,9 +676,7 @@ fn bounded_buffer(
         ) {
             tracing::warn!(port = %shared.port, error = %err, "filter could not answer a sender");
         }
-        buffer
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .push_back(request);
+        shared.pending().push_back(request);
+        shared.changed.notify();
     }
 }

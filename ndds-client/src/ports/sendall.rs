@@ -59,40 +59,37 @@ impl<R: DeserializeOwned> Replies<'_, R> {
 
     /// The next later reply, waiting at most `timeout`; `None` when none came.
     pub fn next(&self, timeout: Duration) -> Option<Result<(String, R), PortError>> {
-        next_reply(self.port, self.source, self.owner, self.id, timeout)
+        let at = super::wait::deadline(Instant::now(), timeout);
+        super::wait::block_on(next_reply(self.port, self.source, self.owner, self.id, at))
     }
 }
 
-/// The next reply to broadcast `id` of `owner` on `source`.
-pub(crate) fn next_reply<R: DeserializeOwned>(
+/// The next reply to broadcast `id` of `owner` on `source`, by `at` (replies to other
+/// broadcasts are dropped).
+pub(crate) async fn next_reply<R: DeserializeOwned>(
     port: &str,
     source: &crate::Consumer<BroadcastReply>,
     owner: u64,
     id: u64,
-    timeout: Duration,
+    at: Option<Instant>,
 ) -> Option<Result<(String, R), PortError>> {
-    let start = Instant::now();
-    loop {
-        let left = timeout.saturating_sub(start.elapsed());
-        if left.is_zero() {
-            return None;
-        }
-        let sample = source
-            .recv_timeout(left.min(Duration::from_millis(50)))
-            .ok();
-        if let Some(sample) = sample {
-            let reply = sample.value;
+    let reply = super::wait::timeout_at(at, async {
+        loop {
+            let reply = super::wait::next_sample(source).await?.value;
             if reply.owner == owner && reply.id == id {
-                return Some(
-                    postcard::from_bytes(&reply.payload)
-                        .map(|value| (reply.task, value))
-                        .map_err(|e| PortError::Codec {
-                            port: port.to_owned(),
-                            what: "decoding a broadcast reply",
-                            reason: e.to_string(),
-                        }),
-                );
+                return Some(reply);
             }
         }
-    }
+    })
+    .await
+    .flatten()?;
+    Some(
+        postcard::from_bytes(&reply.payload)
+            .map(|value| (reply.task, value))
+            .map_err(|e| PortError::Codec {
+                port: port.to_owned(),
+                what: "decoding a broadcast reply",
+                reason: e.to_string(),
+            }),
+    )
 }

@@ -1,30 +1,34 @@
 //! [`PortUser`]: a task that uses a port — `send` blocks until the owner replies (or the
 //! timeout). Several threads may send through one user at once; each gets its own reply.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::error::PortError;
+use super::sendall::{Broadcast, BroadcastReply};
+use super::wait::{self, Either, Notify};
 use super::wire::{OwnerInfo, Reply, Request, Usage, UserInfo};
-use super::{
-    ANNOUNCE_PERIOD, check_name, reliable_consumer, reliable_producer, spawn_error, topic,
-};
-use crate::{Consumer, Participant, Producer, TypeDescription};
+use super::{check_name, declaring_producer, reliable_consumer, reliable_producer, topic};
+use crate::{Consumer, Event, Guid, Notification, Participant, Producer, TypeDescription};
+
+/// How long a user of a port with a maximum of active users waits to be admitted once it
+/// knows the owner; past that, the port is full.
+pub const ADMISSION_WAIT: Duration = Duration::from_secs(1);
 
 /// A user of a port: sends requests of type `Q`, gets replies of type `R`.
 pub struct PortUser<Q, R> {
     usages: Vec<Usage>,
     declared: Instant,
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    announcer: Option<std::thread::JoinHandle<()>>,
-    broadcasts: Consumer<super::sendall::Broadcast>,
-    broadcast_replies: Producer<super::sendall::BroadcastReply>,
+    /// The user's declaration, written once and kept for owners that match later.
+    _declaration: Producer<UserInfo>,
+    broadcasts: Consumer<Broadcast>,
+    broadcast_replies: Producer<BroadcastReply>,
     port: String,
     task: String,
     user: String,
@@ -33,7 +37,8 @@ pub struct PortUser<Q, R> {
     owners: Consumer<OwnerInfo>,
     next_id: AtomicU64,
     demux: Mutex<Demux>,
-    arrived: Condvar,
+    /// Told when a sender hands a reply it took to the sender waiting for it.
+    handed: Notify,
     formats: (u64, u64),
     _types: PhantomData<fn(Q) -> R>,
 }
@@ -43,13 +48,28 @@ struct Demux {
     /// Replies taken off the topic by one sender for another.
     waiting: HashMap<u64, Reply>,
     /// Requests whose senders still wait (replies to others are dropped).
-    awaiting: std::collections::HashSet<u64>,
-    /// A sender is reading the reply topic now.
-    reading: bool,
-    /// Owners seen recently: incarnation -> (description, when last seen).
-    owners: HashMap<u64, (OwnerInfo, Instant)>,
-    /// When each owner incarnation was first seen (admission takes a few announcements).
-    first_seen: HashMap<u64, Instant>,
+    awaiting: HashSet<u64>,
+    /// Owners present: their declaration's producer -> their latest declaration.
+    owners: HashMap<Guid, OwnerInfo>,
+    /// When each owner was first seen (admission takes a moment).
+    first_seen: HashMap<Guid, Instant>,
+    /// Not admitted yet by a port with a maximum of active users: refused from then on.
+    admission_ends: Option<Instant>,
+}
+
+/// Forgets a request's reply when its sender stops waiting (also when an async `send` is
+/// dropped).
+struct Awaiting<'a> {
+    demux: &'a Mutex<Demux>,
+    id: u64,
+}
+
+impl Drop for Awaiting<'_> {
+    fn drop(&mut self) {
+        let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+        demux.awaiting.remove(&self.id);
+        demux.waiting.remove(&self.id);
+    }
 }
 
 impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<Q, R> {
@@ -68,32 +88,23 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     ) -> Result<Self, PortError> {
         check_name(port)?;
         let user = format!("{:016x}", fastrand::u64(..));
-        let announce = reliable_producer::<UserInfo>(participant, port, &topic(port, "users"))?;
+        let declaration = declaring_producer::<UserInfo>(participant, port, &topic(port, "users"))?;
         let info = UserInfo {
             user: user.clone(),
             task: task.to_owned(),
             usages: usages.to_vec(),
         };
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let flag = std::sync::Arc::clone(&stop);
-        let thread = format!("port-user-{port}");
-        let announcer = std::thread::Builder::new()
-            .name(thread.clone())
-            .spawn(move || {
-                while !flag.load(Ordering::Acquire) {
-                    let _ = announce.write(&info);
-                    let until = Instant::now() + ANNOUNCE_PERIOD;
-                    while Instant::now() < until && !flag.load(Ordering::Acquire) {
-                        std::thread::sleep(Duration::from_millis(10));
-                    }
-                }
-            })
-            .map_err(spawn_error(port, &thread))?;
+        declaration
+            .write(&info)
+            .map_err(|source| PortError::Write {
+                port: port.to_owned(),
+                what: "the user's declaration".to_owned(),
+                source,
+            })?;
         Ok(Self {
             usages: usages.to_vec(),
             declared: Instant::now(),
-            stop,
-            announcer: Some(announcer),
+            _declaration: declaration,
             broadcasts: reliable_consumer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_producer(participant, port, &topic(port, "all-reply"))?,
             requests: reliable_producer::<Request>(participant, port, &topic(port, "request"))?,
@@ -108,7 +119,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             user,
             next_id: AtomicU64::new(1),
             demux: Mutex::new(Demux::default()),
-            arrived: Condvar::new(),
+            handed: Notify::default(),
             formats: (
                 TypeDescription::of::<Q>().fingerprint(),
                 TypeDescription::of::<R>().fingerprint(),
@@ -122,29 +133,49 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         &self.port
     }
 
-    /// The owner now: its task, or an error when there are two or the formats differ; `None`
-    /// while none is known.
-    fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
-        while let Ok(sample) = self.owners.try_recv() {
-            demux
-                .first_seen
-                .entry(sample.value.incarnation)
-                .or_insert_with(Instant::now);
-            demux
-                .owners
-                .insert(sample.value.incarnation, (sample.value, Instant::now()));
+    fn demux(&self) -> MutexGuard<'_, Demux> {
+        self.demux.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Takes an owner's declaration or its loss.
+    fn note_owner(demux: &mut Demux, event: Event<OwnerInfo>) {
+        match event {
+            Event::Sample(sample) => {
+                let writer = sample.info.writer;
+                demux.first_seen.entry(writer).or_insert_with(Instant::now);
+                demux.owners.insert(writer, sample.value);
+            }
+            Event::Notification(Notification::ProducerLost { writer, .. }) => {
+                demux.owners.remove(&writer);
+                demux.first_seen.remove(&writer);
+            }
+            Event::Notification(_) => {}
         }
-        let known: Vec<u64> = demux.owners.keys().copied().collect();
-        demux.first_seen.retain(|k, _| known.contains(k));
-        // An owner not heard for three announcement periods is gone.
-        demux
-            .owners
-            .retain(|_, (_, seen)| seen.elapsed() < ANNOUNCE_PERIOD * 3);
-        let mut owners: Vec<&OwnerInfo> = demux.owners.values().map(|(o, _)| o).collect();
-        owners.sort_by(|a, b| a.task.cmp(&b.task).then(a.pid.cmp(&b.pid)));
+    }
+
+    /// Waits for the next owner declaration or loss and takes it.
+    async fn owner_event(&self) {
+        if let Ok(mut events) = self.owners.events()
+            && let Some(event) = wait::next(&mut events).await
+        {
+            Self::note_owner(&mut self.demux(), event);
+            return;
+        }
+        std::future::pending::<()>().await;
+    }
+
+    /// The owner now: its task, or an error when there are two or the formats differ; `None`
+    /// while none is known (or it has not admitted this user yet).
+    fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
+        while let Ok(event) = self.owners.try_recv_event() {
+            Self::note_owner(demux, event);
+        }
+        demux.admission_ends = None;
+        let mut owners: Vec<(&Guid, &OwnerInfo)> = demux.owners.iter().collect();
+        owners.sort_by(|(_, a), (_, b)| a.task.cmp(&b.task).then(a.pid.cmp(&b.pid)));
         match owners.as_slice() {
             [] => Ok(None),
-            [owner] => {
+            [(writer, owner)] => {
                 let refused = |restriction: &'static str, detail: String| PortError::Refused {
                     port: self.port.clone(),
                     owner: owner.task.clone(),
@@ -156,20 +187,21 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                     return Err(refused(what, why));
                 }
                 if owner.restrictions.restricted() && !owner.admitted.contains(&self.user) {
-                    // The owner admits users on its next announcements; past that, it is full.
+                    // The owner admits users as it hears them; past a moment, it is full.
                     let since = demux
                         .first_seen
-                        .get(&owner.incarnation)
+                        .get(*writer)
                         .copied()
                         .unwrap_or_else(Instant::now)
                         .max(self.declared);
-                    if let Some(max) = owner.restrictions.max_users
-                        && since.elapsed() > ANNOUNCE_PERIOD * 4
-                    {
-                        return Err(refused(
-                            "maximum active users",
-                            format!("{max} active users already"),
-                        ));
+                    if let Some(max) = owner.restrictions.max_users {
+                        if since.elapsed() > ADMISSION_WAIT {
+                            return Err(refused(
+                                "maximum active users",
+                                format!("{max} active users already"),
+                            ));
+                        }
+                        demux.admission_ends = Some(since + ADMISSION_WAIT);
                     }
                     return Ok(None);
                 }
@@ -187,7 +219,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 }
                 Ok(Some(owner.task.clone()))
             }
-            [a, b, ..] => Err(PortError::SecondOwner {
+            [(_, a), (_, b), ..] => Err(PortError::SecondOwner {
                 port: self.port.clone(),
                 first: format!("{} (pid {})", a.task, a.pid),
                 second: format!("{} (pid {})", b.task, b.pid),
@@ -199,11 +231,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     /// shorter) for the owner's reply.
     pub fn send(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         self.require(Usage::Send)?;
-        self.exchange(value, timeout)
+        wait::block_on(self.exchange(value, timeout))
     }
 
     /// Refuses locally an operation this user did not declare.
-    fn require(&self, usage: Usage) -> Result<(), PortError> {
+    pub(crate) fn require(&self, usage: Usage) -> Result<(), PortError> {
         if self.usages.contains(&usage) {
             return Ok(());
         }
@@ -219,9 +251,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         })
     }
 
-    fn exchange(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+    /// One request and its reply: `send` and `query` as a future.
+    pub(crate) async fn exchange(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         let start = Instant::now();
-        let mut timeout = timeout;
+        let mut deadline = wait::deadline(start, timeout);
         let timed_out = |owner: Option<String>| PortError::Timeout {
             port: self.port.clone(),
             operation: "send",
@@ -231,25 +264,28 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         };
         // An owner must be known (and unique, with our formats) before the request goes out.
         let owner = loop {
-            let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
-            if let Some(owner) = self.owner(&mut demux)? {
-                let declared = demux
-                    .owners
-                    .values()
-                    .find_map(|(o, _)| o.restrictions.timeout_ms);
-                if let Some(ms) = declared {
-                    timeout = timeout.min(Duration::from_millis(ms));
+            let admission_ends = {
+                let mut demux = self.demux();
+                if let Some(owner) = self.owner(&mut demux)? {
+                    let declared = demux
+                        .owners
+                        .values()
+                        .find_map(|o| o.restrictions.timeout_ms);
+                    if let Some(ms) = declared {
+                        let limit = wait::deadline(start, Duration::from_millis(ms));
+                        deadline = deadline.into_iter().chain(limit).min();
+                    }
+                    break owner;
                 }
-                break owner;
-            }
-            drop(demux);
-            if start.elapsed() >= timeout {
+                demux.admission_ends
+            };
+            if deadline.is_some_and(|at| Instant::now() >= at) {
                 return Err(timed_out(None));
             }
-            std::thread::sleep(Duration::from_millis(5));
+            let until = deadline.into_iter().chain(admission_ends).min();
+            wait::timeout_at(until, self.owner_event()).await;
         };
-        let left = timeout.saturating_sub(start.elapsed());
-        if !self.requests.wait_for_consumers(1, left) {
+        if !wait::matched_by(&self.requests, deadline).await {
             return Err(timed_out(Some(owner)));
         }
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
@@ -258,37 +294,26 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "encoding a request",
             reason: e.to_string(),
         })?;
-        self.demux
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .awaiting
-            .insert(id);
-        let written = self.requests.write(&Request {
+        self.demux().awaiting.insert(id);
+        let _awaiting = Awaiting {
+            demux: &self.demux,
             id,
-            user: self.user.clone(),
-            task: self.task.clone(),
-            payload,
-        });
-        let deadline = start
-            .checked_add(timeout)
-            .unwrap_or(start + Duration::from_secs(86_400 * 365));
-        let reply = match written {
-            Ok(()) => self.wait_reply(id, deadline),
-            Err(_) => None,
         };
-        {
-            let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
-            demux.awaiting.remove(&id);
-            demux.waiting.remove(&id);
-        }
-        if let Err(source) = written {
-            return Err(PortError::Write {
+        self.requests
+            .write(&Request {
+                id,
+                user: self.user.clone(),
+                task: self.task.clone(),
+                payload,
+            })
+            .map_err(|source| PortError::Write {
                 port: self.port.clone(),
                 what: "a request".to_owned(),
                 source,
-            });
-        }
-        let reply = reply.ok_or_else(|| timed_out(Some(owner)))?;
+            })?;
+        let reply = wait::timeout_at(deadline, self.reply_to(id))
+            .await
+            .ok_or_else(|| timed_out(Some(owner)))?;
         postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a reply",
@@ -303,12 +328,21 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         timeout: Duration,
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
+        wait::block_on(self.receive_all_future(timeout, answer))
+    }
+
+    pub(crate) async fn receive_all_future(
+        &self,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> R,
+    ) -> Result<Q, PortError> {
         self.require(Usage::ReceiveAll)?;
         let start = Instant::now();
-        let broadcast = self
-            .broadcasts
-            .recv_timeout(timeout)
-            .map_err(|_| PortError::Timeout {
+        let deadline = wait::deadline(start, timeout);
+        let broadcast = wait::timeout_at(deadline, wait::next_sample(&self.broadcasts))
+            .await
+            .flatten()
+            .ok_or_else(|| PortError::Timeout {
                 port: self.port.clone(),
                 operation: "receive_all",
                 task: self.task.clone(),
@@ -329,13 +363,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         // The broadcast came, so its owner exists; its reply stream may not have matched this
         // user yet (across hosts discovery is not symmetric in time): a reliable reply written
         // before the match would reach nobody. Wait briefly, as first replies do.
-        if self.broadcast_replies.matched().is_empty() {
-            let _ = self
-                .broadcast_replies
-                .wait_for_consumers(1, super::owner::REPLY_MATCH.min(timeout));
-        }
+        let briefly = wait::deadline(Instant::now(), super::owner::REPLY_MATCH.min(timeout));
+        wait::matched_by(&self.broadcast_replies, briefly).await;
         self.broadcast_replies
-            .write(&super::sendall::BroadcastReply {
+            .write(&BroadcastReply {
                 owner: broadcast.owner,
                 id: broadcast.id,
                 task: self.task.clone(),
@@ -353,51 +384,31 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     /// answers. The same exchange as [`send`](Self::send).
     pub fn query(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         self.require(Usage::Query)?;
-        self.exchange(value, timeout)
+        wait::block_on(self.exchange(value, timeout))
     }
 
-    /// The reply to request `id`: one waiting sender reads the topic at a time and hands the
-    /// others their replies.
-    fn wait_reply(&self, id: u64, deadline: Instant) -> Option<Reply> {
-        let mut demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
+    /// The reply to request `id`. Every waiting sender reads the topic; one that takes
+    /// another's reply hands it over.
+    async fn reply_to(&self, id: u64) -> Reply {
         loop {
-            if let Some(reply) = demux.waiting.remove(&id) {
-                return Some(reply);
+            let seen = self.handed.generation();
+            if let Some(reply) = self.demux().waiting.remove(&id) {
+                return reply;
             }
-            let now = Instant::now();
-            if now >= deadline {
-                return None;
+            match wait::race(wait::next_sample(&self.replies), self.handed.changed(seen)).await {
+                Either::Left(Some(sample)) if sample.value.id == id => return sample.value,
+                Either::Left(Some(sample)) => {
+                    let mut demux = self.demux();
+                    if demux.awaiting.contains(&sample.value.id) {
+                        demux.waiting.insert(sample.value.id, sample.value);
+                        drop(demux);
+                        self.handed.notify();
+                    }
+                }
+                // The topic closed: only a reply another sender took can still come.
+                Either::Left(None) => self.handed.changed(seen).await,
+                Either::Right(()) => {}
             }
-            if demux.reading {
-                demux = self
-                    .arrived
-                    .wait_timeout(demux, deadline - now)
-                    .unwrap_or_else(|p| p.into_inner())
-                    .0;
-                continue;
-            }
-            demux.reading = true;
-            drop(demux);
-            let got = self
-                .replies
-                .recv_timeout((deadline - now).min(Duration::from_millis(20)));
-            demux = self.demux.lock().unwrap_or_else(|p| p.into_inner());
-            demux.reading = false;
-            if let Ok(sample) = got
-                && demux.awaiting.contains(&sample.value.id)
-            {
-                demux.waiting.insert(sample.value.id, sample.value);
-            }
-            self.arrived.notify_all();
-        }
-    }
-}
-
-impl<Q, R> Drop for PortUser<Q, R> {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(thread) = self.announcer.take() {
-            let _ = thread.join();
         }
     }
 }

@@ -3,10 +3,11 @@
 //! and continues with its result. Calls are numbered in rounds, so consecutive rendezvous never
 //! mix.
 //!
-//! On the network (reliable topic `waitfor/<name>`), each task repeats its arrival — message
-//! and the tasks whose arrival it has — every [`REPEAT`] until it has every message and every
-//! other task has its message: a task that joined late still gets everything, and nobody
-//! leaves while another still needs its message.
+//! On the network (reliable topic `waitfor/<name>`), each task writes its arrival — message
+//! and the tasks whose arrival it has — whenever what it has changes, until it has every
+//! message and every other task has its message; the topic keeps each task's last arrival for
+//! tasks that match later, so a task that joined late still gets everything, and nobody
+//! leaves while another still needs its message. Between writes a task sleeps on the topic.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::marker::PhantomData;
@@ -17,10 +18,12 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::error::PortError;
-use super::{check_name, reliable_consumer, reliable_producer};
+use super::wait::{self, Notify};
+use super::{check_name, declaring_producer, reliable_consumer};
 use crate::{Consumer, Participant, Producer};
 
-/// How often an arrival is repeated while the rendezvous is incomplete.
+/// How soon an arrival whose write failed (a full window on a loaded machine) is written
+/// again.
 pub const REPEAT: Duration = Duration::from_millis(20);
 
 /// How long a task leaving the rendezvous (its handle dropped) waits for its last arrival to
@@ -49,7 +52,10 @@ pub struct Rendezvous<T> {
     tasks: BTreeSet<String>,
     producer: Producer<Arrival>,
     consumer: Consumer<Arrival>,
-    state: Mutex<State>,
+    /// The rounds' state, taken by the one `wait` in progress (`None` meanwhile).
+    state: Mutex<Option<State>>,
+    /// Told when a `wait` gives the state back.
+    returned: Notify,
     _message: PhantomData<fn(T)>,
 }
 
@@ -79,12 +85,13 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
         }
         let topic = format!("waitfor/{name}");
         Ok(Self {
-            producer: reliable_producer(participant, name, &topic)?,
+            producer: declaring_producer(participant, name, &topic)?,
             consumer: reliable_consumer(participant, name, &topic)?,
             name: name.to_owned(),
             task: task.to_owned(),
             tasks,
-            state: Mutex::new(State::default()),
+            state: Mutex::new(Some(State::default())),
+            returned: Notify::default(),
             _message: PhantomData,
         })
     }
@@ -102,9 +109,34 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
         timeout: Duration,
         combine: impl FnOnce(&BTreeMap<String, T>) -> O,
     ) -> Result<O, PortError> {
-        let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        let round = state.round;
+        wait::block_on(self.wait_future(message, timeout, combine))
+    }
+
+    /// The state, once no other `wait` of this handle holds it.
+    async fn turn(&self) -> Turn<'_, T> {
+        loop {
+            let seen = self.returned.generation();
+            if let Some(state) = self.state.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                return Turn {
+                    rendezvous: self,
+                    state: Some(state),
+                };
+            }
+            self.returned.changed(seen).await;
+        }
+    }
+
+    pub(crate) async fn wait_future<O>(
+        &self,
+        message: &T,
+        timeout: Duration,
+        combine: impl FnOnce(&BTreeMap<String, T>) -> O,
+    ) -> Result<O, PortError> {
         let start = Instant::now();
+        let deadline = wait::deadline(start, timeout);
+        let mut turn = self.turn().await;
+        let state = turn.state();
+        let round = state.round;
         let payload = postcard::to_stdvec(message).map_err(|e| PortError::Codec {
             port: self.name.clone(),
             what: "encoding a waitfor message",
@@ -121,43 +153,26 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
                 seen: Vec::new(),
             },
         );
-        let mut last_sent: Option<Instant> = None;
         let mut changed = true;
+        let mut retry_at: Option<Instant> = None;
         // Whether the last arrival that went out (written without error) had every message:
         // the others wait for it, so this task leaves the round only after it went out.
         let mut sent_complete = false;
         loop {
             while let Ok(sample) = self.consumer.try_recv() {
-                let arrival = sample.value;
-                if !self.tasks.contains(&arrival.task) {
-                    continue;
-                }
-                if arrival.round == round {
-                    if arrival.task != self.task {
-                        changed |= !arrivals.contains_key(&arrival.task)
-                            || arrivals[&arrival.task].seen.len() != arrival.seen.len();
-                        arrivals.insert(arrival.task.clone(), arrival);
-                    }
-                } else if arrival.round == round + 1 {
-                    state
-                        .early
-                        .entry(arrival.round)
-                        .or_default()
-                        .insert(arrival.task.clone(), arrival);
-                }
+                changed |= self.take(state, &mut arrivals, round, sample.value);
             }
             let have: Vec<String> = arrivals.keys().cloned().collect();
             let complete = have.len() == self.tasks.len();
-            if changed || last_sent.is_none_or(|t| t.elapsed() >= REPEAT) {
+            if changed || retry_at.is_some_and(|at| Instant::now() >= at) {
                 let written = self.producer.write(&Arrival {
                     round,
                     task: self.task.clone(),
                     payload: payload.clone(),
                     seen: have.clone(),
                 });
-                last_sent = Some(Instant::now());
-                // A write that failed (a full window on a loaded machine) is tried again.
-                changed = written.is_err();
+                changed = false;
+                retry_at = written.is_err().then(|| Instant::now() + REPEAT);
                 if written.is_ok() {
                     sent_complete = complete;
                 }
@@ -169,7 +184,7 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
             if complete && acknowledged && sent_complete {
                 break;
             }
-            if start.elapsed() >= timeout {
+            if deadline.is_some_and(|at| Instant::now() >= at) {
                 // Keep what came: a retry of this round still has the other tasks' messages.
                 let others: BTreeMap<String, Arrival> = arrivals
                     .iter()
@@ -190,10 +205,18 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
                     waited: start.elapsed(),
                 });
             }
-            std::thread::sleep(Duration::from_millis(1));
+            // Sleep until an arrival, the retry of a failed write, or the deadline.
+            let until = deadline.into_iter().chain(retry_at).min();
+            match wait::timeout_at(until, wait::next_sample(&self.consumer)).await {
+                Some(Some(sample)) => {
+                    changed |= self.take(state, &mut arrivals, round, sample.value);
+                }
+                Some(None) => wait::sleep_until(until).await,
+                None => {}
+            }
         }
         state.round += 1;
-        drop(state);
+        drop(turn);
         let mut messages = BTreeMap::new();
         for (task, arrival) in arrivals {
             let value = postcard::from_bytes(&arrival.payload).map_err(|e| PortError::Codec {
@@ -204,6 +227,60 @@ impl<T: Serialize + DeserializeOwned> Rendezvous<T> {
             messages.insert(task, value);
         }
         Ok(combine(&messages))
+    }
+
+    /// Takes one arrival into this round's (or, early, the next round's); whether what this
+    /// task has changed.
+    fn take(
+        &self,
+        state: &mut State,
+        arrivals: &mut BTreeMap<String, Arrival>,
+        round: u64,
+        arrival: Arrival,
+    ) -> bool {
+        if !self.tasks.contains(&arrival.task) || arrival.task == self.task {
+            return false;
+        }
+        if arrival.round == round {
+            let changed = arrivals
+                .get(&arrival.task)
+                .is_none_or(|known| known.seen.len() != arrival.seen.len());
+            arrivals.insert(arrival.task.clone(), arrival);
+            return changed;
+        }
+        if arrival.round == round + 1 {
+            state
+                .early
+                .entry(arrival.round)
+                .or_default()
+                .insert(arrival.task.clone(), arrival);
+        }
+        false
+    }
+}
+
+/// The rounds' state while one `wait` holds it; given back when dropped (also when an async
+/// `wait` is dropped half-way).
+struct Turn<'a, T> {
+    rendezvous: &'a Rendezvous<T>,
+    state: Option<State>,
+}
+
+impl<T> Turn<'_, T> {
+    fn state(&mut self) -> &mut State {
+        self.state.get_or_insert_with(State::default)
+    }
+}
+
+impl<T> Drop for Turn<'_, T> {
+    fn drop(&mut self) {
+        let state = self.state.take().unwrap_or_default();
+        *self
+            .rendezvous
+            .state
+            .lock()
+            .unwrap_or_else(|p| p.into_inner()) = Some(state);
+        self.rendezvous.returned.notify();
     }
 }
 

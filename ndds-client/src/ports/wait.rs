@@ -1,0 +1,355 @@
+//! How port primitives wait: every primitive is a future that sleeps on what it waits for
+//! (a consumer's queue, a [`Notify`], a deadline) and is woken by it — never a sleep loop.
+//!
+//! | piece | what it is |
+//! |---|---|
+//! | [`block_on`] | the blocking forms: polls one future on the calling thread and parks it in between, until a waker or the nearest [`sleep_until`] deadline unparks it |
+//! | [`sleep_until`] | a deadline: inside [`block_on`] it only shortens the park; on another executor, one process-wide timer thread (`ndds-port-timer`) wakes it |
+//! | [`Notify`] | a generation counter with wakers: a waiter remembers the generation it saw and wakes when it moved |
+//! | [`next`], [`race`], [`timeout_at`] | the few combinators the primitives need |
+//!
+//! The async forms (`send_async`, ...) are the same futures awaited on the caller's executor,
+//! so no call starts a thread.
+
+use std::cell::Cell;
+use std::collections::HashMap;
+use std::future::Future;
+use std::pin::{Pin, pin};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
+use std::task::{Context, Poll, Wake, Waker};
+use std::time::{Duration, Instant};
+
+use futures_core::Stream;
+
+use crate::{Producer, Sample};
+
+thread_local! {
+    /// Inside [`block_on`]: the earliest deadline a pending [`sleep_until`] asked for in the
+    /// current poll (`Some(None)`: none). `None` outside [`block_on`].
+    static PARK_UNTIL: Cell<Option<Option<Instant>>> = const { Cell::new(None) };
+}
+
+struct Unpark(std::thread::Thread);
+
+impl Wake for Unpark {
+    fn wake(self: Arc<Self>) {
+        self.0.unpark();
+    }
+
+    fn wake_by_ref(self: &Arc<Self>) {
+        self.0.unpark();
+    }
+}
+
+/// Runs `future` to completion on this thread, parked whenever it is pending.
+pub(crate) fn block_on<F: Future>(future: F) -> F::Output {
+    let mut future = pin!(future);
+    let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+    let mut cx = Context::from_waker(&waker);
+    let outer = PARK_UNTIL.with(Cell::get);
+    let result = loop {
+        PARK_UNTIL.with(|p| p.set(Some(None)));
+        if let Poll::Ready(output) = future.as_mut().poll(&mut cx) {
+            break output;
+        }
+        match PARK_UNTIL.with(Cell::get).flatten() {
+            Some(at) => std::thread::park_timeout(at.saturating_duration_since(Instant::now())),
+            None => std::thread::park(),
+        }
+    };
+    PARK_UNTIL.with(|p| p.set(outer));
+    result
+}
+
+/// Whether the current poll runs inside [`block_on`] (so it may block on a condition
+/// variable of its own).
+pub(crate) fn blocking() -> bool {
+    PARK_UNTIL.with(Cell::get).is_some()
+}
+
+/// The deadline `timeout` from `start`; `None` when it is too far to represent.
+pub(crate) fn deadline(start: Instant, timeout: Duration) -> Option<Instant> {
+    start.checked_add(timeout)
+}
+
+/// A future ready at `at` (never, with `None`).
+pub(crate) fn sleep_until(at: Option<Instant>) -> Sleep {
+    Sleep { at, id: None }
+}
+
+/// See [`sleep_until`].
+pub(crate) struct Sleep {
+    at: Option<Instant>,
+    /// Registered with the timer thread under this id.
+    id: Option<u64>,
+}
+
+impl Future for Sleep {
+    type Output = ();
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let Some(at) = self.at else {
+            return Poll::Pending;
+        };
+        if Instant::now() >= at {
+            return Poll::Ready(());
+        }
+        let inside = PARK_UNTIL.with(|p| match p.get() {
+            Some(earliest) => {
+                p.set(Some(Some(earliest.map_or(at, |e| e.min(at)))));
+                true
+            }
+            None => false,
+        });
+        if !inside {
+            let id = *self
+                .id
+                .get_or_insert_with(|| NEXT_SLEEP.fetch_add(1, Ordering::Relaxed));
+            timer().register(id, at, cx.waker());
+        }
+        Poll::Pending
+    }
+}
+
+impl Drop for Sleep {
+    fn drop(&mut self) {
+        if let Some(id) = self.id {
+            timer().cancel(id);
+        }
+    }
+}
+
+static NEXT_SLEEP: AtomicU64 = AtomicU64::new(1);
+
+/// The deadlines of sleeps awaited outside [`block_on`], and the one thread that wakes them.
+struct Timer {
+    sleeps: Mutex<HashMap<u64, (Instant, Waker)>>,
+    changed: Condvar,
+}
+
+fn timer() -> &'static Timer {
+    static TIMER: OnceLock<&'static Timer> = OnceLock::new();
+    TIMER.get_or_init(|| {
+        let timer: &'static Timer = Box::leak(Box::new(Timer {
+            sleeps: Mutex::new(HashMap::new()),
+            changed: Condvar::new(),
+        }));
+        let spawned = std::thread::Builder::new()
+            .name("ndds-port-timer".to_owned())
+            .spawn(move || timer.run());
+        if let Err(err) = spawned {
+            tracing::error!(error = %err, "port timer thread not started: async port timeouts will not fire");
+        }
+        timer
+    })
+}
+
+impl Timer {
+    fn register(&self, id: u64, at: Instant, waker: &Waker) {
+        let mut sleeps = self.sleeps.lock().unwrap_or_else(|p| p.into_inner());
+        let earliest = sleeps.values().all(|(other, _)| at < *other);
+        sleeps.insert(id, (at, waker.clone()));
+        if earliest {
+            self.changed.notify_one();
+        }
+    }
+
+    fn cancel(&self, id: u64) {
+        self.sleeps
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&id);
+    }
+
+    fn run(&self) {
+        let mut sleeps = self.sleeps.lock().unwrap_or_else(|p| p.into_inner());
+        loop {
+            let now = Instant::now();
+            let due: Vec<u64> = sleeps
+                .iter()
+                .filter(|(_, (at, _))| *at <= now)
+                .map(|(id, _)| *id)
+                .collect();
+            for id in due {
+                if let Some((_, waker)) = sleeps.remove(&id) {
+                    waker.wake();
+                }
+            }
+            let next = sleeps.values().map(|(at, _)| *at).min();
+            sleeps = match next {
+                Some(at) => {
+                    self.changed
+                        .wait_timeout(sleeps, at.saturating_duration_since(now))
+                        .unwrap_or_else(|p| p.into_inner())
+                        .0
+                }
+                None => self.changed.wait(sleeps).unwrap_or_else(|p| p.into_inner()),
+            };
+        }
+    }
+}
+
+/// Something changed: whoever waits for a change since the generation it saw wakes.
+#[derive(Default)]
+pub(crate) struct Notify {
+    generation: AtomicU64,
+    wakers: Mutex<Vec<Waker>>,
+}
+
+impl Notify {
+    /// The generation now: pass it to [`changed`](Self::changed) before looking at the state.
+    pub(crate) fn generation(&self) -> u64 {
+        self.generation.load(Ordering::SeqCst)
+    }
+
+    /// Wakes every waiter.
+    pub(crate) fn notify(&self) {
+        self.generation.fetch_add(1, Ordering::SeqCst);
+        let wakers = std::mem::take(&mut *self.wakers.lock().unwrap_or_else(|p| p.into_inner()));
+        for waker in wakers {
+            waker.wake();
+        }
+    }
+
+    /// Ready once the generation is no longer `seen`.
+    pub(crate) fn changed(&self, seen: u64) -> impl Future<Output = ()> + '_ {
+        std::future::poll_fn(move |cx| {
+            if self.generation() != seen {
+                return Poll::Ready(());
+            }
+            {
+                let mut wakers = self.wakers.lock().unwrap_or_else(|p| p.into_inner());
+                if !wakers.iter().any(|w| w.will_wake(cx.waker())) {
+                    wakers.push(cx.waker().clone());
+                }
+            }
+            // A notify between the first look and the registration is seen here.
+            if self.generation() != seen {
+                Poll::Ready(())
+            } else {
+                Poll::Pending
+            }
+        })
+    }
+}
+
+/// The next item of `stream`.
+pub(crate) fn next<S: Stream + Unpin>(stream: &mut S) -> impl Future<Output = Option<S::Item>> {
+    std::future::poll_fn(move |cx| Pin::new(&mut *stream).poll_next(cx))
+}
+
+/// Which of two futures finished first.
+pub(crate) enum Either<A, B> {
+    Left(A),
+    Right(B),
+}
+
+/// The first of `a` and `b` to finish (`a` when both are ready); the other is dropped.
+pub(crate) async fn race<A: Future, B: Future>(a: A, b: B) -> Either<A::Output, B::Output> {
+    let (mut a, mut b) = (pin!(a), pin!(b));
+    std::future::poll_fn(move |cx| {
+        if let Poll::Ready(out) = a.as_mut().poll(cx) {
+            return Poll::Ready(Either::Left(out));
+        }
+        b.as_mut().poll(cx).map(Either::Right)
+    })
+    .await
+}
+
+/// `future`'s output, or `None` once `at` passes first (never, with `None`).
+pub(crate) async fn timeout_at<F: Future>(at: Option<Instant>, future: F) -> Option<F::Output> {
+    match race(future, sleep_until(at)).await {
+        Either::Left(out) => Some(out),
+        Either::Right(()) => None,
+    }
+}
+
+/// The next sample of `consumer` (notifications skipped); `None` once it closed (or is not
+/// an immediate consumer, which ports never declare).
+pub(crate) async fn next_sample<T: serde::de::DeserializeOwned>(
+    consumer: &crate::Consumer<T>,
+) -> Option<Sample<T>> {
+    let mut samples = consumer.stream().ok()?;
+    next(&mut samples).await
+}
+
+/// Whether `producer` has a matched consumer by `at`. Inside [`block_on`] it waits on the
+/// producer's own match condition; on another executor it looks again after 1, 2, 4, ... up
+/// to 50 ms (no match event reaches a producer's owner yet: see docs/ports.md).
+pub(crate) async fn matched_by(producer: &Producer<impl Sized>, at: Option<Instant>) -> bool {
+    if producer.wait_for_consumers(1, Duration::ZERO) {
+        return true;
+    }
+    if blocking() {
+        let left = at.map_or(Duration::from_secs(86_400 * 365), |at| {
+            at.saturating_duration_since(Instant::now())
+        });
+        return producer.wait_for_consumers(1, left);
+    }
+    let mut pause = Duration::from_millis(1);
+    loop {
+        let now = Instant::now();
+        if at.is_some_and(|at| now >= at) {
+            return producer.wait_for_consumers(1, Duration::ZERO);
+        }
+        let wake = at.map_or(now + pause, |at| at.min(now + pause));
+        sleep_until(Some(wake)).await;
+        if producer.wait_for_consumers(1, Duration::ZERO) {
+            return true;
+        }
+        pause = (pause * 2).min(Duration::from_millis(50));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn block_on_wakes_on_notify_and_at_the_deadline() {
+        let notify = Arc::new(Notify::default());
+        let seen = notify.generation();
+        let other = Arc::clone(&notify);
+        let t = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(30));
+            other.notify();
+        });
+        let start = Instant::now();
+        let woke = block_on(timeout_at(
+            Some(start + Duration::from_secs(10)),
+            notify.changed(seen),
+        ));
+        assert!(woke.is_some());
+        assert!(start.elapsed() < Duration::from_secs(5));
+        t.join().unwrap();
+        let start = Instant::now();
+        let seen = notify.generation();
+        let timed_out = block_on(timeout_at(
+            Some(start + Duration::from_millis(50)),
+            notify.changed(seen),
+        ));
+        assert!(timed_out.is_none());
+        assert!(start.elapsed() >= Duration::from_millis(50));
+    }
+
+    #[test]
+    fn a_sleep_outside_block_on_is_woken_by_the_timer_thread() {
+        let (tx, rx) = flume::bounded(1);
+        let start = Instant::now();
+        std::thread::spawn(move || {
+            // A hand-made executor that is not block_on: it only waits for the waker.
+            let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+            let mut cx = Context::from_waker(&waker);
+            let mut sleep = pin!(sleep_until(Some(
+                Instant::now() + Duration::from_millis(40)
+            )));
+            while sleep.as_mut().poll(&mut cx).is_pending() {
+                std::thread::park();
+            }
+            let _ = tx.send(());
+        });
+        rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        assert!(start.elapsed() >= Duration::from_millis(40));
+    }
+}
