@@ -1,8 +1,8 @@
 //! # ndds-core
 //!
 //! The protocol of ndds without any IO: the datagram wire format, type descriptions and their
-//! fingerprints, the discovery engine (announce, refresh, solicit, withdraw, decay, matching)
-//! and the messages local clients exchange with their daemon.
+//! fingerprints, the discovery engine (announce, refresh, solicit, withdraw, decay, matching),
+//! a participant's data plane, and the messages local clients exchange with their daemon.
 //!
 //! Nothing here opens a socket, spawns a task or reads a clock. Every function that needs the
 //! time takes `now`; randomness comes from a seed in the configuration. The daemon
@@ -15,6 +15,8 @@
 //! - [`arbitration`]: a consumer's arbitration, minimum separation, deadline and statuses.
 //! - [`reliability`]: reliable streams (history, heartbeats, acknowledgements, repair).
 //! - [`fragment`]: large samples split into pieces and reassembled.
+//! - [`participant`]: a participant's whole data plane (every producer and consumer, what
+//!   it sends and believes), composed of the above, for one I/O thread to drive.
 //! - [`types`]: type descriptions, layouts, canonical text and fingerprints.
 //! - [`dynamic`]: decode a sample to JSON (and encode JSON to a sample) from its description.
 //! - [`discovery`]: the sans-IO discovery engine and its configuration.

@@ -54,6 +54,9 @@ const WAKE: mio::Token = mio::Token(1);
 thread_local! {
     /// Set on a participant's I/O thread.
     static IO_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Set on the I/O thread when a command it gave (from a direct callback) left the core
+    /// work: events, or a timer earlier than the one the thread is about to wait for.
+    static IO_DIRTY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
     /// Datagrams this thread took from a core and sent; their buffers go back to the core
     /// the next time this thread holds it, so sending allocates nothing.
     static SENT: RefCell<Vec<Transmit>> = const { RefCell::new(Vec::new()) };
@@ -209,9 +212,13 @@ impl DataPlane {
             || core
                 .poll_timeout()
                 .is_some_and(|at| locked.io_wakes_at.is_none_or(|wakes| at < wakes));
-        if wake && !on_io_thread() {
-            // Told once: the I/O thread recomputes its wake-up when it runs.
-            locked.io_wakes_at = Some(Instant::now());
+        if wake {
+            if on_io_thread() {
+                IO_DIRTY.with(|dirty| dirty.set(true));
+            } else {
+                // Told once: the I/O thread recomputes its wake-up when it runs.
+                locked.io_wakes_at = Some(Instant::now());
+            }
         }
         SENT.with(|sent| {
             let Ok(mut sent) = sent.try_borrow_mut() else {
@@ -507,7 +514,9 @@ impl DataPlane {
                 let sent = self.release(locked);
                 self.count(&sent);
                 self.dispatch(&mut events);
-                if !full {
+                // A direct callback's command may have left events or an earlier timer: one
+                // more round picks them up.
+                if !full && !IO_DIRTY.with(|dirty| dirty.replace(false)) {
                     break;
                 }
             }
