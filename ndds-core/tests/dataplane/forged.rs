@@ -1,0 +1,216 @@
+//! Forged traffic: a sample, a heartbeat and a gap aimed at a reliable consumer, an
+//! AckNack and a NackFrag aimed at its reliable producer, sent by an attacker either under
+//! an id discovery never matched or under the matched peer's id from the attacker's own
+//! address. Each is dropped and counted (`CoreStats::{unmatched_sender, wrong_address}`,
+//! `ConsumerCounters::admission`), nothing is sent to the attacker, and the genuine stream,
+//! over a lossy link that needs every repair, is unharmed.
+
+use ndds_core::participant::Event;
+use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Gap, Heartbeat, Sample};
+use ndds_core::wire::feedback::{AckNack, NackFrag, encode_feedback};
+use ndds_core::wire::{DataSub, DataWriter, FeedbackSub, SampleMeta};
+
+use crate::sim::{
+    App, DOMAIN, Link, MTU, SimNet, WriterApp, exactly, guid, outsider, participant_id, payload,
+    tag,
+};
+use crate::{MS, reliable_consumer, reliable_producer};
+
+const PRODUCER: (usize, u32) = (0, 1);
+const CONSUMER: (usize, u32) = (1, 2);
+/// Samples of the genuine stream.
+const TOTAL: u64 = 300;
+/// A participant id discovery never heard of.
+const STRANGER: u64 = 0x0BAD_0BAD;
+
+/// Whose id the attacker uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Disguise {
+    /// An id never matched.
+    Stranger,
+    /// The matched peer's id (the producer's towards the consumer, the consumer's towards
+    /// the producer).
+    Peer,
+}
+
+fn data(sender: u64, writer: u32, sub: &DataSub<'_>) -> Vec<u8> {
+    let mut datagram = DataWriter::new();
+    let readers = [CONSUMER.1];
+    datagram.begin(
+        DOMAIN,
+        sender,
+        &Addressing {
+            reader_participant: participant_id(CONSUMER.0),
+            writer,
+            readers: &readers,
+        },
+    );
+    assert!(datagram.push(sub, MTU));
+    datagram.bytes().to_vec()
+}
+
+fn feedback(sender: u64, sub: FeedbackSub<'_>) -> Vec<u8> {
+    let mut datagram = Vec::new();
+    encode_feedback(
+        DOMAIN,
+        sender,
+        participant_id(PRODUCER.0),
+        &[sub],
+        &mut datagram,
+    )
+    .expect("encodes");
+    datagram
+}
+
+/// The five forged datagrams: three for the consumer's host, two for the producer's.
+fn forgeries(disguise: Disguise) -> (Vec<Vec<u8>>, Vec<Vec<u8>>) {
+    let (data_sender, feedback_sender) = match disguise {
+        Disguise::Stranger => (STRANGER, STRANGER),
+        Disguise::Peer => (participant_id(PRODUCER.0), participant_id(CONSUMER.0)),
+    };
+    let far = 1 << 40;
+    // Believed, it would take the topic over for good and make every genuine sample old.
+    let bytes = payload(tag(PRODUCER.0, PRODUCER.1), far, 64);
+    let sample = DataSub::Sample(Sample {
+        meta: SampleMeta {
+            seq: far,
+            timestamp_ns: u64::MAX / 2,
+            strength: i32::MAX,
+            persistence_us: far,
+            flags: FLAG_RELIABLE,
+        },
+        payload: &bytes,
+    });
+    // Believed, it would silence the stream, or report it all lost.
+    let heartbeat = DataSub::Heartbeat(Heartbeat {
+        first: 1 << 63,
+        last: 1 << 63,
+    });
+    let gap = DataSub::Gap(Gap { from: 1, to: far });
+    let to_consumer = [&sample, &heartbeat, &gap]
+        .into_iter()
+        .map(|sub| data(data_sender, PRODUCER.1, sub))
+        .collect();
+    // Believed, it would settle every sample the reader has not got yet.
+    let acknack = FeedbackSub::AckNack(AckNack {
+        reader: CONSUMER.1,
+        writer: PRODUCER.1,
+        acked: far,
+        missing: &[],
+    });
+    // Believed, it would have pieces resent (seq 2 is a large sample).
+    let nackfrag = FeedbackSub::NackFrag(NackFrag {
+        reader: CONSUMER.1,
+        writer: PRODUCER.1,
+        seq: 2,
+        base: 0,
+        missing: &[0xff],
+    });
+    let to_producer = [acknack, nackfrag]
+        .into_iter()
+        .map(|sub| feedback(feedback_sender, sub))
+        .collect();
+    (to_consumer, to_producer)
+}
+
+/// The genuine stream over 20 % loss with the attacker's five datagrams every 20 ms while
+/// it flows; returns how many rounds were sent.
+fn attacked(seed: u64, disguise: Disguise) -> (SimNet, u64) {
+    let mut net = SimNet::new(seed, 2);
+    net.set_link(PRODUCER.0, CONSUMER.0, Link::lossy(0.2));
+    net.add_producer(PRODUCER.0, PRODUCER.1, reliable_producer(64));
+    net.add_consumer(
+        CONSUMER.0,
+        CONSUMER.1,
+        reliable_consumer(Some(64)),
+        App::Eager,
+    );
+    net.connect(PRODUCER, CONSUMER);
+    let mut writer = WriterApp::new(PRODUCER.0, PRODUCER.1, TOTAL, 2 * MS, 500);
+    writer.sizes = vec![500, 3_000];
+    let writer = net.add_writer(writer);
+    let (to_consumer, to_producer) = forgeries(disguise);
+    let mut rounds = 0;
+    while !net.writers[writer].finished() {
+        for datagram in &to_consumer {
+            net.inject(outsider(), CONSUMER.0, datagram.clone());
+        }
+        for datagram in &to_producer {
+            net.inject(outsider(), PRODUCER.0, datagram.clone());
+        }
+        rounds += 1;
+        net.run_for(20 * MS);
+    }
+    // Past the time a sample from an unknown sender is held for a match that never comes.
+    let done = net.run_until(net.at_ms(10_000), |n| {
+        n.consumer(CONSUMER.0, CONSUMER.1).got.len() as u64 == TOTAL
+    });
+    assert!(done, "{:?}", net.stats);
+    net.run_for(2_100 * MS);
+    (net, rounds)
+}
+
+/// The genuine stream arrived whole, and nobody answered the attacker.
+fn assert_unharmed(net: &SimNet) {
+    let log = net.consumer(CONSUMER.0, CONSUMER.1);
+    assert_eq!(
+        exactly(&log.seqs_from(guid(PRODUCER.0, PRODUCER.1)), 1, TOTAL),
+        Ok(())
+    );
+    assert!(
+        log.got
+            .iter()
+            .all(|g| g.intact && g.writer == guid(PRODUCER.0, PRODUCER.1))
+    );
+    assert_eq!(log.notable(), vec![]);
+    let counters = net.nodes[CONSUMER.0]
+        .core
+        .consumer_counters(CONSUMER.1)
+        .expect("declared");
+    assert_eq!(counters.arbiter.old_data, 0);
+    assert_eq!(counters.arbiter.delivered, TOTAL);
+    assert_eq!(net.outsiders, vec![]);
+    assert!(
+        !net.nodes[PRODUCER.0]
+            .producer_events
+            .iter()
+            .any(|(_, e)| matches!(e, Event::ReaderSilenced { .. }))
+    );
+}
+
+#[test]
+fn forged_traffic_from_an_unmatched_sender_is_dropped_and_counted() {
+    let (net, rounds) = attacked(41, Disguise::Stranger);
+    assert_unharmed(&net);
+    // The consumer held the sample, heartbeat and gap a moment for a match, then dropped
+    // them; the producer holds no feedback.
+    let consumer = net.nodes[CONSUMER.0].core.stats();
+    assert_eq!(consumer.unmatched_sender, 3 * rounds, "{consumer:?}");
+    assert_eq!(consumer.wrong_address, 0);
+    let counters = net.nodes[CONSUMER.0]
+        .core
+        .consumer_counters(CONSUMER.1)
+        .expect("declared");
+    assert_eq!(counters.admission.unmatched, 3 * rounds);
+    assert_eq!(counters.admission.released, 0);
+    let producer = net.nodes[PRODUCER.0].core.stats();
+    assert_eq!(producer.unmatched_sender, 2 * rounds, "{producer:?}");
+    assert_eq!(producer.wrong_address, 0);
+}
+
+#[test]
+fn forged_traffic_under_a_matched_id_from_another_address_is_dropped_and_counted() {
+    let (net, rounds) = attacked(42, Disguise::Peer);
+    assert_unharmed(&net);
+    let consumer = net.nodes[CONSUMER.0].core.stats();
+    assert_eq!(consumer.wrong_address, 3 * rounds, "{consumer:?}");
+    assert_eq!(consumer.unmatched_sender, 0);
+    let counters = net.nodes[CONSUMER.0]
+        .core
+        .consumer_counters(CONSUMER.1)
+        .expect("declared");
+    assert_eq!(counters.admission.wrong_address, 3 * rounds);
+    let producer = net.nodes[PRODUCER.0].core.stats();
+    assert_eq!(producer.wrong_address, 2 * rounds, "{producer:?}");
+    assert_eq!(producer.unmatched_sender, 0);
+}
