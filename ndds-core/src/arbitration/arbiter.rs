@@ -173,13 +173,18 @@ impl<S> Arbiter<S> {
 
     fn accept(&mut self, now: Instant, meta: Incoming, sample: S, status: SampleStatus) {
         self.stats.accepted += 1;
+        // A lost producer's last samples may still arrive: they are delivered, but do not
+        // put it back in charge (any producer may take over from a lost one at once).
+        let lost = self
+            .in_charge
+            .is_some_and(|c| c.writer == meta.writer && c.lost);
         self.in_charge = Some(InCharge {
             writer: meta.writer,
             strength: meta.strength,
             persistence: meta.persistence,
             accepted_at: now,
             seq: meta.seq,
-            lost: false,
+            lost,
         });
         self.next_deadline = self.rules.deadline.and_then(|d| now.checked_add(d));
         match self.window_end() {
@@ -198,7 +203,22 @@ impl<S> Arbiter<S> {
                 };
                 self.held = Some((sample, status));
             }
-            _ => self.deliver(now, sample, status),
+            _ => {
+                // The window ended but its timer has not run yet: the held sample is older
+                // than this one, which replaces it (never delivered after it).
+                let status = match self.held.take() {
+                    Some((_, held @ SampleStatus::TookOver { .. })) => {
+                        self.stats.superseded += 1;
+                        held
+                    }
+                    Some(_) => {
+                        self.stats.superseded += 1;
+                        status
+                    }
+                    None => status,
+                };
+                self.deliver(now, sample, status);
+            }
         }
     }
 
@@ -231,6 +251,16 @@ impl<S> Arbiter<S> {
                 writer,
                 was_current,
             }));
+    }
+
+    /// A producer is matched (again): if it was in charge when it was lost, it is in charge
+    /// with its strength and persistence again.
+    pub fn handle_writer_back(&mut self, writer: Guid) {
+        if let Some(current) = self.in_charge.as_mut()
+            && current.writer == writer
+        {
+            current.lost = false;
+        }
     }
 
     /// Runs what is due at `now`: the end of a separation window, a missed deadline.

@@ -342,3 +342,39 @@ fn check(
     }
     Ok(())
 }
+
+#[test]
+fn a_lost_producers_late_sample_is_delivered_without_putting_it_back_in_charge() {
+    let t0 = Instant::now();
+    let mut a = Arbiter::new(Rules::default(), t0);
+    a.handle_sample(t0, incoming(1, 10, 10_000, 1), 101);
+    a.handle_writer_lost(writer(1));
+    // Its last sample was still on the way when the news came.
+    a.handle_sample(t0 + MS, incoming(1, 10, 10_000, 2), 102);
+    // A weaker producer takes over at once, not after the lost one's 10 s persistence.
+    a.handle_sample(t0 + MS * 2, incoming(2, 5, 100, 3), 201);
+    assert_eq!(delivered(&drain(&mut a)), vec![101, 102, 201]);
+    // Matched again, the strong producer is in charge with its persistence again.
+    a.handle_sample(t0 + MS * 3, incoming(1, 10, 10_000, 4), 104);
+    a.handle_writer_back(writer(1));
+    a.handle_sample(t0 + MS * 4, incoming(2, 5, 100, 5), 202);
+    assert_eq!(delivered(&drain(&mut a)), vec![104]);
+    assert_eq!(a.stats().weaker, 1);
+}
+
+#[test]
+fn a_sample_at_the_end_of_a_window_whose_timer_has_not_run_replaces_the_held_one() {
+    let t0 = Instant::now();
+    let rules = Rules {
+        min_separation: MS * 100,
+        deadline: None,
+    };
+    let mut a = Arbiter::new(rules, t0);
+    a.handle_sample(t0, incoming(1, 0, 0, 1), 1);
+    a.handle_sample(t0 + MS * 50, incoming(1, 0, 0, 2), 2);
+    // The window ended at 100 ms; its timer is late, and seq 3 arrives first.
+    a.handle_sample(t0 + MS * 100, incoming(1, 0, 0, 3), 3);
+    a.handle_timeout(t0 + MS * 101);
+    assert_eq!(delivered(&drain(&mut a)), vec![1, 3]);
+    assert_eq!(a.stats().superseded, 1);
+}

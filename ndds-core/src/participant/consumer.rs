@@ -305,6 +305,11 @@ impl ConsumerCore {
         now: Instant,
         producers: impl IntoIterator<Item = (Guid, SocketAddrV4)>,
     ) {
+        let producers: smallvec::SmallVec<[(Guid, SocketAddrV4); 8]> =
+            producers.into_iter().collect();
+        for (writer, _) in &producers {
+            self.arbiter.handle_writer_back(*writer);
+        }
         let released = self.admission.set_matched(now, producers);
         for early in released {
             self.accept(ctx, now, early);
