@@ -542,7 +542,7 @@ impl Participant {
             topic,
             type_desc,
             entity,
-            reliable.is_some() && credit.is_some(),
+            credit.filter(|_| reliable.is_some()),
             delivery.clone(),
             self.inner.data.clone(),
         ));

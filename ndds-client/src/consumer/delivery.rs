@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use ndds_core::arbitration::Notification;
 
 use crate::error::RecvError;
-use crate::qos::{ConsumerMode, ConsumerQos};
+use crate::qos::{ConsumerMode, ConsumerQos, Reliability};
 use crate::sample::{PollStatus, RawEvent, RawSample};
 use crate::sync::lock;
 
@@ -157,8 +157,13 @@ impl Signal {
 #[derive(Debug)]
 pub(crate) struct Delivery {
     kind: Kind,
-    /// Samples in the queue (notifications are not counted: they have room of their own).
+    /// Samples and notifications in the queue (notifications have room of their own).
     samples: AtomicUsize,
+    notifications: AtomicUsize,
+    /// True for a reliable consumer with a queue: what it is handed spends credit.
+    credited: bool,
+    /// Samples pushed out whose credit has not been given back yet.
+    evicted: AtomicUsize,
     /// Wakes the application's threads waiting for the queue.
     pub(crate) signal: Arc<Signal>,
     direct: Mutex<Option<DirectBox>>,
@@ -187,6 +192,10 @@ impl Delivery {
         let sink = Delivery {
             kind,
             samples: AtomicUsize::new(0),
+            notifications: AtomicUsize::new(0),
+            credited: matches!(qos.reliability, Reliability::Reliable { .. })
+                && qos.mode == ConsumerMode::Immediate,
+            evicted: AtomicUsize::new(0),
             signal: Arc::default(),
             direct: Mutex::new(None),
             has_direct: AtomicBool::new(false),
@@ -203,15 +212,10 @@ impl Delivery {
 
     /// The application took `event` from the queue.
     pub(crate) fn took(&self, event: &RawEvent) {
-        if matches!(event, RawEvent::Sample(_)) {
-            self.uncount();
+        match event {
+            RawEvent::Sample(_) => decrement(&self.samples),
+            RawEvent::Notification(_) => decrement(&self.notifications),
         }
-    }
-
-    fn uncount(&self) {
-        let _ = self
-            .samples
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1));
     }
 
     /// The latest-sample cell (polled mode only).
@@ -241,8 +245,9 @@ impl Delivery {
     }
 
     /// Queues `event`. A sample beyond the depth pushes the oldest event out (only a
-    /// best-effort consumer gets there: a reliable one takes samples only while there is
-    /// room); a notification uses the extra room and never pushes anything out.
+    /// best-effort consumer gets there: a reliable one is handed samples only while the
+    /// application has made room for them); a notification has room of its own and never
+    /// takes a sample's place: past that room it is dropped (and counted).
     fn enqueue(
         &self,
         tx: &flume::Sender<RawEvent>,
@@ -252,45 +257,55 @@ impl Delivery {
     ) {
         match event {
             RawEvent::Notification(_) => {
+                if self.notifications.load(Ordering::Acquire) >= NOTIFICATION_ROOM {
+                    self.overflow.fetch_add(1, Ordering::Relaxed);
+                    return;
+                }
+                self.notifications.fetch_add(1, Ordering::AcqRel);
                 if tx.try_send(event).is_err() {
+                    decrement(&self.notifications);
                     self.overflow.fetch_add(1, Ordering::Relaxed);
                     return;
                 }
             }
             RawEvent::Sample(_) => {
-                // Only a best-effort stream gets here with the queue full: a reliable one is
-                // handed samples only while the application has made room for them.
                 while self.samples.load(Ordering::Acquire) >= capacity {
                     match oldest.try_recv() {
                         Ok(dropped) => {
                             self.took(&dropped);
+                            if matches!(dropped, RawEvent::Sample(_)) && self.credited {
+                                // Its credit was spent when it was handed over: it comes
+                                // back, or the stream would stall with an empty queue.
+                                self.evicted.fetch_add(1, Ordering::AcqRel);
+                            }
                             self.overflow.fetch_add(1, Ordering::Relaxed);
                         }
                         Err(_) => break,
                     }
                 }
                 self.samples.fetch_add(1, Ordering::AcqRel);
-                let event = match tx.try_send(event) {
-                    Ok(()) => None,
-                    Err(flume::TrySendError::Full(event)) => Some(event),
-                    Err(flume::TrySendError::Disconnected(_)) => return,
-                };
-                if let Some(event) = event {
-                    // Notifications filled the queue's own room and the samples' too: the
-                    // oldest event goes.
-                    if let Ok(dropped) = oldest.try_recv() {
-                        self.took(&dropped);
-                        self.overflow.fetch_add(1, Ordering::Relaxed);
-                    }
-                    if tx.try_send(event).is_err() {
-                        self.uncount();
-                        self.overflow.fetch_add(1, Ordering::Relaxed);
-                        return;
-                    }
+                // Samples stay within the depth and notifications within their room, so the
+                // channel (depth + room) has a place for this one.
+                if tx.try_send(event).is_err() {
+                    decrement(&self.samples);
+                    return;
                 }
             }
         }
         self.signal.notify()
+    }
+
+    /// Samples waiting in the queue.
+    pub(crate) fn queued_samples(&self) -> usize {
+        self.samples.load(Ordering::Acquire)
+    }
+
+    /// Samples pushed out of the queue since the last call whose credit must come back.
+    pub(crate) fn take_evicted(&self) -> usize {
+        if self.evicted.load(Ordering::Acquire) == 0 {
+            return 0;
+        }
+        self.evicted.swap(0, Ordering::AcqRel)
     }
 
     fn replace(&self, latest: &mut Latest, event: RawEvent) {
@@ -312,6 +327,11 @@ impl Delivery {
             }
         }
     }
+}
+
+/// Takes one from a counter that never goes below zero.
+fn decrement(counter: &AtomicUsize) {
+    let _ = counter.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1));
 }
 
 impl Drop for Delivery {

@@ -174,12 +174,61 @@ impl Drop for Registration {
     }
 }
 
-fn run(shared: &Shared) {
+thread_local! {
+    /// The dispatcher this thread runs, on a dispatcher thread.
+    static CURRENT: std::cell::RefCell<Option<Arc<Shared>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// True on a participant's callback thread.
+pub(crate) fn on_dispatcher_thread() -> bool {
+    CURRENT.with(|current| current.borrow().is_some())
+}
+
+/// On a callback thread whose callback waits (a reliable write into a full window): runs one
+/// turn of another ready callback of the participant, so the one that would take the samples
+/// and open the window is not held up behind the waiting one. Returns whether it ran one.
+pub(crate) fn help_dispatch() -> bool {
+    let Some(shared) = CURRENT.with(|current| current.borrow().clone()) else {
+        return false;
+    };
+    // The waiting callbacks hold their entries' locks: only the others can run.
+    let found = {
+        let mut queue = lock(&shared.queue);
+        let mut found = None;
+        for _ in 0..queue.ready.len() {
+            let Some(id) = queue.ready.pop_front() else {
+                break;
+            };
+            let Some(entry) = queue.entries.get(&id).cloned() else {
+                continue;
+            };
+            let free = entry.callback.try_lock().is_ok();
+            if free {
+                found = Some((id, entry));
+                break;
+            }
+            queue.ready.push_back(id);
+        }
+        found
+    };
+    match found {
+        Some((id, entry)) => {
+            turn(&shared, id, &entry);
+            true
+        }
+        None => false,
+    }
+}
+
+fn run(shared: &Arc<Shared>) {
+    CURRENT.with(|current| *current.borrow_mut() = Some(Arc::clone(shared)));
     loop {
         let (id, entry) = {
             let mut queue = lock(&shared.queue);
             loop {
                 if queue.closed {
+                    CURRENT.with(|current| current.borrow_mut().take());
                     return;
                 }
                 if let Some(id) = queue.ready.pop_front() {
@@ -194,33 +243,39 @@ fn run(shared: &Shared) {
                     .unwrap_or_else(|poison| poison.into_inner());
             }
         };
-        // Cleared before taking, so an event queued from now on marks the entry ready again.
-        entry.queued.store(false, Ordering::Release);
-        let mut callback = lock(&entry.callback);
-        let mut handed = 0;
-        while handed < TURN {
-            let Some(run) = callback.as_mut() else {
-                break;
-            };
-            if entry.removed.load(Ordering::Acquire) {
-                break;
-            }
-            let Ok(event) = entry.rx.try_recv() else {
-                break;
-            };
-            handed += 1;
-            // Room was made: a reliable stream waiting for it moves on.
-            if let Some(state) = entry.state.upgrade() {
-                state.took(&event);
-            }
-            run(event);
+        turn(shared, id, &entry);
+    }
+}
+
+/// Hands up to [`TURN`] events of one ready consumer to its callback.
+fn turn(shared: &Shared, id: u64, entry: &Entry) {
+    // Cleared before taking, so an event queued from now on marks the entry ready again.
+    entry.queued.store(false, Ordering::Release);
+    let mut callback = lock(&entry.callback);
+    let mut handed = 0;
+    while handed < TURN {
+        let Some(run) = callback.as_mut() else {
+            break;
+        };
+        if entry.removed.load(Ordering::Acquire) {
+            break;
         }
-        drop(callback);
-        if handed == TURN && !entry.rx.is_empty() && !entry.queued.swap(true, Ordering::AcqRel) {
-            let mut queue = lock(&shared.queue);
-            if queue.entries.contains_key(&id) {
-                queue.ready.push_back(id);
-            }
+        let Ok(event) = entry.rx.try_recv() else {
+            break;
+        };
+        handed += 1;
+        // Room was made: a reliable stream waiting for it moves on.
+        if let Some(state) = entry.state.upgrade() {
+            state.took(&event);
+        }
+        run(event);
+    }
+    drop(callback);
+    if handed == TURN && !entry.rx.is_empty() && !entry.queued.swap(true, Ordering::AcqRel) {
+        let mut queue = lock(&shared.queue);
+        if queue.entries.contains_key(&id) {
+            queue.ready.push_back(id);
+            shared.wake.notify_one();
         }
     }
 }

@@ -20,7 +20,7 @@ mod typed;
 
 pub use callback::{CallbackConsumer, DirectConsumer};
 pub(crate) use delivery::{Delivery, Direct};
-pub(crate) use dispatch::Dispatcher;
+pub(crate) use dispatch::{Dispatcher, help_dispatch, on_dispatcher_thread};
 pub(crate) use raw::ConsumerState;
 pub use raw::{ConsumerStats, RawConsumer};
 pub use stream::{EventStream, SampleStream};

@@ -1,7 +1,7 @@
 //! The untyped consumer: its shared state, waiting for events, polling, counters.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use ndds_core::arbitration::Notification;
@@ -23,9 +23,12 @@ pub(crate) struct ConsumerState {
     pub(crate) peers: Peers,
     /// Its entity number in the participant's data plane.
     pub(crate) entity: u32,
-    /// True when what the application takes is credited back to the data plane (a reliable
-    /// consumer with a queue: its streams deliver only while the queue has room).
-    credited: bool,
+    /// `Some` when what the application takes is credited back to the data plane (a reliable
+    /// consumer with a queue: its streams deliver only while the queue has room): how many
+    /// taken samples are given back at once.
+    credit_batch: Option<usize>,
+    /// Taken samples not yet given back.
+    pending_credit: AtomicUsize,
     pub(crate) delivery: Arc<Delivery>,
     pub(crate) plane: Arc<DataPlane>,
     pub(crate) decoder: Arc<Decoder>,
@@ -43,14 +46,18 @@ impl ConsumerState {
         topic: &str,
         type_desc: TypeDescription,
         entity: u32,
-        credited: bool,
+        credit: Option<usize>,
         delivery: Arc<Delivery>,
         plane: Arc<DataPlane>,
     ) -> Self {
         ConsumerState {
             peers: Peers::new(topic, type_desc),
             entity,
-            credited,
+            // A quarter of the depth at once (one lock of the data plane per quarter, not per
+            // sample); all of it as soon as the queue is empty, so a stream never waits for
+            // credit the application already made.
+            credit_batch: credit.map(|depth| (depth / 4).max(1)),
+            pending_credit: AtomicUsize::new(0),
             delivery,
             plane,
             decoder: Arc::new(Decoder {
@@ -70,8 +77,18 @@ impl ConsumerState {
     /// moves on.
     pub(crate) fn took(&self, event: &RawEvent) {
         self.delivery.took(event);
-        if self.credited && matches!(event, RawEvent::Sample(_)) {
-            self.plane.taken(self.entity, 1);
+        let Some(batch) = self.credit_batch else {
+            return;
+        };
+        if !matches!(event, RawEvent::Sample(_)) {
+            return;
+        }
+        let pending = self.pending_credit.fetch_add(1, Ordering::AcqRel) + 1;
+        if pending >= batch || self.delivery.queued_samples() == 0 {
+            let samples = self.pending_credit.swap(0, Ordering::AcqRel);
+            if samples > 0 {
+                self.plane.taken(self.entity, samples);
+            }
         }
     }
 }

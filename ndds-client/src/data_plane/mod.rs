@@ -10,7 +10,9 @@
 //! producer's handle, into a pooled buffer), and no user code ever runs under it. An
 //! application thread that writes sends its own datagrams, so a write costs no thread
 //! switch; when a command moves the core's next timer earlier than the I/O thread's wake-up,
-//! or leaves events for it, the I/O thread is woken through an eventfd (mio's `Waker`).
+//! or leaves events for it, the I/O thread is woken by an empty datagram to its own socket.
+//! The thread waits in a blocking receive while its next timer is far (one system call per
+//! datagram, as a plain UDP receiver), in `ppoll` while it is near.
 
 mod socket;
 
@@ -45,11 +47,17 @@ const RECV_SIZE: usize = ndds_core::wire::MAX_DATAGRAM + 1;
 /// so the samples the application keeps share a few regions instead of each pinning a buffer
 /// of the largest datagram's size; a region is reused once nothing cut from it is alive.
 const RECV_REGION: usize = 4 * RECV_SIZE;
+/// Bytes of datagrams received before the core is taken to handle them (bounds the events
+/// one round produces).
+const RECV_BATCH_BYTES: usize = 32 * 1024;
 /// Datagrams received before the core is taken to handle them together.
 const RECV_BATCH: usize = 32;
-/// The I/O thread's tokens.
-const SOCKET: mio::Token = mio::Token(0);
-const WAKE: mio::Token = mio::Token(1);
+/// How long a callback waiting for a window sleeps before it looks for other callbacks to run.
+const HELP_WAIT: Duration = Duration::from_millis(1);
+/// The I/O thread waits in a blocking receive when its next timer is at least this far
+/// away (one system call per datagram, the receive timeout only as precise as the kernel's
+/// tick), and in `ppoll` (precise to the microsecond) when it is closer.
+const PRECISE_BELOW: Duration = Duration::from_millis(5);
 
 thread_local! {
     /// Set on a participant's I/O thread.
@@ -57,9 +65,10 @@ thread_local! {
     /// Set on the I/O thread when a command it gave (from a direct callback) left the core
     /// work: events, or a timer earlier than the one the thread is about to wait for.
     static IO_DIRTY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-    /// Datagrams this thread took from a core and sent; their buffers go back to the core
-    /// the next time this thread holds it, so sending allocates nothing.
-    static SENT: RefCell<Vec<Transmit>> = const { RefCell::new(Vec::new()) };
+    /// Datagrams this thread took from a core and sent (and which core: its address); their
+    /// buffers go back to that core the next time this thread holds it, so sending allocates
+    /// nothing.
+    static SENT: RefCell<(usize, Vec<Transmit>)> = const { RefCell::new((0, Vec::new())) };
 }
 
 /// True on a participant's I/O thread (where direct callbacks run).
@@ -129,19 +138,43 @@ pub(crate) struct DataPlane {
     /// Signalled (with `locked`) when a reliable producer's window may have opened.
     window: Condvar,
     endpoints: RwLock<Endpoints>,
-    /// The I/O thread's poller, until the thread takes it.
-    poll: Mutex<Option<mio::Poll>>,
-    waker: mio::Waker,
+    /// The data socket's own address: an empty datagram sent there wakes the I/O thread.
+    wake_to: SocketAddrV4,
     closed: AtomicBool,
     /// Datagrams sent, and datagrams the operating system refused.
     sent: AtomicU64,
     send_errors: AtomicU64,
 }
 
+/// The data socket's receive timeout, set only when the I/O thread's wait needs another
+/// one (a system call): never longer than the wait (the thread would sleep through a timer),
+/// and lengthened only when it is much shorter (waking early is harmless, just not free).
+#[derive(Debug, Default)]
+struct ReceiveTimeout {
+    set: Option<Option<Duration>>,
+}
+
+impl ReceiveTimeout {
+    fn set(&mut self, socket: &UdpSocket, wait: Option<Duration>) {
+        // A zero timeout means "forever" to the socket; a wait that short is never asked for
+        // here (short waits go to `ppoll`).
+        let wait = wait.map(|w| w.max(Duration::from_micros(100)));
+        let fits = match (self.set, wait) {
+            (Some(None), None) => true,
+            (Some(Some(current)), Some(wait)) => current <= wait && current * 2 >= wait,
+            _ => false,
+        };
+        if !fits && socket.set_read_timeout(wait).is_ok() {
+            self.set = Some(wait);
+        }
+    }
+}
+
 /// What sending the datagrams of one command came to.
 #[derive(Debug, Default)]
 struct Sent {
     ok: usize,
+    failed: usize,
     last_error: Option<io::Error>,
 }
 
@@ -159,13 +192,6 @@ impl DataPlane {
             SocketAddr::V4(addr) => Locator::from(addr),
             SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
         };
-        let poll = mio::Poll::new()?;
-        poll.registry().register(
-            &mut mio::unix::SourceFd(&socket.as_raw_fd()),
-            SOCKET,
-            mio::Interest::READABLE,
-        )?;
-        let waker = mio::Waker::new(poll.registry(), WAKE)?;
         let core = ParticipantCore::new(CoreConfig {
             domain,
             participant,
@@ -182,8 +208,7 @@ impl DataPlane {
             }),
             window: Condvar::new(),
             endpoints: RwLock::default(),
-            poll: Mutex::new(Some(poll)),
-            waker,
+            wake_to: SocketAddrV4::from(locator),
             closed: AtomicBool::new(false),
             sent: AtomicU64::new(0),
             send_errors: AtomicU64::new(0),
@@ -195,12 +220,23 @@ impl DataPlane {
         let mut locked = lock(&self.locked);
         SENT.with(|sent| {
             if let Ok(mut sent) = sent.try_borrow_mut() {
-                for transmit in sent.drain(..) {
-                    locked.core.recycle(transmit);
+                let (owner, sent) = &mut *sent;
+                if *owner == self.id() {
+                    for transmit in sent.drain(..) {
+                        locked.core.recycle(transmit);
+                    }
+                } else {
+                    // Another participant's buffers: freed, not mixed into this core's.
+                    sent.clear();
                 }
             }
         });
         locked
+    }
+
+    /// This data plane's identity for the thread-local list of sent buffers.
+    fn id(&self) -> usize {
+        std::ptr::from_ref(self) as usize
     }
 
     /// Releases the core after a command: wakes the I/O thread if the command left it work
@@ -220,10 +256,23 @@ impl DataPlane {
                 locked.io_wakes_at = Some(Instant::now());
             }
         }
+        let mut local = Vec::new();
         SENT.with(|sent| {
-            let Ok(mut sent) = sent.try_borrow_mut() else {
-                drop(locked);
-                return Sent::default();
+            let mut borrowed = sent.try_borrow_mut().ok();
+            let sent = match borrowed.as_deref_mut() {
+                Some((owner, sent)) => {
+                    if *owner != self.id() {
+                        sent.clear();
+                        *owner = self.id();
+                    }
+                    if sent.capacity() == 0 {
+                        sent.reserve(256);
+                    }
+                    sent
+                }
+                // Never expected (nothing here calls back into a core), but then the
+                // buffers are simply freed.
+                None => &mut local,
             };
             let first = sent.len();
             while let Some(transmit) = locked.core.poll_transmit() {
@@ -231,7 +280,7 @@ impl DataPlane {
             }
             drop(locked);
             if wake && !on_io_thread() {
-                let _ = self.waker.wake();
+                self.wake_io();
             }
             let mut result = Sent::default();
             for transmit in &mut sent[first..] {
@@ -239,6 +288,7 @@ impl DataPlane {
                     Ok(()) => result.ok += 1,
                     Err(err) => {
                         tracing::debug!(to = %transmit.to, %err, "data send failed");
+                        result.failed += 1;
                         result.last_error = Some(err);
                     }
                 }
@@ -261,8 +311,9 @@ impl DataPlane {
         if sent.ok > 0 {
             self.sent.fetch_add(sent.ok as u64, Ordering::Relaxed);
         }
-        if sent.last_error.is_some() {
-            self.send_errors.fetch_add(1, Ordering::Relaxed);
+        if sent.failed > 0 {
+            self.send_errors
+                .fetch_add(sent.failed as u64, Ordering::Relaxed);
         }
     }
 
@@ -411,9 +462,21 @@ impl DataPlane {
                             unacknowledged,
                         });
                     };
+                    let mut wait = left;
+                    if crate::consumer::on_dispatcher_thread() {
+                        // A callback waits: the participant's other callbacks run meanwhile
+                        // (one of them may be what takes the samples that open the window).
+                        drop(locked);
+                        let helped = crate::consumer::help_dispatch();
+                        locked = self.lock();
+                        if helped {
+                            continue;
+                        }
+                        wait = wait.min(HELP_WAIT);
+                    }
                     locked = self
                         .window
-                        .wait_timeout(locked, left)
+                        .wait_timeout(locked, wait)
                         .map(|(guard, _)| guard)
                         .unwrap_or_else(|poison| poison.into_inner().0);
                 }
@@ -471,36 +534,51 @@ impl DataPlane {
 
     // ---- the I/O thread ----
 
+    /// Wakes the I/O thread: an empty datagram to its own socket (which ends a blocking
+    /// receive as well as a `ppoll`, and costs one system call, like an eventfd).
+    fn wake_io(&self) {
+        let _ = self.socket.send_to(&[], self.wake_to);
+    }
+
     /// Receives, runs the timers and hands out events until [`DataPlane::close`]. Runs on
     /// its own thread.
     pub(crate) fn run(&self) {
         IO_THREAD.with(|t| t.set(true));
-        let Some(mut poll) = lock(&self.poll).take() else {
-            return;
-        };
-        let mut ready = mio::Events::with_capacity(4);
         let mut buf = BytesMut::new();
         let mut batch: Vec<(Bytes, SocketAddrV4)> = Vec::with_capacity(RECV_BATCH);
-        let mut events: Vec<Event> = Vec::new();
+        let mut events: Vec<Event> = Vec::with_capacity(1024);
+        let mut credits: Vec<(u32, usize)> = Vec::new();
         let mut next: Option<Instant> = None;
+        let mut receive_timeout = ReceiveTimeout::default();
+        // Whether the last round found more than one datagram waiting: then the socket is
+        // drained (until empty, up to a batch) after each wait; otherwise (one datagram at a
+        // time, as in a ping-pong) the thread goes back to waiting at once.
+        let mut draining = false;
         while !self.closed.load(Ordering::Acquire) {
-            let timeout = next.map(|at| at.saturating_duration_since(Instant::now()));
-            if let Err(err) = poll.poll(&mut ready, timeout)
-                && err.kind() != io::ErrorKind::Interrupted
-            {
-                tracing::debug!(%err, "data plane poll failed");
-                std::thread::sleep(Duration::from_millis(10));
-            }
+            let wait = next.map(|at| at.saturating_duration_since(Instant::now()));
+            let mut full = match wait {
+                Some(wait) if wait < PRECISE_BELOW => {
+                    self.poll_readable(wait) && self.receive(&mut buf, &mut batch)
+                }
+                wait => {
+                    receive_timeout.set(&self.socket, wait);
+                    self.receive_blocking(&mut buf, &mut batch);
+                    draining && !batch.is_empty() && self.receive(&mut buf, &mut batch)
+                }
+            };
             if self.closed.load(Ordering::Acquire) {
                 break;
             }
-            // Edge-triggered: read until the socket is empty.
             loop {
-                let full = self.receive(&mut buf, &mut batch);
+                draining = batch.len() > 1;
                 let now = Instant::now();
                 let received = SystemTime::now();
                 let mut locked = self.lock();
                 for (datagram, from) in batch.drain(..) {
+                    if datagram.is_empty() && from == self.wake_to {
+                        // A wake-up, not traffic.
+                        continue;
+                    }
                     locked.core.handle_datagram(now, received, from, datagram);
                 }
                 if locked.core.poll_timeout().is_some_and(|at| at <= now) {
@@ -513,50 +591,89 @@ impl DataPlane {
                 locked.io_wakes_at = next;
                 let sent = self.release(locked);
                 self.count(&sent);
-                self.dispatch(&mut events);
-                // A direct callback's command may have left events or an earlier timer: one
-                // more round picks them up.
+                self.dispatch(&mut events, &mut credits);
+                // More datagrams may wait; and a direct callback's command may have left
+                // events or an earlier timer: one more round picks them up.
                 if !full && !IO_DIRTY.with(|dirty| dirty.replace(false)) {
                     break;
                 }
+                full = self.receive(&mut buf, &mut batch);
             }
         }
     }
 
-    /// Receives up to [`RECV_BATCH`] datagrams without waiting; true if it got that many
-    /// (more may wait).
-    fn receive(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) -> bool {
+    /// Waits up to `wait` for the socket to become readable (precisely, with `ppoll`).
+    fn poll_readable(&self, wait: Duration) -> bool {
+        let mut fd = libc::pollfd {
+            fd: self.socket.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        let timeout = libc::timespec {
+            tv_sec: libc::time_t::try_from(wait.as_secs()).unwrap_or(libc::time_t::MAX),
+            tv_nsec: libc::c_long::from(wait.subsec_nanos() as i32),
+        };
+        // SAFETY: one valid pollfd, a valid timespec, no signal mask.
+        let ready = unsafe { libc::ppoll(&mut fd, 1, &timeout, std::ptr::null()) };
+        ready > 0
+    }
+
+    /// Waits (with the socket's receive timeout) for one datagram.
+    fn receive_blocking(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) {
+        let _ = self.receive_one(buf, batch, 0);
+    }
+
+    /// Receives one datagram into `buf`'s region and `batch`.
+    fn receive_one(
+        &self,
+        buf: &mut BytesMut,
+        batch: &mut Vec<(Bytes, SocketAddrV4)>,
+        flags: libc::c_int,
+    ) -> io::Result<()> {
+        // Room for the largest datagram; a region is reused once every sample cut from it
+        // has been dropped.
+        if buf.capacity() - buf.len() < RECV_SIZE {
+            buf.reserve(RECV_REGION);
+        }
         let socket = socket2::SockRef::from(&self.socket);
+        let (len, from) =
+            socket.recv_from_with_flags(&mut buf.spare_capacity_mut()[..RECV_SIZE], flags)?;
+        // SAFETY: `recv_from_with_flags` initialised the first `len` bytes of the spare
+        // capacity it was given.
+        unsafe { buf.set_len(len) };
+        let datagram = buf.split_to(len).freeze();
+        if let Some(from) = from.as_socket_ipv4() {
+            batch.push((datagram, from));
+        }
+        Ok(())
+    }
+
+    /// Receives up to [`RECV_BATCH`] datagrams without waiting; true if it stopped before the
+    /// socket was empty (more may wait).
+    fn receive(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) -> bool {
+        let mut errors = 0;
+        let mut bytes: usize = batch.iter().map(|(d, _)| d.len()).sum();
         while batch.len() < RECV_BATCH {
-            // Room for the largest datagram; a region is reused once every sample cut from it
-            // has been dropped.
-            if buf.capacity() - buf.len() < RECV_SIZE {
-                if !batch.is_empty() {
-                    // The datagrams of this batch still hold the region: handle them first,
-                    // so the region can be reused instead of another one allocated.
-                    return true;
-                }
-                buf.reserve(RECV_REGION);
+            if bytes >= RECV_BATCH_BYTES {
+                return true;
             }
-            match socket.recv_from_with_flags(
-                &mut buf.spare_capacity_mut()[..RECV_SIZE],
-                libc::MSG_DONTWAIT,
-            ) {
-                Ok((len, from)) => {
-                    // SAFETY: `recv_from_with_flags` initialised the first `len` bytes of the
-                    // spare capacity it was given.
-                    unsafe { buf.set_len(len) };
-                    let datagram = buf.split_to(len).freeze();
-                    if let Some(from) = from.as_socket_ipv4() {
-                        batch.push((datagram, from));
-                    }
-                }
+            if buf.capacity() - buf.len() < RECV_SIZE && !batch.is_empty() {
+                // The datagrams of this batch still hold the region: handle them first, so
+                // the region can be reused instead of another one allocated.
+                return true;
+            }
+            match self.receive_one(buf, batch, libc::MSG_DONTWAIT) {
+                Ok(()) => bytes += batch.last().map_or(0, |(d, _)| d.len()),
                 Err(err) if err.kind() == io::ErrorKind::WouldBlock => return false,
                 Err(err) if err.kind() == io::ErrorKind::Interrupted => {}
                 Err(err) => {
-                    // ICMP errors reported on the socket (a peer's port closed) and the like.
+                    // ICMP errors reported on the socket (a peer's port closed) and the like:
+                    // datagrams may still wait behind them.
                     tracing::trace!(%err, "data receive error");
-                    return false;
+                    errors += 1;
+                    if errors > RECV_BATCH {
+                        return !batch.is_empty();
+                    }
                 }
             }
         }
@@ -565,7 +682,7 @@ impl DataPlane {
 
     /// Hands the core's events to the consumers' queues and the producers' waiters, outside
     /// every lock of the core (a direct callback runs here).
-    fn dispatch(&self, events: &mut Vec<Event>) {
+    fn dispatch(&self, events: &mut Vec<Event>, credits: &mut Vec<(u32, usize)>) {
         let mut window = false;
         for event in events.drain(..) {
             let (consumer, event) = match event {
@@ -591,7 +708,20 @@ impl DataPlane {
             let delivery = read(&self.endpoints).consumers.get(&consumer).cloned();
             if let Some(delivery) = delivery {
                 delivery.push(event);
+                let evicted = delivery.take_evicted();
+                if evicted > 0 {
+                    credits.push((consumer, evicted));
+                }
             }
+        }
+        if !credits.is_empty() {
+            // Samples a full queue pushed out give their credit back (the next round of
+            // this thread delivers what that lets through).
+            self.command(|core, now| {
+                for (consumer, samples) in credits.drain(..) {
+                    core.taken(now, consumer, samples);
+                }
+            });
         }
         // The window changed under the lock, before this: a writer that looked before is
         // waiting by now, one that looks after sees it open.
@@ -603,7 +733,7 @@ impl DataPlane {
     /// Stops the I/O thread promptly.
     pub(crate) fn close(&self) {
         self.closed.store(true, Ordering::Release);
-        let _ = self.waker.wake();
+        self.wake_io();
         self.wake_writers();
     }
 }

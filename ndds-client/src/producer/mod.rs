@@ -30,6 +30,10 @@ pub(crate) struct ProducerState {
     /// Buffers samples are encoded into before the data plane takes them (and shares them
     /// with its history and the datagrams that carry them).
     pool: Mutex<BufferPool>,
+    /// Held by a write from the moment the data plane takes the sample until its datagrams
+    /// are sent, so two threads writing with this producer never put its datagrams on the
+    /// wire out of order (the data plane's own lock is not held while sending).
+    order: Mutex<()>,
 }
 
 impl ProducerState {
@@ -74,6 +78,7 @@ impl ProducerState {
             peers: Peers::new(topic, type_desc),
             plane,
             pool: Mutex::new(BufferPool::new(buffers)),
+            order: Mutex::new(()),
         }
     }
 
@@ -101,8 +106,13 @@ impl ProducerState {
         encode: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
     ) -> Result<(), WriteError> {
         let payload = lock(&self.pool).fill(encode)?;
-        self.plane
-            .write(self.entity, payload, self.qos.write_timeout)
+        self.send(payload, self.qos.write_timeout)
+    }
+
+    /// Hands an encoded sample to the data plane, in order with this producer's other writes.
+    fn send(&self, payload: Arc<Vec<u8>>, timeout: Duration) -> Result<(), WriteError> {
+        let _order = lock(&self.order);
+        self.plane.write(self.entity, payload, timeout)
     }
 }
 
@@ -146,10 +156,7 @@ impl<T: Serialize> Producer<T> {
             Ok::<(), WriteError>(())
         })?;
         loop {
-            match state
-                .plane
-                .write(state.entity, Arc::clone(&payload), Duration::ZERO)
-            {
+            match state.send(Arc::clone(&payload), Duration::ZERO) {
                 Err(WriteError::WouldBlock { .. }) => {
                     std::future::poll_fn(|cx| {
                         if state.plane.poll_window(state.entity, cx) {

@@ -168,7 +168,9 @@ impl ParticipantCore {
             producers: HashMap::new(),
             repair: Repair::new(config.max_sample),
             transmits: Transmits::default(),
-            events: VecDeque::new(),
+            // Room for what one round of a driver's datagrams produces, so a steady state
+            // does not grow it.
+            events: VecDeque::with_capacity(1024),
             stats: CoreStats::default(),
             withdrawn: AdmissionStats::default(),
         }

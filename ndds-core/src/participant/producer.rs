@@ -320,6 +320,10 @@ impl ProducerCore {
         now: Instant,
     ) {
         self.outbox.flush_due(tx, now, self.spec.batching);
+        if self.believed.poll_timeout().is_some_and(|due| due <= now) {
+            // Consumers that left stop being believed once their grace is over.
+            self.believed.handle_timeout(now);
+        }
         if let Some(reliable) = &mut self.reliable
             && reliable.writer.poll_timeout().is_some_and(|due| due <= now)
         {
@@ -342,12 +346,13 @@ impl ProducerCore {
     }
 
     fn reschedule(&mut self) {
-        let batch = self.outbox.next_due(self.spec.batching);
-        let reliable = self.reliable.as_ref().and_then(|r| r.writer.poll_timeout());
-        self.due = match (batch, reliable) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        };
+        self.due = self
+            .outbox
+            .next_due(self.spec.batching)
+            .into_iter()
+            .chain(self.reliable.as_ref().and_then(|r| r.writer.poll_timeout()))
+            .chain(self.believed.poll_timeout())
+            .min();
     }
 
     /// Queues what the reliable writer asked for: per reader, its gaps, resends and

@@ -8,6 +8,12 @@ use std::sync::Arc;
 /// Head buffers kept for reuse: a driver that recycles what it sent allocates nothing per
 /// datagram once this many exist.
 const FREE_HEADS: usize = 256;
+/// Spare head buffers larger than this (batches, resent whole samples) are kept only up to
+/// [`LARGE_HEADS`], so the spares stay small (at most 256 × 8 KiB + 8 × 64 KiB).
+const KEPT_HEAD: usize = 8 * 1024;
+const LARGE_HEADS: usize = 8;
+/// A new head buffer holds at least this much.
+const MIN_HEAD: usize = 2 * 1024;
 
 /// One datagram to send: `head` followed by `tail`, which the driver hands to the kernel
 /// together (scatter-gather), so a sample's payload is never copied into the datagram.
@@ -76,7 +82,11 @@ impl Transmits {
         head: &[u8],
         tail: Option<(&Arc<Vec<u8>>, Range<usize>)>,
     ) {
-        let mut buffer = self.free.pop().unwrap_or_default();
+        // The most recently freed spare large enough (a small one would have to grow).
+        let mut buffer = match self.free.iter().rposition(|b| b.capacity() >= head.len()) {
+            Some(index) => self.free.swap_remove(index),
+            None => Vec::with_capacity(head.len().max(MIN_HEAD)),
+        };
         buffer.clear();
         buffer.extend_from_slice(head);
         let tail = tail.map(|(bytes, range)| (Arc::clone(bytes), range));
@@ -100,8 +110,19 @@ impl Transmits {
 
     /// Takes a sent datagram's head buffer back (its payload reference is dropped).
     pub(crate) fn recycle(&mut self, transmit: Transmit) {
-        if self.free.len() < FREE_HEADS {
-            self.free.push(transmit.head);
+        if self.free.len() >= FREE_HEADS {
+            return;
         }
+        if transmit.head.capacity() > KEPT_HEAD
+            && self
+                .free
+                .iter()
+                .filter(|b| b.capacity() > KEPT_HEAD)
+                .count()
+                >= LARGE_HEADS
+        {
+            return;
+        }
+        self.free.push(transmit.head);
     }
 }
