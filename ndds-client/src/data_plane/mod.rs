@@ -156,16 +156,23 @@ struct ReceiveTimeout {
 
 impl ReceiveTimeout {
     fn set(&mut self, socket: &UdpSocket, wait: Option<Duration>) {
-        // A zero timeout means "forever" to the socket; a wait that short is never asked for
-        // here (short waits go to `ppoll`).
-        let wait = wait.map(|w| w.max(Duration::from_micros(100)));
         let fits = match (self.set, wait) {
             (Some(None), None) => true,
-            (Some(Some(current)), Some(wait)) => current <= wait && current * 2 >= wait,
+            (Some(Some(current)), Some(wait)) => current <= wait && current * 2 > wait,
             _ => false,
         };
-        if !fits && socket.set_read_timeout(wait).is_ok() {
-            self.set = Some(wait);
+        if fits {
+            return;
+        }
+        // Rounded down to a power of two of milliseconds, so a timer drawing nearer changes
+        // the timeout once per halving, not at every datagram. (A zero timeout would mean
+        // "forever" to the socket; waits that short go to `ppoll`.)
+        let timeout = wait.map(|wait| {
+            let ms = u64::try_from(wait.as_millis()).unwrap_or(u64::MAX).max(1);
+            Duration::from_millis(1 << ms.ilog2())
+        });
+        if socket.set_read_timeout(timeout).is_ok() {
+            self.set = Some(timeout);
         }
     }
 }
@@ -593,11 +600,15 @@ impl DataPlane {
                 self.count(&sent);
                 self.dispatch(&mut events, &mut credits);
                 // More datagrams may wait; and a direct callback's command may have left
-                // events or an earlier timer: one more round picks them up.
-                if !full && !IO_DIRTY.with(|dirty| dirty.replace(false)) {
+                // events or an earlier timer: one more round picks them up (without a
+                // receive, which would only find the socket empty).
+                let dirty = IO_DIRTY.with(|dirty| dirty.replace(false));
+                if !full && !dirty {
                     break;
                 }
-                full = self.receive(&mut buf, &mut batch);
+                if full {
+                    full = self.receive(&mut buf, &mut batch);
+                }
             }
         }
     }
@@ -684,6 +695,7 @@ impl DataPlane {
     /// every lock of the core (a direct callback runs here).
     fn dispatch(&self, events: &mut Vec<Event>, credits: &mut Vec<(u32, usize)>) {
         let mut window = false;
+        let mut cached: Option<(u32, Arc<Delivery>)> = None;
         for event in events.drain(..) {
             let (consumer, event) = match event {
                 Event::Sample { consumer, sample } => (consumer, RawEvent::Sample(sample)),
@@ -705,8 +717,17 @@ impl DataPlane {
                     continue;
                 }
             };
-            let delivery = read(&self.endpoints).consumers.get(&consumer).cloned();
-            if let Some(delivery) = delivery {
+            // Consecutive events are mostly for one consumer: its queue is looked up once.
+            if cached
+                .as_ref()
+                .is_none_or(|(entity, _)| *entity != consumer)
+            {
+                cached = read(&self.endpoints)
+                    .consumers
+                    .get(&consumer)
+                    .map(|delivery| (consumer, Arc::clone(delivery)));
+            }
+            if let Some((_, delivery)) = &cached {
                 delivery.push(event);
                 let evicted = delivery.take_evicted();
                 if evicted > 0 {
