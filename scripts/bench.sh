@@ -345,7 +345,7 @@ $(lscpu | grep -E '^(Architecture|CPU\(s\)|On-line|Model name|Thread|Core|Socket
   CPU, which costs far more on this virtual machine than the work itself.
 - **Round trips** are in microseconds: warm-up (200 round trips) excluded, then ${SECS} s of ping
   and pong in a closed loop (the next ping leaves when the previous reply is in). ndds sends the
-  next ping from the reply's direct callback, on its receive thread; raw UDP sends and receives
+  next ping from the reply's direct callback, on its I/O thread; raw UDP sends and receives
   on one thread. ddsperf reports *half* round trips per second; the table doubles them and
   gives the median of its per-second percentiles (first second excluded; p99.9 not reported).
 - **What ndds does per sample**: the publisher and ping encode a typed sample (postcard, the
@@ -376,36 +376,40 @@ The reliable-under-10 %-loss goal is in its own section below (it needs two host
 
 ## What bounds the goals not met
 
-Written from profiles (\`perf record\`, \`perf stat\`) of the runs above; the figures move a little
-from run to run, the reasons do not.
+Written from the runs above and from a sitting that ran this script for the build before
+issue 15's data-plane rewrite (b4d6c55) and after it, alternately; the figures move from run
+to run (on this virtual machine by more than the differences between builds), the reasons
+do not.
 
-- **Round trips with both processes on one CPU** (64 B reliable, 8 KiB): on one CPU every
-  microsecond either process spends adds to the round trip, and raw UDP spends almost nothing
-  besides the two system calls. Per direction ndds encodes the sample (one copy of the payload
-  into a buffer), reads the clocks, locks the producer and the consumer's slot, and arbitrates;
-  a reliable stream adds its history entry and the reader's ordering, about 0.3–0.6 µs per
-  side. Across CPUs the wake-up of the other CPU dominates and every ratio is 1.2 or less. What
-  would move it: encoding large payloads by reference (a scatter-gather entry instead of a
-  copy), and reliable bookkeeping in rings instead of ordered maps.
-- **64 B, 12 × raw unbatched UDP on one CPU**: publisher and subscriber share one CPU, so the
-  rate is bounded by their summed cost per sample (about 280 ns here: serializing, a clock read
-  for the source timestamp, the producer's lock, appending to the batch; then parsing and
-  arbitrating at the subscriber). Across CPUs the goal is met. Reliable batches pay
-  150–230 ns more per sample (history entry, acknowledgement accounting).
-- **8 KiB without batching, 0.8 × raw UDP**: one datagram per sample as raw UDP, plus the
-  encoding copy and the per-sample work above (0.75–0.78 ×). Reliable 8 KiB without batching
-  also keeps 1024 samples (8 MiB) in flight, more than the receiver's socket buffer (4 MiB
-  here, \`net.core.rmem_max\`), so datagrams are dropped by the kernel and repaired. With
-  batching (several samples per datagram) 8 KiB exceeds raw UDP.
-- **Reliable through 10 % loss** (64 B batched, 8 KiB in fragments): the flow-control window
-  is counted in samples (1024). At 2 million samples/s that is half a millisecond of data; a
-  lost datagram carries about 19 batched samples (or one of six pieces), the window cannot
-  move past it until its repair arrives, and a repair lost again waits for the retry time
-  (at least 1 ms). The stream then spends more time waiting than sending. 1 KiB samples,
-  one per datagram, reach 0.57–0.78. What would move it: a window sized in bytes to the
-  bandwidth-delay product rather than in samples, a shorter retry floor once the measured
-  round trip is tens of microseconds (a shorter fixed floor made things worse: spurious
-  repeats), and a receive buffer at least as large as the window.
+- **Round trips with both processes on one CPU** (64 B reliable, 8 KiB reliable): on one CPU
+  every microsecond either process spends adds to the round trip, and raw UDP spends almost
+  nothing besides two system calls. A reliable sample costs each side a second datagram (the
+  acknowledgement) and its system calls, plus the history entry and the reader's ordering;
+  the write takes three uncontended locks (buffer pool, producer order, the data plane's
+  core) and reads two clocks. The I/O thread waits in a blocking receive, so an arriving
+  datagram costs one system call as for raw UDP (it was three with epoll, which put reliable
+  64 B at 1.6-1.9 x). What would move it: acknowledging every few samples (coalesced on a
+  short timer) instead of each one, and one lock per write instead of three.
+- **64 B, 12 x raw unbatched UDP on one CPU**: publisher and subscriber share one CPU, so the
+  rate is bounded by their summed cost per sample: serializing into a pooled buffer, a clock
+  read for the source timestamp, three locks and appending to the batch; then parsing,
+  admission and arbitration, an event per sample and its hand-over to the consumer. Across
+  CPUs the goal is met. Reliable batches pay more per sample (history entry, acknowledgement
+  accounting).
+- **8 KiB without batching, 0.8 x raw UDP**: one datagram per sample as raw UDP, plus the
+  encoding copy and the per-sample work above (0.7-0.85 x from run to run, old and new
+  builds alike). Reliable 8 KiB without batching also keeps up to 1024 samples (8 MiB) in
+  flight, more than the receiver's socket buffer (\`net.core.rmem_max\`), so datagrams are
+  dropped by the kernel and repaired. With batching 8 KiB exceeds raw UDP.
+- **Reliable through 10 % loss**: 1 KiB and 8 KiB samples now keep 0.70-0.95 of their lossless
+  rate (0.24-0.58 and 0.10-0.37 before the rewrite, in the same sitting): one I/O thread
+  handles a whole burst of datagrams and repair requests under one lock, where the receive
+  and timer threads used to contend for every consumer's lock. 64 B batched stays at about
+  0.5: a lost datagram carries about 19 batched samples, the window (counted in samples,
+  1024) cannot move past it until its repair arrives, and a repair lost again waits for the
+  retry time (at least 1 ms). What would move it: a window in bytes sized to the
+  bandwidth-delay product, a retry floor from the measured round trip, and a receive buffer
+  at least the window.
 
 $LOSS_SECTION
 
