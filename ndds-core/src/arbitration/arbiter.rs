@@ -189,36 +189,31 @@ impl<S> Arbiter<S> {
         self.next_deadline = self.rules.deadline.and_then(|d| now.checked_add(d));
         match self.window_end() {
             Some(end) if now < end => {
-                // A takeover stays visible even if a newer sample replaces the held one.
-                let status = match self.held.take() {
-                    Some((_, held @ SampleStatus::TookOver { .. })) => {
-                        self.stats.superseded += 1;
-                        held
-                    }
-                    Some(_) => {
-                        self.stats.superseded += 1;
-                        status
-                    }
-                    None => status,
-                };
+                let status = self.supersede_held(status);
                 self.held = Some((sample, status));
             }
             _ => {
                 // The window ended but its timer has not run yet: the held sample is older
                 // than this one, which replaces it (never delivered after it).
-                let status = match self.held.take() {
-                    Some((_, held @ SampleStatus::TookOver { .. })) => {
-                        self.stats.superseded += 1;
-                        held
-                    }
-                    Some(_) => {
-                        self.stats.superseded += 1;
-                        status
-                    }
-                    None => status,
-                };
+                let status = self.supersede_held(status);
                 self.deliver(now, sample, status);
             }
+        }
+    }
+
+    /// Drops the held sample, if any, for a newer one with `status`; returns the status the
+    /// newer one gets (a takeover stays visible even if a newer sample replaces the held one).
+    fn supersede_held(&mut self, status: SampleStatus) -> SampleStatus {
+        match self.held.take() {
+            Some((_, held @ SampleStatus::TookOver { .. })) => {
+                self.stats.superseded += 1;
+                held
+            }
+            Some(_) => {
+                self.stats.superseded += 1;
+                status
+            }
+            None => status,
         }
     }
 
