@@ -71,6 +71,37 @@ fn replies_given_later_and_out_of_order_reach_each_blocked_sender() {
 }
 
 #[test]
+fn threads_of_a_new_user_that_wait_for_the_owner_together_all_find_it() {
+    // Before the fix one thread took the owner's declaration off the queue and the others
+    // slept until their deadline, then timed out with the owner known.
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "ports-waiting");
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.late", "client").unwrap());
+    let started = std::time::Instant::now();
+    let threads: Vec<_> = (0..4)
+        .map(|k| {
+            let user = Arc::clone(&user);
+            std::thread::spawn(move || (k, user.send(&k, WAIT)))
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let owner = PortOwner::<u32, u32>::declare(&p, "arm.late", "arm-server").unwrap();
+    for _ in 0..4 {
+        let (value, handle) = owner.receive(WAIT).unwrap();
+        handle.reply(&(value + 100)).unwrap();
+    }
+    for t in threads {
+        let (k, reply) = t.join().unwrap();
+        assert_eq!(reply.unwrap(), k + 100);
+    }
+    assert!(
+        started.elapsed() < WAIT,
+        "every sender found the owner well before its deadline: {:?}",
+        started.elapsed()
+    );
+}
+
+#[test]
 fn without_an_owner_or_a_reply_a_send_times_out_naming_the_port() {
     let dir = tempfile::tempdir().unwrap();
     let p = participant(dir.path(), "timeout");

@@ -39,6 +39,9 @@ pub struct PortUser<Q, R> {
     demux: Mutex<Demux>,
     /// Told when a sender hands a reply it took to the sender waiting for it.
     handed: Notify,
+    /// Told when one sender takes an owner's declaration or loss off the topic, so that the
+    /// other senders waiting for an owner look again (the event is gone from the queue).
+    owners_noted: Notify,
     formats: (u64, u64),
     _types: PhantomData<fn(Q) -> R>,
 }
@@ -120,6 +123,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             next_id: AtomicU64::new(1),
             demux: Mutex::new(Demux::default()),
             handed: Notify::default(),
+            owners_noted: Notify::default(),
             formats: (
                 TypeDescription::of::<Q>().fingerprint(),
                 TypeDescription::of::<R>().fingerprint(),
@@ -153,22 +157,32 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         }
     }
 
-    /// Waits for the next owner declaration or loss and takes it.
-    async fn owner_event(&self) {
-        if let Ok(mut events) = self.owners.events()
-            && let Some(event) = wait::next(&mut events).await
-        {
-            Self::note_owner(&mut self.demux(), event);
-            return;
-        }
-        std::future::pending::<()>().await;
+    /// Waits for the next owner declaration or loss and takes it, or for another sender to
+    /// take one (after generation `seen` of `owners_noted`).
+    async fn owner_event(&self, seen: u64) {
+        let mine = async {
+            if let Ok(mut events) = self.owners.events()
+                && let Some(event) = wait::next(&mut events).await
+            {
+                Self::note_owner(&mut self.demux(), event);
+                self.owners_noted.notify();
+                return;
+            }
+            std::future::pending::<()>().await;
+        };
+        wait::race(mine, self.owners_noted.changed(seen)).await;
     }
 
     /// The owner now: its task, or an error when there are two or the formats differ; `None`
     /// while none is known (or it has not admitted this user yet).
     fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
+        let mut noted = false;
         while let Ok(event) = self.owners.try_recv_event() {
             Self::note_owner(demux, event);
+            noted = true;
+        }
+        if noted {
+            self.owners_noted.notify();
         }
         demux.admission_ends = None;
         let mut owners: Vec<(&Guid, &OwnerInfo)> = demux.owners.iter().collect();
@@ -264,6 +278,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         };
         // An owner must be known (and unique, with our formats) before the request goes out.
         let owner = loop {
+            let seen = self.owners_noted.generation();
             let admission_ends = {
                 let mut demux = self.demux();
                 if let Some(owner) = self.owner(&mut demux)? {
@@ -283,7 +298,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 return Err(timed_out(None));
             }
             let until = deadline.into_iter().chain(admission_ends).min();
-            wait::timeout_at(until, self.owner_event()).await;
+            wait::timeout_at(until, self.owner_event(seen)).await;
         };
         if !wait::matched_by(&self.requests, deadline).await {
             return Err(timed_out(Some(owner)));
