@@ -1,7 +1,9 @@
 //! Forged but well-formed traffic from an attacker host: samples from a writer discovery never
 //! matched (strongest strength, endless persistence), and samples, heartbeats and gaps that
-//! carry the real producer's id; acknowledgements carrying the real consumer's id sent to the
-//! producer. None of it is believed: each is dropped and counted, and the genuine reliable
+//! carry the real producer's id; acknowledgements and a repair flood (every one of 512 samples
+//! and 512 pieces asked for again) carrying the real consumer's id sent to the producer from
+//! the attacker's own address. None of it is believed: each is dropped and counted, not one
+//! byte goes back to the attacker, and the genuine reliable
 //! stream (through 10 % loss, so repair matters) delivers every sample once, in order, with
 //! nothing reported lost. Real daemons and test nodes on hosts simulated with network
 //! namespaces (needs root, `ip` and `nft`); the attacker is a host of its own.
@@ -13,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use interop_tests::netns::Cluster;
 use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Gap, Heartbeat, Sample};
-use ndds_core::wire::feedback::{AckNack, encode_feedback};
+use ndds_core::wire::feedback::{AckNack, MAX_BITMAP_BYTES, NackFrag, encode_feedback};
 use ndds_core::wire::{DataSub, DataWriter, EndpointKind, FeedbackSub, MAX_DATAGRAM, SampleMeta};
 use serde_json::Value;
 use support::{WAIT, exclusive, field, node, notifications, read_until, samples};
@@ -133,6 +135,33 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
         &mut acknack,
     )
     .expect("an acknack encodes");
+    // A repair flood from the attacker's own address: every one of 512 samples and 512
+    // pieces asked for again, in the real reader's name. Believed, each datagram would make
+    // the producer resend hundreds of datagrams.
+    let all_missing = [0xff_u8; MAX_BITMAP_BYTES];
+    let mut flood = Vec::new();
+    encode_feedback(
+        domain,
+        real_reader.guid.participant,
+        real_writer.guid.participant,
+        &[
+            FeedbackSub::AckNack(AckNack {
+                reader: real_reader.guid.entity,
+                writer: real_writer.guid.entity,
+                acked: 1,
+                missing: &all_missing,
+            }),
+            FeedbackSub::NackFrag(NackFrag {
+                reader: real_reader.guid.entity,
+                writer: real_writer.guid.entity,
+                seq: 1,
+                base: 0,
+                missing: &all_missing,
+            }),
+        ],
+        &mut flood,
+    )
+    .expect("a repair request encodes");
     let forged: Vec<(Vec<u8>, SocketAddrV4)> = vec![
         // A writer nobody matched, as strong and persistent as can be.
         (
@@ -191,23 +220,43 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
         ),
         // The real reader's id, acknowledging everything the producer will ever write.
         (acknack, writer_at),
+        (flood, writer_at),
     ];
     let attacker = cluster.host(ATTACKER);
     let from = attacker.ip();
-    let sent = attacker.enter(|| {
+    let (sent, sent_bytes, answered) = attacker.enter(|| {
         let socket = UdpSocket::bind(SocketAddrV4::new(from, 0)).expect("attacker socket");
-        let mut sent = 0_u64;
+        socket.set_nonblocking(true).expect("non-blocking");
+        let (mut sent, mut sent_bytes, mut answered) = (0_u64, 0_usize, 0_usize);
+        let mut buf = vec![0_u8; 65536];
+        let mut drain = |answered: &mut usize| {
+            while let Ok((n, _)) = socket.recv_from(&mut buf) {
+                *answered += n;
+            }
+        };
         for _ in 0..ROUNDS {
             for (bytes, to) in &forged {
                 if socket.send_to(bytes, to).is_ok() {
                     sent += 1;
+                    sent_bytes += bytes.len();
                 }
             }
+            drain(&mut answered);
             std::thread::sleep(Duration::from_millis(1));
         }
-        sent
+        std::thread::sleep(Duration::from_millis(500));
+        drain(&mut answered);
+        (sent, sent_bytes, answered)
     });
-    eprintln!("attacker host sent {sent} forged datagrams ({ROUNDS} rounds of 5)");
+    eprintln!(
+        "attacker host sent {sent} forged datagrams ({ROUNDS} rounds of {}, {sent_bytes} B) \
+         and received {answered} B",
+        forged.len()
+    );
+    assert_eq!(
+        answered, 0,
+        "nothing is sent to an address discovery never gave (no amplification)"
+    );
 
     let (done, rest) = read_until(&consumer, Duration::from_secs(90), |l| l["event"] == "done");
     lines.extend(rest);
@@ -235,7 +284,7 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
     };
     eprintln!("producer data socket: {producer_stats}");
     assert!(
-        field(&producer_stats, "wrong_address") > 0,
-        "the forged acknowledgements were counted: {producer_stats}"
+        field(&producer_stats, "wrong_address") >= ROUNDS,
+        "the forged acknowledgements and repair requests were counted: {producer_stats}"
     );
 }

@@ -127,6 +127,10 @@ struct Locked {
     io_wakes_at: Option<Instant>,
     /// Async writers waiting for a reliable producer's window.
     window_wakers: Vec<std::task::Waker>,
+    /// Threads in [`DataPlane::wait_acknowledged`]: while there are any, the I/O thread
+    /// signals `window` after each round (acknowledgements that empty a history open no
+    /// window, so nothing else would).
+    ack_waiters: usize,
 }
 
 /// The participant's data socket, its core and its I/O thread.
@@ -212,6 +216,7 @@ impl DataPlane {
                 core,
                 io_wakes_at: None,
                 window_wakers: Vec::new(),
+                ack_waiters: 0,
             }),
             window: Condvar::new(),
             endpoints: RwLock::default(),
@@ -225,6 +230,12 @@ impl DataPlane {
     /// Takes the core: first hands back the buffers this thread sent since it last held it.
     fn lock(&self) -> MutexGuard<'_, Locked> {
         let mut locked = lock(&self.locked);
+        self.recycle_sent(&mut locked);
+        locked
+    }
+
+    /// Hands the buffers this thread sent back to the core.
+    fn recycle_sent(&self, locked: &mut Locked) {
         SENT.with(|sent| {
             if let Ok(mut sent) = sent.try_borrow_mut() {
                 let (owner, sent) = &mut *sent;
@@ -238,7 +249,6 @@ impl DataPlane {
                 }
             }
         });
-        locked
     }
 
     /// This data plane's identity for the thread-local list of sent buffers.
@@ -519,24 +529,25 @@ impl DataPlane {
     pub(crate) fn wait_acknowledged(&self, entity: u32, timeout: Duration) -> bool {
         let deadline = crate::sync::deadline(timeout);
         let mut locked = self.lock();
-        loop {
+        locked.ack_waiters += 1;
+        let acknowledged = loop {
             if locked.core.unacknowledged(entity) == 0 {
-                return true;
+                break true;
             }
             let left = deadline.map_or(Duration::from_secs(3600), |d| {
                 d.saturating_duration_since(Instant::now())
             });
             if left.is_zero() {
-                return false;
+                break false;
             }
-            // Acknowledgements that do not open a closed window signal nothing: look again
-            // every few milliseconds.
             locked = self
                 .window
-                .wait_timeout(locked, left.min(Duration::from_millis(5)))
+                .wait_timeout(locked, left)
                 .map(|(guard, _)| guard)
                 .unwrap_or_else(|poison| poison.into_inner().0);
-        }
+        };
+        locked.ack_waiters -= 1;
+        acknowledged
     }
 
     // ---- the I/O thread ----
@@ -596,9 +607,17 @@ impl DataPlane {
                 }
                 next = locked.core.poll_timeout();
                 locked.io_wakes_at = next;
+                if locked.ack_waiters > 0 {
+                    self.window.notify_all();
+                }
                 let sent = self.release(locked);
                 self.count(&sent);
                 self.dispatch(&mut events, &mut credits);
+                // The buffers just sent go back now if nobody holds the core, rather than
+                // when this thread next wakes: a writer meanwhile finds them spare.
+                if let Ok(mut locked) = self.locked.try_lock() {
+                    self.recycle_sent(&mut locked);
+                }
                 // More datagrams may wait; and a direct callback's command may have left
                 // events or an earlier timer: one more round picks them up (without a
                 // receive, which would only find the socket empty).

@@ -29,6 +29,17 @@ fn live(delta: i64) {
 fn count() {
     if TRACKED.try_with(Cell::get).unwrap_or(false) {
         ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // Where a counted allocation comes from, with NDDS_ALLOC_BACKTRACE set (untracked
+        // while the variable is read and the backtrace taken: both allocate).
+        TRACKED.with(|t| t.set(false));
+        if std::env::var_os("NDDS_ALLOC_BACKTRACE").is_some() {
+            eprintln!(
+                "counted allocation on {:?}:\n{}",
+                std::thread::current().name(),
+                std::backtrace::Backtrace::force_capture()
+            );
+        }
+        TRACKED.with(|t| t.set(true));
     }
 }
 

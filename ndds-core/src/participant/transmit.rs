@@ -12,6 +12,8 @@ const FREE_HEADS: usize = 256;
 /// [`LARGE_HEADS`], so the spares stay small (at most 256 × 8 KiB + 8 × 64 KiB).
 const KEPT_HEAD: usize = 8 * 1024;
 const LARGE_HEADS: usize = 8;
+/// Spare heads made with the first datagram.
+const RESERVED_HEADS: usize = 8;
 /// A new head buffer holds at least this much.
 const MIN_HEAD: usize = 2 * 1024;
 
@@ -82,10 +84,21 @@ impl Transmits {
         head: &[u8],
         tail: Option<(&Arc<Vec<u8>>, Range<usize>)>,
     ) {
-        // The most recently freed spare large enough (a small one would have to grow).
+        // The most recently freed spare large enough (a small one would have to grow). A new
+        // one is rounded up to a power of two, so heads that grow a little at a time (a batch
+        // a few samples longer than any before) do not each need a new buffer.
         let mut buffer = match self.free.iter().rposition(|b| b.capacity() >= head.len()) {
             Some(index) => self.free.swap_remove(index),
-            None => Vec::with_capacity(head.len().max(MIN_HEAD)),
+            None => {
+                if self.free.is_empty() && self.datagrams == 0 {
+                    // The first datagram: a few spares at once, so that heads a driver
+                    // still holds (sent by another thread, not yet recycled) are not
+                    // what makes a later push allocate.
+                    self.free
+                        .extend((0..RESERVED_HEADS).map(|_| Vec::with_capacity(MIN_HEAD)));
+                }
+                Vec::with_capacity(head.len().max(MIN_HEAD).next_power_of_two())
+            }
         };
         buffer.clear();
         buffer.extend_from_slice(head);
