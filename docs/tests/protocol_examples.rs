@@ -40,11 +40,14 @@ const PARTICIPANT: u64 = 0x1122_3344_5566_7788;
 /// The consuming participant of the data-plane examples.
 const CONSUMER: u64 = 0x8877_6655_4433_2211;
 const DOMAIN: u16 = 7;
+/// The producing participant's address token for the consumer's data socket.
+const TOKEN: u64 = 0x0123_4567_89ab_cdef;
 
 /// From producer entity 1 of `PARTICIPANT` to consumers 2 and 5 of `CONSUMER`.
 const TO_CONSUMERS: Addressing<'static> = Addressing {
     reader_participant: CONSUMER,
     writer: 1,
+    token: TOKEN,
     readers: &[2, 5],
 };
 
@@ -155,7 +158,7 @@ fn data_datagram(subs: &[DataSub<'_>]) -> Vec<u8> {
 
 fn feedback_datagram(subs: &[FeedbackSub<'_>]) -> Vec<u8> {
     let mut out = Vec::new();
-    encode_feedback(DOMAIN, CONSUMER, PARTICIPANT, subs, &mut out).expect("example encodes");
+    encode_feedback(DOMAIN, CONSUMER, PARTICIPANT, TOKEN, subs, &mut out).expect("example encodes");
     out
 }
 
@@ -334,6 +337,7 @@ fn data_plane_examples_parse_back() {
         assert_eq!(datagram.header.sender, PARTICIPANT);
         assert_eq!(datagram.reader_participant, CONSUMER);
         assert_eq!(datagram.writer, TO_CONSUMERS.writer);
+        assert_eq!(datagram.token, TOKEN);
         assert_eq!(datagram.readers.as_slice(), TO_CONSUMERS.readers);
         let parsed: Result<Vec<_>, _> = datagram.subs().collect();
         assert_eq!(parsed, Ok(subs));
@@ -342,6 +346,7 @@ fn data_plane_examples_parse_back() {
     let datagram = FeedbackDatagram::parse(&bytes, DOMAIN).expect("example parses");
     assert_eq!(datagram.header.sender, CONSUMER);
     assert_eq!(datagram.writer_participant, PARTICIPANT);
+    assert_eq!(datagram.token, TOKEN);
     let parsed: Result<Vec<_>, _> = datagram.subs().collect();
     assert_eq!(parsed, Ok(feedback_example()));
 }

@@ -28,6 +28,7 @@ fn registry() -> Registry {
     let addressing = Addressing {
         reader_participant: 1,
         writer: 2,
+        token: 4,
         readers: &[3],
     };
     // Enums first: one that sits behind a `Vec` or `Option` is seen completely only when

@@ -164,6 +164,7 @@ fn data_sub_kinds() -> Vec<(&'static str, u8)> {
     let to = Addressing {
         reader_participant: 0,
         writer: 0,
+        token: 0,
         readers: &[],
     };
     subs.iter()
@@ -210,9 +211,9 @@ fn feedback_sub_kinds() -> Vec<(&'static str, u8)> {
                 FeedbackSub::NackFrag(_) => ("NackFrag", FeedbackSubKind::NackFrag),
             };
             let mut out = Vec::new();
-            encode_feedback(0, 0, 0, std::slice::from_ref(sub), &mut out).expect("encodes");
-            // Header, then a one-byte participant varint, then the kind byte.
-            let byte = out[HEADER_LEN + 1];
+            encode_feedback(0, 0, 0, 0, std::slice::from_ref(sub), &mut out).expect("encodes");
+            // Header, a one-byte participant varint, the 8-byte token, then the kind byte.
+            let byte = out[HEADER_LEN + 9];
             assert_eq!(byte, kind as u8, "FeedbackSubKind::{name}");
             (name, byte)
         })

@@ -325,6 +325,7 @@ fn a_datagram_naming_one_reader_many_times_reaches_it_once() {
         &ndds_core::wire::data::Addressing {
             reader_participant: reader.guid.participant,
             writer: 1,
+            token: 0x5eed,
             readers: &readers,
         },
     );

@@ -38,6 +38,7 @@ fn data(domain: u16, sender: u64, writer: u32, to: (u64, u32), sub: &DataSub<'_>
         &Addressing {
             reader_participant: to.0,
             writer,
+            token: 0,
             readers: &[to.1],
         },
     );
@@ -126,6 +127,7 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
         domain,
         real_reader.guid.participant,
         real_writer.guid.participant,
+        0,
         &[FeedbackSub::AckNack(AckNack {
             reader: real_reader.guid.entity,
             writer: real_writer.guid.entity,
@@ -144,6 +146,7 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
         domain,
         real_reader.guid.participant,
         real_writer.guid.participant,
+        0,
         &[
             FeedbackSub::AckNack(AckNack {
                 reader: real_reader.guid.entity,

@@ -204,10 +204,10 @@ impl DataPlane {
             SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
         };
         let core = ParticipantCore::new(CoreConfig {
-            domain,
-            participant,
             max_datagram: limits.max_datagram,
             max_sample: limits.max_sample,
+            secret: os_secret(),
+            ..CoreConfig::new(domain, participant)
         });
         Ok(DataPlane {
             socket,
@@ -783,4 +783,18 @@ fn now_ns() -> u64 {
     SystemTime::now()
         .duration_since(SystemTime::UNIX_EPOCH)
         .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// 32 bytes from the operating system's random source, for the core's address tokens; if it
+/// cannot be read, the core's own (seeded from the operating system by `fastrand`).
+fn os_secret() -> [u8; 32] {
+    use std::io::Read;
+    let mut secret = [0; 32];
+    match std::fs::File::open("/dev/urandom").and_then(|mut f| f.read_exact(&mut secret)) {
+        Ok(()) => secret,
+        Err(error) => {
+            tracing::debug!(%error, "/dev/urandom unreadable: address tokens from fastrand");
+            CoreConfig::new(0, 0).secret
+        }
+    }
 }

@@ -16,7 +16,7 @@ use crate::admission::{Admission, AdmissionConfig, AdmissionStats};
 use crate::arbitration::SampleStatus;
 use crate::arbitration::{Arbiter, ArbiterStats, Incoming, Notification, Output, Rules};
 use crate::reliability::{AckNack, Delivery, ReaderConfig, ReliableReader};
-use crate::wire::data::{FLAG_RELIABLE, Gap, Heartbeat};
+use crate::wire::data::{AddressToken, FLAG_RELIABLE, Gap, Heartbeat};
 use crate::wire::feedback::{AckNack as WireAckNack, encode_feedback};
 use crate::wire::{FeedbackSub, Guid, SampleMeta};
 
@@ -45,6 +45,8 @@ pub(crate) struct Origin {
     pub(crate) from: SocketAddrV4,
     /// When the datagram arrived (the driver's wall clock, read once per datagram).
     pub(crate) received: SystemTime,
+    /// The writer participant's address token for this participant, echoed in feedback.
+    pub(crate) token: AddressToken,
 }
 
 impl Origin {
@@ -84,6 +86,8 @@ struct Stream {
     reader: ReliableReader<(Incoming, RawSample)>,
     /// Where the producer's feedback goes (its data socket).
     from: SocketAddrV4,
+    /// The token its data carried last, echoed in the feedback.
+    token: AddressToken,
 }
 
 /// What a producer sent: held, in arrival order, until the producer is matched.
@@ -424,7 +428,7 @@ impl ConsumerCore {
                 }
             }
             while let Some(ack) = stream.reader.poll_output() {
-                send_ack(ctx, feedback, entity, *writer, stream.from, ack);
+                send_ack(ctx, feedback, entity, *writer, stream, ack);
             }
         }
     }
@@ -445,9 +449,11 @@ impl ConsumerCore {
             Stream {
                 reader,
                 from: origin.from,
+                token: origin.token,
             }
         });
         stream.from = origin.from;
+        stream.token = origin.token;
         stream
     }
 
@@ -493,7 +499,7 @@ fn send_ack(
     buf: &mut Vec<u8>,
     reader: u32,
     writer: Guid,
-    to: SocketAddrV4,
+    stream: &Stream,
     ack: AckNack,
 ) {
     let sub = FeedbackSub::AckNack(WireAckNack {
@@ -502,7 +508,8 @@ fn send_ack(
         acked: ack.acked,
         missing: ack.missing.as_bytes(),
     });
-    if encode_feedback(ctx.domain, ctx.participant, writer.participant, &[sub], buf).is_ok() {
-        ctx.out.push(to, buf, None);
+    let (domain, participant, token) = (ctx.domain, ctx.participant, stream.token);
+    if encode_feedback(domain, participant, writer.participant, token, &[sub], buf).is_ok() {
+        ctx.out.push(stream.from, buf, None);
     }
 }

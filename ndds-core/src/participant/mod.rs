@@ -37,6 +37,7 @@ use bytes::Bytes;
 pub use consumer::{ConsumerCounters, ConsumerSpec};
 pub use outbox::{BatchConfig, BufferPool, MatchedConsumer};
 pub use producer::{ProducerSpec, WriteRefused};
+use producer::FeedbackVerdict;
 pub use sample::{RawSample, SampleInfo};
 pub use transmit::Transmit;
 
@@ -64,6 +65,11 @@ pub struct CoreConfig {
     pub max_datagram: usize,
     /// Largest sample accepted or written, in encoded bytes.
     pub max_sample: usize,
+    /// A secret of this participant's, from which the address tokens of its data are
+    /// derived (feedback must echo them: see `docs/protocol.md`). Unguessable in a driver:
+    /// [`CoreConfig::new`] takes one from `fastrand`'s generator (seeded from the operating
+    /// system); a driver may put the operating system's random bytes here instead.
+    pub secret: [u8; 32],
 }
 
 impl CoreConfig {
@@ -74,6 +80,7 @@ impl CoreConfig {
             participant,
             max_datagram: MAX_DATAGRAM,
             max_sample: 16 << 20,
+            secret: std::array::from_fn(|_| fastrand::u8(..)),
         }
     }
 }
@@ -127,6 +134,12 @@ pub struct CoreStats {
     pub unmatched_sender: u64,
     /// Dropped because they carried a matched sender's id but came from another address.
     pub wrong_address: u64,
+    /// Feedback submessages from a matched reader's address that did not echo the address
+    /// token of the data sent there: not acted on, except for pieces within 3 times the bytes
+    /// such feedback brought (what a host forging the reader's address can get).
+    pub unvalidated_feedback: u64,
+    /// Pieces asked for by unvalidated feedback and not sent (beyond its allowance).
+    pub pieces_withheld: u64,
     /// Dropped datagrams, by [`DropReason::index`].
     pub dropped: [u64; DropReason::ALL.len()],
     /// Datagrams and bytes the core asked to send.
@@ -205,6 +218,7 @@ impl ParticipantCore {
                 domain: self.config.domain,
                 participant: self.config.participant,
                 max_datagram: self.config.max_datagram,
+                secret: &self.config.secret,
                 out: &mut self.transmits,
             },
             &mut self.producers,
@@ -427,6 +441,7 @@ impl ParticipantCore {
             },
             from,
             received,
+            token: parsed.token,
         };
         let mut readers = Readers::new();
         for reader in parsed.readers.iter() {
@@ -453,7 +468,7 @@ impl ParticipantCore {
                     let reader = readers[0];
                     let outcome = self
                         .repair
-                        .piece(now, origin.writer, from, reader, &fragment);
+                        .piece(now, origin.writer, (from, parsed.token), reader, &fragment);
                     match outcome {
                         PieceOutcome::Complete(whole) => {
                             let (meta, info) = origin.describe(&fragment.meta);
@@ -544,6 +559,8 @@ impl ParticipantCore {
             return Ok(());
         }
         let sender = parsed.header.sender;
+        // What the datagram brought counts once towards an unvalidated sender's allowance.
+        let mut credit = datagram.len();
         for sub in parsed.subs() {
             let sub = sub?;
             let (reader, writer) = match &sub {
@@ -558,7 +575,14 @@ impl ParticipantCore {
             let Some(producer) = producers.get_mut(&writer) else {
                 continue;
             };
-            producer.on_feedback(&mut tx, events, now, reader, from, &sub);
+            let how = (from, parsed.token, std::mem::take(&mut credit));
+            match producer.on_feedback(&mut tx, events, now, reader, how, &sub) {
+                FeedbackVerdict::NotBelieved | FeedbackVerdict::Acted => {}
+                FeedbackVerdict::Unvalidated { withheld } => {
+                    self.stats.unvalidated_feedback += 1;
+                    self.stats.pieces_withheld += withheld as u64;
+                }
+            }
         }
         Ok(())
     }

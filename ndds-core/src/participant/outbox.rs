@@ -7,9 +7,12 @@ use std::net::SocketAddrV4;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use sha2::{Digest, Sha256};
+
 use crate::fragment::Split;
 use crate::wire::data::{
-    Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample, prefix_overhead,
+    AddressToken, Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample,
+    prefix_overhead,
 };
 use crate::wire::{DataSub, DataWriter, Guid, SampleMeta};
 
@@ -35,7 +38,32 @@ pub(crate) struct Tx<'a> {
     pub(crate) domain: u16,
     pub(crate) participant: u64,
     pub(crate) max_datagram: usize,
+    /// The participant's secret, from which its address tokens are derived.
+    pub(crate) secret: &'a [u8; 32],
     pub(crate) out: &'a mut Transmits,
+}
+
+/// Bytes a producer may send in answer to feedback that did not echo its destination's
+/// address token, per byte of that feedback: the address has not proved it receives there.
+pub(crate) const UNVALIDATED_FACTOR: usize = 3;
+
+/// The token of destination `participant` at `addr`: the first 8 bytes of SHA-256 over a
+/// label, the secret and the destination, never 0 (which stands for none).
+pub(crate) fn address_token(
+    secret: &[u8; 32],
+    addr: SocketAddrV4,
+    participant: u64,
+) -> AddressToken {
+    let mut hash = Sha256::new();
+    hash.update(b"ndds address token v1");
+    hash.update(secret);
+    hash.update(addr.ip().octets());
+    hash.update(addr.port().to_le_bytes());
+    hash.update(participant.to_le_bytes());
+    let digest = hash.finalize();
+    let mut first = [0; 8];
+    first.copy_from_slice(&digest[..8]);
+    u64::from_le_bytes(first).max(1)
 }
 
 impl Tx<'_> {
@@ -63,16 +91,23 @@ pub(crate) struct Dest {
     pub(crate) addr: SocketAddrV4,
     pub(crate) participant: u64,
     pub(crate) readers: Vec<u32>,
+    /// What every datagram sent here carries, and feedback from here must echo.
+    pub(crate) token: AddressToken,
+    /// Bytes that may still be sent in answer to feedback from here that did not echo the
+    /// token ([`UNVALIDATED_FACTOR`] times what such feedback brought, less what was sent).
+    pub(crate) allowance: usize,
     batch: DataWriter,
     opened: Option<Instant>,
 }
 
 impl Dest {
-    fn new(addr: SocketAddrV4, participant: u64) -> Self {
+    fn new(addr: SocketAddrV4, participant: u64, token: AddressToken) -> Self {
         Dest {
             addr,
             participant,
             readers: Vec::new(),
+            token,
+            allowance: 0,
             batch: DataWriter::new(),
             opened: None,
         }
@@ -96,6 +131,7 @@ impl Dest {
         let to = Addressing {
             reader_participant: self.participant,
             writer,
+            token: self.token,
             readers,
         };
         self.batch.begin(tx.domain, tx.participant, &to);
@@ -284,7 +320,15 @@ impl Outbox {
             }) {
                 Some(index) => index,
                 None => {
-                    dests.push(Dest::new(addr, participant));
+                    let token = address_token(tx.secret, addr, participant);
+                    let mut dest = Dest::new(addr, participant, token);
+                    // What feedback from there has earned so far stays earned.
+                    dest.allowance = self
+                        .dests
+                        .iter()
+                        .find(|d| d.addr == addr && d.participant == participant)
+                        .map_or(0, |d| d.allowance);
+                    dests.push(dest);
                     dests.len() - 1
                 }
             };

@@ -9,12 +9,28 @@ use std::time::Instant;
 
 use crate::admission::{Admission, AdmissionConfig};
 use crate::reliability::{ReliableWriter, WriterConfig, WriterOutput};
-use crate::wire::data::{FLAG_RELIABLE, Gap, Heartbeat, Sample};
+use crate::wire::data::{AddressToken, FLAG_RELIABLE, Gap, Heartbeat, Sample};
 use crate::wire::feedback::bit;
 use crate::wire::{DataSub, FeedbackSub, Guid, SampleMeta};
 
 use super::Event;
-use super::outbox::{BatchConfig, MatchedConsumer, Outbox, Tx, split};
+use super::outbox::{BatchConfig, MatchedConsumer, Outbox, Tx, UNVALIDATED_FACTOR, split};
+
+/// What became of one feedback submessage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum FeedbackVerdict {
+    /// From a reader that is not matched here, or not at its discovered locator (counted by
+    /// the admission).
+    NotBelieved,
+    /// Believed and acted on.
+    Acted,
+    /// From the right address but without its address token: acknowledgements ignored,
+    /// pieces sent only within the allowance; `withheld` pieces were asked for beyond it.
+    Unvalidated {
+        /// Pieces not sent.
+        withheld: usize,
+    },
+}
 
 /// A fragmented sample of at most this many pieces is resent whole when a reader asks for it
 /// again; a larger one is repaired piece by piece.
@@ -253,23 +269,45 @@ impl ProducerCore {
         self.reschedule();
     }
 
-    /// Acknowledgements and repair requests from reader `reader`, sent from `from`. Returns
-    /// false when it was not believed (counted by the admission).
+    /// Acknowledgements and repair requests from reader `reader`, sent from `from` in a
+    /// datagram that echoed `token` and brought `credit` bytes (counted once per datagram).
+    ///
+    /// Feedback is acted on in full only when it comes from the reader's discovered locator
+    /// and echoes that destination's address token, proof that its sender receives what is
+    /// sent there. Feedback from the right address with another token (a host forging the
+    /// reader's address, which never sees the token) moves nothing: its acknowledgements are
+    /// ignored, and the pieces it asks for are sent only within [`UNVALIDATED_FACTOR`] times
+    /// the bytes such feedback brought.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn on_feedback(
         &mut self,
         tx: &mut Tx<'_>,
         events: &mut VecDeque<Event>,
         now: Instant,
         reader: Guid,
-        from: SocketAddrV4,
+        (from, token, credit): (SocketAddrV4, AddressToken, usize),
         sub: &FeedbackSub<'_>,
-    ) -> bool {
+    ) -> FeedbackVerdict {
         if !self.believed.admit(&reader, from) {
-            return false;
+            return FeedbackVerdict::NotBelieved;
         }
+        let Some(dest) = self.outbox.dest_of(reader) else {
+            return FeedbackVerdict::NotBelieved;
+        };
+        let validated = token == dest.token;
+        if !validated {
+            dest.allowance = dest
+                .allowance
+                .saturating_add(credit.saturating_mul(UNVALIDATED_FACTOR));
+        }
+        let mut verdict = if validated {
+            FeedbackVerdict::Acted
+        } else {
+            FeedbackVerdict::Unvalidated { withheld: 0 }
+        };
         match sub {
             FeedbackSub::AckNack(ack) => {
-                if let Some(reliable) = &mut self.reliable {
+                if validated && let Some(reliable) = &mut self.reliable {
                     let was_open = reliable.writer.window_open();
                     reliable
                         .writer
@@ -294,10 +332,21 @@ impl ProducerCore {
                 if let Some(kept) = kept
                     && let Some(dest) = self.outbox.dest_of(reader)
                 {
-                    let mut missing = (0..nack.missing.len() * 8)
+                    let asked = (0..nack.missing.len() * 8)
                         .filter(|i| bit(nack.missing, *i))
                         .filter_map(|i| nack.base.checked_add(u32::try_from(i).ok()?));
-                    dest.send_fragments(
+                    // Unvalidated: only as many pieces as the allowance covers, each counted
+                    // as a whole datagram.
+                    let limit = if validated {
+                        usize::MAX
+                    } else {
+                        dest.allowance / tx.max_datagram.max(1)
+                    };
+                    let wanted = (0..nack.missing.len() * 8)
+                        .filter(|i| bit(nack.missing, *i))
+                        .count();
+                    let mut missing = asked.take(limit);
+                    let sent = dest.send_fragments(
                         tx,
                         self.entity,
                         Some(reader.entity),
@@ -305,11 +354,16 @@ impl ProducerCore {
                         &kept.bytes,
                         Some(&mut missing),
                     );
+                    if !validated {
+                        dest.allowance = dest.allowance.saturating_sub(sent);
+                        let withheld = wanted.saturating_sub(limit);
+                        verdict = FeedbackVerdict::Unvalidated { withheld };
+                    }
                 }
             }
         }
         self.reschedule();
-        true
+        verdict
     }
 
     /// Runs the due timers: batch flushes, heartbeats, repairs, reader liveness.

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use crate::fragment::{FragmentResult, Mode, Piece, Reassembler, ReassemblyConfig};
 use crate::reliability::RttEstimate;
-use crate::wire::data::{FLAG_RELIABLE, Fragment};
+use crate::wire::data::{AddressToken, FLAG_RELIABLE, Fragment};
 use crate::wire::feedback::{NackFrag, encode_feedback};
 use crate::wire::{FeedbackSub, Guid};
 
@@ -31,6 +31,8 @@ const NACK_FRAG_RETRY_MIN: Duration = Duration::from_millis(5);
 #[derive(Clone, Copy, Debug)]
 struct Wanted {
     from: SocketAddrV4,
+    /// The address token its pieces carried (echoed in the request).
+    token: AddressToken,
     reader: u32,
     due: Instant,
     /// When its pieces were first asked for, and whether they were asked for again since
@@ -111,13 +113,14 @@ impl Repair {
         }
     }
 
-    /// Takes one piece from `writer` at `from`, for consumer `reader` (whose id the
-    /// requests carry); returns the whole sample once it is complete.
+    /// Takes one piece from `writer` at `from` (whose datagram carried `token`), for
+    /// consumer `reader` (whose id the requests carry); returns the whole sample once it is
+    /// complete.
     pub(crate) fn piece(
         &mut self,
         now: Instant,
         writer: Guid,
-        from: SocketAddrV4,
+        (from, token): (SocketAddrV4, AddressToken),
         reader: u32,
         fragment: &Fragment<'_>,
     ) -> PieceOutcome {
@@ -165,6 +168,7 @@ impl Repair {
                     key,
                     Wanted {
                         from,
+                        token,
                         reader,
                         due: now + wait,
                         // Measured once: later pieces of the same answer are no round trip.
@@ -221,7 +225,8 @@ impl Repair {
                 base: missing.base,
                 missing: missing.bitmap(),
             });
-            if encode_feedback(domain, participant, writer.participant, &[nack], feedback).is_ok() {
+            let to = writer.participant;
+            if encode_feedback(domain, participant, to, want.token, &[nack], feedback).is_ok() {
                 out.push(want.from, feedback, None);
             }
             want.due = now + retry;

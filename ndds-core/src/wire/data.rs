@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! header(kind = 16, sender = producing participant id)
-//!   | varint reader_participant | varint writer | varint n | n × varint reader
+//!   | varint reader_participant | varint writer | u64le token | varint n | n × varint reader
 //!   | submessage { submessage }          (at least one)
 //! submessage := u8 sub_kind | postcard body
 //!   sub_kind 1  Sample     one whole sample
@@ -153,6 +153,7 @@ struct PrefixKey {
     sender: u64,
     reader_participant: u64,
     writer: u32,
+    token: u64,
     readers: SmallVec<[u32; 8]>,
 }
 
@@ -162,6 +163,7 @@ impl PrefixKey {
             && self.sender == sender
             && self.reader_participant == to.reader_participant
             && self.writer == to.writer
+            && self.token == to.token
             && self.readers[..] == *to.readers
     }
 }
@@ -194,6 +196,7 @@ impl DataWriter {
             sender,
             reader_participant: to.reader_participant,
             writer: to.writer,
+            token: to.token,
             readers: SmallVec::from_slice(to.readers),
         });
         Header {
@@ -318,13 +321,29 @@ pub struct Addressing<'a> {
     pub reader_participant: u64,
     /// Writer entity within the sending participant.
     pub writer: u32,
+    /// The sender's address token for this destination (see [`AddressToken`]): fixed 8
+    /// bytes on the wire, echoed in the readers' feedback.
+    #[serde(serialize_with = "token_bytes")]
+    pub token: u64,
     /// Reader entities within `reader_participant`.
     pub readers: &'a [u32],
 }
 
+/// An address token: 64 bits a participant derives from a secret of its own and one
+/// destination (address and participant), carried in every `Data` datagram it sends there
+/// and echoed in the feedback that comes back. Feedback that echoes the right token proves
+/// that its sender receives at that address (an off-path host that forges the address never
+/// sees the token); 0 means none.
+pub type AddressToken = u64;
+
+/// A token as 8 bytes, little-endian (random tokens would take 10 as a varint).
+fn token_bytes<S: serde::Serializer>(token: &u64, s: S) -> Result<S::Ok, S::Error> {
+    token.to_le_bytes().serialize(s)
+}
+
 /// Bytes of a datagram's header and addressing, at most, for `readers` reader entities.
 pub fn prefix_overhead(readers: usize) -> usize {
-    HEADER_LEN + 10 + 5 + 5 + 5 * readers
+    HEADER_LEN + 10 + 5 + 8 + 5 + 5 * readers
 }
 
 /// Bytes a `Sample` submessage adds to its payload, at most (kind byte, metadata, payload
@@ -343,6 +362,8 @@ pub struct DataDatagram<'a> {
     pub reader_participant: u64,
     /// Writer entity within the sending participant.
     pub writer: u32,
+    /// The sender's token for this destination, to echo in feedback.
+    pub token: AddressToken,
     /// Reader entities within `reader_participant`, deduplicated and sorted.
     pub readers: Readers,
     rest: &'a [u8],
@@ -363,6 +384,8 @@ impl<'a> DataDatagram<'a> {
         }
         let (reader_participant, rest) = take::<u64>(body)?;
         let (writer, rest) = take::<u32>(rest)?;
+        let (token, rest) = rest.split_first_chunk::<8>().ok_or(DropReason::Malformed)?;
+        let token = u64::from_le_bytes(*token);
         let (count, mut rest) = take::<u32>(rest)?;
         // Each reader takes at least one byte: a claim beyond the bytes left is malformed
         // before anything is allocated.
@@ -384,6 +407,7 @@ impl<'a> DataDatagram<'a> {
             header,
             reader_participant,
             writer,
+            token,
             readers,
             rest,
         })
@@ -431,9 +455,9 @@ fn take<'a, T: Deserialize<'a>>(body: &'a [u8]) -> Result<(T, &'a [u8]), DropRea
     postcard::take_from_bytes(body).map_err(|_| DropReason::Malformed)
 }
 
-/// The smallest `Data` datagram the parser accepts: header, reader participant, writer and
-/// reader count (one byte each when zero), and one submessage kind byte.
-pub const MIN_DATA_LEN: usize = HEADER_LEN + 4;
+/// The smallest `Data` datagram the parser accepts: header, reader participant, writer,
+/// token, reader count (one byte each when zero, the token 8), and one submessage kind byte.
+pub const MIN_DATA_LEN: usize = HEADER_LEN + 12;
 
 #[cfg(test)]
 mod tests {
@@ -455,6 +479,7 @@ mod tests {
     const TO: Addressing<'static> = Addressing {
         reader_participant: 0xCD,
         writer: 1,
+        token: 0x0123_4567_89AB_CDEF,
         readers: &[3, 2, 3],
     };
 

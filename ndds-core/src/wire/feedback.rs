@@ -4,6 +4,7 @@
 //! ```text
 //! header(kind = 17, sender = consuming participant id)
 //!   | varint writer_participant
+//!   | u64le token          the address token of the writer participant's data (0: none)
 //!   | submessage { submessage }
 //! submessage := u8 sub_kind | postcard body
 //!   sub_kind 1  AckNack   everything before `acked` arrived; these later ones are missing
@@ -16,6 +17,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::data::AddressToken;
 use super::header::{Header, MessageKind};
 use super::{DropReason, MAX_DATAGRAM};
 
@@ -96,6 +98,7 @@ pub fn encode_feedback(
     domain: u16,
     sender: u64,
     writer_participant: u64,
+    token: AddressToken,
     subs: &[FeedbackSub<'_>],
     out: &mut Vec<u8>,
 ) -> Result<(), DropReason> {
@@ -111,6 +114,7 @@ pub fn encode_feedback(
     .emit(out);
     // Encoding integers and byte strings into a Vec cannot fail.
     let mut buf = postcard::to_extend(&writer_participant, std::mem::take(out)).unwrap_or_default();
+    buf.extend_from_slice(&token.to_le_bytes());
     for sub in subs {
         buf.push(sub.kind() as u8);
         buf = match sub {
@@ -134,6 +138,8 @@ pub struct FeedbackDatagram<'a> {
     pub header: Header,
     /// The participant whose writers this is for.
     pub writer_participant: u64,
+    /// The address token echoed from that participant's data (0: none).
+    pub token: AddressToken,
     rest: &'a [u8],
 }
 
@@ -149,12 +155,15 @@ impl<'a> FeedbackDatagram<'a> {
         }
         let (writer_participant, rest) =
             postcard::take_from_bytes::<u64>(body).map_err(|_| DropReason::Malformed)?;
+        let (token, rest) = rest.split_first_chunk::<8>().ok_or(DropReason::Malformed)?;
+        let token = u64::from_le_bytes(*token);
         if rest.is_empty() {
             return Err(DropReason::Malformed);
         }
         Ok(FeedbackDatagram {
             header,
             writer_participant,
+            token,
             rest,
         })
     }
@@ -248,9 +257,10 @@ mod tests {
             }),
         ];
         let mut out = Vec::new();
-        encode_feedback(5, 0xAA, 0xBB, &subs, &mut out).unwrap();
+        encode_feedback(5, 0xAA, 0xBB, 0x1234_5678_9ABC_DEF0, &subs, &mut out).unwrap();
         let datagram = FeedbackDatagram::parse(&out, 5).unwrap();
         assert_eq!(datagram.writer_participant, 0xBB);
+        assert_eq!(datagram.token, 0x1234_5678_9ABC_DEF0);
         let decoded: Vec<_> = datagram.subs().collect::<Result<_, _>>().unwrap();
         assert_eq!(decoded, subs);
         let long = vec![0xFF; MAX_BITMAP_BYTES + 1];
@@ -261,7 +271,7 @@ mod tests {
             missing: &long,
         })];
         assert_eq!(
-            encode_feedback(5, 1, 2, &too_long, &mut out),
+            encode_feedback(5, 1, 2, 0, &too_long, &mut out),
             Err(DropReason::Invalid)
         );
     }

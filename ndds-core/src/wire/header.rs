@@ -15,7 +15,7 @@ use super::DropReason;
 /// The four bytes every ndds datagram starts with.
 pub const MAGIC: [u8; 4] = *b"NDDS";
 /// The protocol version this implementation speaks. Datagrams of any other version are dropped.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Length of the fixed header in bytes.
 pub const HEADER_LEN: usize = 16;
 

@@ -3,7 +3,10 @@
 //! an id discovery never matched or under the matched peer's id from the attacker's own
 //! address. Each is dropped and counted (`CoreStats::{unmatched_sender, wrong_address}`,
 //! `ConsumerCounters::admission`), nothing is sent to the attacker, and the genuine stream,
-//! over a lossy link that needs every repair, is unharmed.
+//! over a lossy link that needs every repair, is unharmed. Feedback forged with the reader's
+//! own address (which only a spoofing attacker can send) lacks the address token the
+//! producer's data carries: its acknowledgements move nothing, and the repairs it asks for
+//! stay within 3 times its bytes.
 
 use ndds_core::participant::Event;
 use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Gap, Heartbeat, Sample};
@@ -11,8 +14,8 @@ use ndds_core::wire::feedback::{AckNack, NackFrag, encode_feedback};
 use ndds_core::wire::{DataSub, DataWriter, FeedbackSub, SampleMeta};
 
 use crate::sim::{
-    App, DOMAIN, Link, MTU, SimNet, WriterApp, exactly, guid, outsider, participant_id, payload,
-    tag,
+    App, DOMAIN, Link, MTU, SimNet, WriterApp, exactly, guid, locator, outsider, participant_id,
+    payload, tag,
 };
 use crate::{MS, reliable_consumer, reliable_producer};
 
@@ -42,6 +45,7 @@ fn data(sender: u64, writer: u32, sub: &DataSub<'_>) -> Vec<u8> {
         &Addressing {
             reader_participant: participant_id(CONSUMER.0),
             writer,
+            token: 0,
             readers: &readers,
         },
     );
@@ -55,6 +59,7 @@ fn feedback(sender: u64, sub: FeedbackSub<'_>) -> Vec<u8> {
         DOMAIN,
         sender,
         participant_id(PRODUCER.0),
+        0,
         &[sub],
         &mut datagram,
     )
@@ -213,4 +218,97 @@ fn forged_traffic_under_a_matched_id_from_another_address_is_dropped_and_counted
     let producer = net.nodes[PRODUCER.0].core.stats();
     assert_eq!(producer.wrong_address, 2 * rounds, "{producer:?}");
     assert_eq!(producer.unmatched_sender, 0);
+}
+
+/// Feedback under the reader's id *and* from the reader's own address, without the token
+/// (what a host that forges source addresses can send, never having seen the data): a flood
+/// of piece requests for the newest large sample gets at most 3 times its bytes back, and
+/// an AckNack settling everything is ignored, so the stream that follows over a lossy link
+/// still arrives whole, without a sample reported lost.
+#[test]
+fn feedback_from_the_readers_address_without_its_token_moves_nothing_and_is_not_amplified() {
+    const FIRST: u64 = 10;
+    const FLOOD: usize = 200;
+    let mut net = SimNet::new(43, 2);
+    net.add_producer(PRODUCER.0, PRODUCER.1, reliable_producer(64));
+    net.add_consumer(
+        CONSUMER.0,
+        CONSUMER.1,
+        reliable_consumer(Some(64)),
+        App::Eager,
+    );
+    net.connect(PRODUCER, CONSUMER);
+    // Samples 1..=10, the even ones 3000 bytes (three pieces): 10 is the newest large one.
+    let mut writer = WriterApp::new(PRODUCER.0, PRODUCER.1, FIRST, 2 * MS, 500);
+    writer.sizes = vec![500, 3_000];
+    let writer = net.add_writer(writer);
+    let done = net.run_until(net.at_ms(5_000), |n| {
+        n.consumer(CONSUMER.0, CONSUMER.1).got.len() as u64 == FIRST
+            && n.nodes[PRODUCER.0].core.unacknowledged(PRODUCER.1) == 0
+    });
+    assert!(done, "{:?}", net.stats);
+
+    let consumer_id = participant_id(CONSUMER.0);
+    let nackfrag = feedback(
+        consumer_id,
+        FeedbackSub::NackFrag(NackFrag {
+            reader: CONSUMER.1,
+            writer: PRODUCER.1,
+            seq: FIRST,
+            base: 0,
+            missing: &[0xff; 64],
+        }),
+    );
+    let acknack = feedback(
+        consumer_id,
+        FeedbackSub::AckNack(AckNack {
+            reader: CONSUMER.1,
+            writer: PRODUCER.1,
+            acked: 1 << 40,
+            missing: &[],
+        }),
+    );
+    let before = net.nodes[PRODUCER.0].core.stats();
+    let mut flood_bytes = 0;
+    for _ in 0..FLOOD {
+        for datagram in [&nackfrag, &acknack] {
+            flood_bytes += datagram.len() as u64;
+            net.inject(locator(CONSUMER.0), PRODUCER.0, datagram.clone());
+        }
+    }
+    // Shorter than the idle heartbeat period: what the producer sends now answers the flood.
+    net.run_for(100 * MS);
+    let after = net.nodes[PRODUCER.0].core.stats();
+    let answered = after.transmit_bytes - before.transmit_bytes;
+    assert!(
+        answered <= 3 * flood_bytes,
+        "{answered} B sent for {flood_bytes} B of unvalidated feedback"
+    );
+    eprintln!("{answered} B sent for {flood_bytes} B of unvalidated feedback");
+    // The flood asked for 512 pieces per request; the sample has 3.
+    assert!(answered > 0, "the allowance lets some pieces through");
+    assert_eq!(
+        after.unvalidated_feedback - before.unvalidated_feedback,
+        2 * FLOOD as u64,
+        "{after:?}"
+    );
+    assert!(after.pieces_withheld > before.pieces_withheld, "{after:?}");
+    assert_eq!(after.wrong_address, 0);
+    assert_eq!(after.unmatched_sender, 0);
+
+    // Had the AckNack been believed, the writer would think everything settled and the
+    // consumer would see samples lost over the lossy link that follows.
+    net.set_link(PRODUCER.0, CONSUMER.0, Link::lossy(0.2));
+    net.writers[writer].total = 3 * FIRST;
+    let done = net.run_until(net.at_ms(10_000), |n| {
+        n.consumer(CONSUMER.0, CONSUMER.1).got.len() as u64 == 3 * FIRST
+    });
+    assert!(done, "{:?}", net.stats);
+    let log = net.consumer(CONSUMER.0, CONSUMER.1);
+    assert_eq!(
+        exactly(&log.seqs_from(guid(PRODUCER.0, PRODUCER.1)), 1, 3 * FIRST),
+        Ok(())
+    );
+    assert_eq!(log.notable(), vec![]);
+    assert_eq!(net.outsiders, vec![]);
 }

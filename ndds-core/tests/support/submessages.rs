@@ -117,6 +117,7 @@ pub struct OwnedDataDatagram {
     pub sender: u64,
     pub reader_participant: u64,
     pub writer: u32,
+    pub token: u64,
     /// As the sender lists them: in any order, repeats allowed.
     pub readers: Vec<u32>,
     pub subs: Vec<OwnedDataSub>,
@@ -133,6 +134,7 @@ impl OwnedDataDatagram {
         Addressing {
             reader_participant: self.reader_participant,
             writer: self.writer,
+            token: self.token,
             readers: &self.readers,
         }
     }
@@ -177,6 +179,7 @@ pub struct OwnedFeedbackDatagram {
     pub domain: u16,
     pub sender: u64,
     pub writer_participant: u64,
+    pub token: u64,
     pub subs: Vec<OwnedFeedbackSub>,
 }
 
@@ -193,6 +196,7 @@ impl OwnedFeedbackDatagram {
             self.domain,
             self.sender,
             self.writer_participant,
+            self.token,
             &self.subs()[..count],
             &mut out,
         )
@@ -335,15 +339,16 @@ pub fn feedback_sub() -> impl Strategy<Value = OwnedFeedbackSub> {
 pub fn data_datagram() -> impl Strategy<Value = OwnedDataDatagram> {
     (
         (any::<u16>(), number_u64()),
-        (number_u64(), number_u32(), readers()),
+        (number_u64(), number_u32(), any::<u64>(), readers()),
         vec(data_sub(), 1..8),
     )
         .prop_map(
-            |((domain, sender), (reader_participant, writer, readers), subs)| OwnedDataDatagram {
+            |((domain, sender), (reader_participant, writer, token, readers), subs)| OwnedDataDatagram {
                 domain,
                 sender,
                 reader_participant,
                 writer,
+                token,
                 readers,
                 subs,
             },
@@ -356,13 +361,15 @@ pub fn feedback_datagram() -> impl Strategy<Value = OwnedFeedbackDatagram> {
         any::<u16>(),
         number_u64(),
         number_u64(),
+        any::<u64>(),
         vec(feedback_sub(), 1..8),
     )
         .prop_map(
-            |(domain, sender, writer_participant, subs)| OwnedFeedbackDatagram {
+            |(domain, sender, writer_participant, token, subs)| OwnedFeedbackDatagram {
                 domain,
                 sender,
                 writer_participant,
+                token,
                 subs,
             },
         )

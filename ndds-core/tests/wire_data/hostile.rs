@@ -179,6 +179,9 @@ proptest! {
     }
 }
 
+/// An address token, as it follows the writer (Data) or the writer participant (Feedback).
+const TOKEN: [u8; 8] = [0xAB; 8];
+
 fn data_datagram_of(body: &[&[u8]]) -> Vec<u8> {
     let mut bytes = header_bytes(MessageKind::Data as u8, 0, 1);
     for part in body {
@@ -202,13 +205,13 @@ fn huge_reader_counts_are_malformed_and_cheap() {
     let beyond_max = postcard::to_allocvec(&(MAX_READERS as u32 + 1)).unwrap();
     let many_zeros = vec![0_u8; MAX_READERS + 8];
     let cases = [
-        // Participant 7, writer 1, u32::MAX readers, two of them, a heartbeat.
-        data_datagram_of(&[&[7, 1], &CLAIM_U32_MAX, &[3, 4], &[3, 1, 2]]),
-        data_datagram_of(&[&[7, 1], &CLAIM_U64_MAX, &[3, 4], &[3, 1, 2]]),
+        // Participant 7, writer 1, a token, u32::MAX readers, two of them, a heartbeat.
+        data_datagram_of(&[&[7, 1], &TOKEN, &CLAIM_U32_MAX, &[3, 4], &[3, 1, 2]]),
+        data_datagram_of(&[&[7, 1], &TOKEN, &CLAIM_U64_MAX, &[3, 4], &[3, 1, 2]]),
         // MAX_READERS + 1 readers, all present.
-        data_datagram_of(&[&[7, 1], &beyond_max, &many_zeros]),
+        data_datagram_of(&[&[7, 1], &TOKEN, &beyond_max, &many_zeros]),
         // 100 readers claimed, 3 bytes follow.
-        data_datagram_of(&[&[7, 1, 100], &[3, 1, 2]]),
+        data_datagram_of(&[&[7, 1], &TOKEN, &[100], &[3, 1, 2]]),
     ];
     for bytes in &cases {
         let (outcome, usage) = parse_data(bytes, 0);
@@ -223,8 +226,9 @@ fn huge_reader_counts_are_malformed_and_cheap() {
 fn payloads_chunks_and_bitmaps_claiming_gigabytes_are_malformed_and_cheap() {
     let sample = DataSubKind::Sample as u8;
     let fragment = DataSubKind::Fragment as u8;
-    // Participant 7, writer 1, no readers; then one-byte varints up to the length claim.
-    let prefix: &[u8] = &[7, 1, 0];
+    // Participant 7, writer 1, a token, no readers; then one-byte varints up to the length
+    // claim.
+    let prefix: &[u8] = &[7, 1, 0xAB, 0xAB, 0xAB, 0xAB, 0xAB, 0xAB, 0xAB, 0xAB, 0];
     let meta: &[u8] = &[1, 2, 3, 4, 5];
     let data_cases = [
         data_datagram_of(&[prefix, &[sample], meta, &CLAIM_U32_MAX, b"xy"]),
@@ -243,10 +247,10 @@ fn payloads_chunks_and_bitmaps_claiming_gigabytes_are_malformed_and_cheap() {
     let ack = FeedbackSubKind::AckNack as u8;
     let nack = FeedbackSubKind::NackFrag as u8;
     let feedback_cases = [
-        // Writer participant 7; reader 1, writer 2, acked 3, bitmap of u32::MAX bytes.
-        feedback_datagram_of(&[&[7, ack, 1, 2, 3], &CLAIM_U32_MAX, b"xy"]),
-        feedback_datagram_of(&[&[7, ack, 1, 2, 3], &CLAIM_U64_MAX, b"xy"]),
-        feedback_datagram_of(&[&[7, nack, 1, 2, 3, 4], &CLAIM_U32_MAX, b"xy"]),
+        // Writer participant 7, a token; reader 1, writer 2, acked 3, bitmap of u32::MAX bytes.
+        feedback_datagram_of(&[&[7], &TOKEN, &[ack, 1, 2, 3], &CLAIM_U32_MAX, b"xy"]),
+        feedback_datagram_of(&[&[7], &TOKEN, &[ack, 1, 2, 3], &CLAIM_U64_MAX, b"xy"]),
+        feedback_datagram_of(&[&[7], &TOKEN, &[nack, 1, 2, 3, 4], &CLAIM_U32_MAX, b"xy"]),
     ];
     for bytes in &feedback_cases {
         let (outcome, usage) = parse_feedback(bytes, 0);
@@ -267,6 +271,7 @@ fn the_most_readers_stay_within_the_budget() {
     let to = Addressing {
         reader_participant: 7,
         writer: 1,
+        token: 0x5eed,
         readers: &readers,
     };
     writer.begin(0, 1, &to);
@@ -291,6 +296,7 @@ fn warm_builders_allocate_nothing() {
     let to = Addressing {
         reader_participant: 7,
         writer: 1,
+        token: 0x5eed,
         readers: &readers,
     };
     let sample = |seq| {
@@ -326,8 +332,8 @@ fn warm_builders_allocate_nothing() {
         missing: &missing,
     })];
     let mut out = Vec::new();
-    encode_feedback(0, 7, 1, &subs, &mut out).unwrap();
-    let (result, usage) = measure(|| encode_feedback(0, 7, 1, &subs, &mut out));
+    encode_feedback(0, 7, 1, 0, &subs, &mut out).unwrap();
+    let (result, usage) = measure(|| encode_feedback(0, 7, 1, 0, &subs, &mut out));
     assert_eq!(result, Ok(()));
     assert_eq!((usage.peak, usage.total), (0, 0));
 }
@@ -340,6 +346,7 @@ fn a_refused_push_allocates_no_more_than_its_limit() {
     let to = Addressing {
         reader_participant: 7,
         writer: 1,
+        token: 0x5eed,
         readers: &[2],
     };
     let mut writer = DataWriter::new();
@@ -361,6 +368,7 @@ fn readers_beyond_eight_are_the_only_parse_allocation() {
         let to = Addressing {
             reader_participant: 7,
             writer: 1,
+            token: 0x5eed,
             readers: &readers,
         };
         let mut writer = DataWriter::new();
@@ -382,6 +390,7 @@ fn readers_beyond_eight_are_the_only_parse_allocation() {
             &Addressing {
                 reader_participant: 7,
                 writer: 1,
+                token: 0x5eed,
                 readers: &[],
             },
         );

@@ -70,19 +70,21 @@ fn data_preamble(d: &OwnedDataDatagram) -> Vec<u8> {
     let mut out = header(MessageKind::Data, d.domain, d.sender);
     out.extend(postcard::to_allocvec(&d.reader_participant).unwrap());
     out.extend(postcard::to_allocvec(&d.writer).unwrap());
+    out.extend(d.token.to_le_bytes());
     out.extend(postcard::to_allocvec(&d.readers).unwrap());
     out
 }
 
 /// Header and writer participant: where the submessages of a `Feedback` datagram start.
-fn feedback_preamble(domain: u16, sender: u64, writer_participant: u64) -> Vec<u8> {
+fn feedback_preamble(domain: u16, sender: u64, writer_participant: u64, token: u64) -> Vec<u8> {
     let mut out = header(MessageKind::Feedback, domain, sender);
     out.extend(postcard::to_allocvec(&writer_participant).unwrap());
+    out.extend(token.to_le_bytes());
     out
 }
 
 fn feedback_preamble_of(d: &OwnedFeedbackDatagram) -> Vec<u8> {
-    feedback_preamble(d.domain, d.sender, d.writer_participant)
+    feedback_preamble(d.domain, d.sender, d.writer_participant, d.token)
 }
 
 type Items<T> = Vec<Result<T, DropReason>>;
@@ -131,8 +133,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
     /// A `Data` datagram of several submessages goes through `DataWriter` and back, with the
-    /// layout `header | varint reader_participant | varint writer | varint n | n × varint
-    /// reader | { u8 sub_kind | postcard body }`.
+    /// layout `header | varint reader_participant | varint writer | u64le token | varint n |
+    /// n × varint reader | { u8 sub_kind | postcard body }`.
     #[test]
     fn data_datagrams_round_trip(d in data_datagram()) {
         let (bytes, ends) = d.encode_with_ends();
@@ -151,6 +153,7 @@ proptest! {
         );
         prop_assert_eq!(datagram.reader_participant, d.reader_participant);
         prop_assert_eq!(datagram.writer, d.writer);
+        prop_assert_eq!(datagram.token, d.token);
         prop_assert_eq!(datagram.readers.as_slice(), &d.parsed_readers()[..]);
         prop_assert_eq!(datagram.subs().collect::<Vec<_>>(), all_ok(subs));
         // The iterator stays done once it has run out.
@@ -160,7 +163,8 @@ proptest! {
     }
 
     /// A `Feedback` datagram of several submessages goes through `encode_feedback` and back,
-    /// with the layout `header | varint writer_participant | { u8 sub_kind | postcard body }`.
+    /// with the layout `header | varint writer_participant | u64le token | { u8 sub_kind |
+    /// postcard body }`.
     #[test]
     fn feedback_datagrams_round_trip(d in feedback_datagram()) {
         let bytes = d.encode();
@@ -177,6 +181,7 @@ proptest! {
             (MessageKind::Feedback, d.domain, d.sender)
         );
         prop_assert_eq!(datagram.writer_participant, d.writer_participant);
+        prop_assert_eq!(datagram.token, d.token);
         prop_assert_eq!(datagram.subs().collect::<Vec<_>>(), all_ok(subs));
     }
 
@@ -436,12 +441,14 @@ fn every_submessage_kind_has_its_documented_wire_value() {
 const TO_TWO: Addressing<'static> = Addressing {
     reader_participant: 2,
     writer: 1,
+    token: 0x5eed,
     readers: &[5, 3, 5],
 };
 
 const NO_READERS: Addressing<'static> = Addressing {
     reader_participant: 0,
     writer: 0,
+    token: 0x5eed,
     readers: &[],
 };
 
@@ -456,7 +463,7 @@ fn a_datagram_without_submessages_is_malformed() {
         DataDatagram::parse(writer.bytes(), 3).map(|_| ()),
         Err(DropReason::Malformed)
     );
-    let feedback = feedback_preamble(3, 9, 2);
+    let feedback = feedback_preamble(3, 9, 2, 0);
     assert_eq!(
         FeedbackDatagram::parse(&feedback, 3).map(|_| ()),
         Err(DropReason::Malformed)
@@ -479,10 +486,11 @@ fn readers_are_reported_sorted_and_once() {
     assert!(writer.push(&DataSub::Gap(Gap { from: 1, to: 2 }), MAX_DATAGRAM));
     let datagram = DataDatagram::parse(writer.bytes(), 0).unwrap();
     assert_eq!(datagram.readers.as_slice(), &[3, 5]);
-    // On the wire they stay as written.
+    // On the wire they stay as written (after the one-byte participant and writer and the
+    // 8-byte token).
     let written = postcard::to_allocvec(&TO_TWO.readers).unwrap();
     assert_eq!(
-        &writer.bytes()[HEADER_LEN + 2..HEADER_LEN + 2 + written.len()],
+        &writer.bytes()[HEADER_LEN + 10..HEADER_LEN + 10 + written.len()],
         &written[..]
     );
 }
@@ -494,7 +502,7 @@ fn more_than_max_readers_is_malformed() {
     let gap = DataSub::Gap(Gap { from: 1, to: 2 });
     let bytes = |readers: &[u32]| {
         let mut out = header(MessageKind::Data, 0, 1);
-        out.extend(postcard::to_allocvec(&(7_u64, 1_u32, readers)).unwrap());
+        out.extend(postcard::to_allocvec(&(7_u64, 1_u32, [0xAB_u8; 8], readers)).unwrap());
         out.extend(data_sub_bytes(&gap));
         out
     };
@@ -515,6 +523,7 @@ fn the_writer_refuses_more_than_max_readers() {
     let to = Addressing {
         reader_participant: 7,
         writer: 1,
+        token: 0x5eed,
         readers: &readers,
     };
     let mut writer = DataWriter::new();
@@ -542,7 +551,7 @@ fn min_data_len_is_the_smallest_datagram_the_parser_accepts() {
 #[test]
 fn feedback_without_submessages_is_refused_by_the_encoder() {
     let mut out = Vec::new();
-    let encoded = encode_feedback(0, 1, 2, &[], &mut out);
+    let encoded = encode_feedback(0, 1, 2, 0, &[], &mut out);
     assert!(
         encoded.is_err() || FeedbackDatagram::parse(&out, 0).is_ok(),
         "encode_feedback wrote {out:02x?} and returned {encoded:?}, but the parser says {:?}",
@@ -576,18 +585,18 @@ fn bitmaps_longer_than_the_limit_are_rejected() {
     let mut out = Vec::new();
     for make in [ack, nack] {
         // The longest bitmap is accepted both ways.
-        encode_feedback(5, 6, 7, &[make(&longest)], &mut out).unwrap();
+        encode_feedback(5, 6, 7, 0, &[make(&longest)], &mut out).unwrap();
         assert_eq!(feedback_items(&out, 5), Ok(vec![Ok(make(&longest))]));
         // One byte more is refused by the encoder, in any position.
         for subs in [vec![make(&too_long)], vec![make(&longest), make(&too_long)]] {
             assert_eq!(
-                encode_feedback(5, 6, 7, &subs, &mut out),
+                encode_feedback(5, 6, 7, 0, &subs, &mut out),
                 Err(DropReason::Invalid)
             );
         }
         // And by the parser: the submessage is `invalid` and ends the parse.
         let bytes = [
-            feedback_preamble(5, 6, 7),
+            feedback_preamble(5, 6, 7, 0),
             feedback_sub_bytes(&make(&longest)),
             feedback_sub_bytes(&make(&too_long)),
             feedback_sub_bytes(&make(&longest)),
@@ -648,12 +657,12 @@ fn feedback_larger_than_a_datagram_is_refused() {
         missing: &missing,
     });
     let one = feedback_sub_bytes(&ack).len();
-    let fits = (MAX_DATAGRAM - feedback_preamble(0, 1, 2).len()) / one;
+    let fits = (MAX_DATAGRAM - feedback_preamble(0, 1, 2, 0).len()) / one;
     let mut out = Vec::new();
-    encode_feedback(0, 1, 2, &vec![ack.clone(); fits], &mut out).unwrap();
+    encode_feedback(0, 1, 2, 0, &vec![ack.clone(); fits], &mut out).unwrap();
     assert!(out.len() <= MAX_DATAGRAM);
     assert_eq!(
-        encode_feedback(0, 1, 2, &vec![ack; fits + 1], &mut out),
+        encode_feedback(0, 1, 2, 0, &vec![ack; fits + 1], &mut out),
         Err(DropReason::Invalid)
     );
 }

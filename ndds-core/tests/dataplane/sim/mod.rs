@@ -192,6 +192,8 @@ impl SimNet {
                     participant: participant_id(i),
                     max_datagram: MTU,
                     max_sample: 1 << 20,
+                    // Deterministic from the seed, like everything else here.
+                    secret: secret(seed, i),
                 }),
                 addr: locator(i),
                 up: true,
@@ -652,4 +654,10 @@ fn fnv(seed: u64, bytes: &[u8]) -> u64 {
         hash = hash.wrapping_mul(0x0100_0000_01b3);
     }
     hash
+}
+
+/// Participant `index`'s secret in a network seeded by `seed`.
+fn secret(seed: u64, index: usize) -> [u8; 32] {
+    let mut rng = fastrand::Rng::with_seed(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    std::array::from_fn(|_| rng.u8(..))
 }
