@@ -94,6 +94,12 @@ pub struct ParticipantStats {
     pub unmatched_sender: u64,
     /// Dropped because they carried a matched sender's id but came from another address.
     pub wrong_address: u64,
+    /// Feedback from a matched consumer's address that did not echo the address token of
+    /// this participant's data there (forged with that address): not acted on, but for
+    /// pieces within 3 times its bytes.
+    pub unvalidated_feedback: u64,
+    /// Pieces such feedback asked for and did not get.
+    pub pieces_withheld: u64,
     /// Dropped datagrams by reason name (see `DropReason::name`).
     pub dropped: Vec<(&'static str, u64)>,
     /// Datagrams sent.
@@ -345,6 +351,8 @@ impl DataPlane {
             fragments_refused: stats.fragments_refused,
             unmatched_sender: stats.unmatched_sender,
             wrong_address: stats.wrong_address,
+            unvalidated_feedback: stats.unvalidated_feedback,
+            pieces_withheld: stats.pieces_withheld,
             dropped: DropReason::ALL
                 .iter()
                 .map(|reason| (reason.name(), stats.dropped(*reason)))

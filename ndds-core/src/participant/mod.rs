@@ -36,8 +36,8 @@ use bytes::Bytes;
 
 pub use consumer::{ConsumerCounters, ConsumerSpec};
 pub use outbox::{BatchConfig, BufferPool, MatchedConsumer};
-pub use producer::{ProducerSpec, WriteRefused};
 use producer::FeedbackVerdict;
+pub use producer::{ProducerSpec, WriteRefused};
 pub use sample::{RawSample, SampleInfo};
 pub use transmit::Transmit;
 
@@ -466,9 +466,13 @@ impl ParticipantCore {
                 }
                 DataSub::Fragment(fragment) => {
                     let reader = readers[0];
-                    let outcome = self
-                        .repair
-                        .piece(now, origin.writer, (from, parsed.token), reader, &fragment);
+                    let outcome = self.repair.piece(
+                        now,
+                        origin.writer,
+                        (from, parsed.token),
+                        reader,
+                        &fragment,
+                    );
                     match outcome {
                         PieceOutcome::Complete(whole) => {
                             let (meta, info) = origin.describe(&fragment.meta);

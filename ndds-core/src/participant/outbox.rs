@@ -11,8 +11,7 @@ use sha2::{Digest, Sha256};
 
 use crate::fragment::Split;
 use crate::wire::data::{
-    AddressToken, Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample,
-    prefix_overhead,
+    AddressToken, Addressing, FRAGMENT_OVERHEAD, Fragment, SAMPLE_OVERHEAD, Sample, prefix_overhead,
 };
 use crate::wire::{DataSub, DataWriter, Guid, SampleMeta};
 

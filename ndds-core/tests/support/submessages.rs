@@ -343,14 +343,16 @@ pub fn data_datagram() -> impl Strategy<Value = OwnedDataDatagram> {
         vec(data_sub(), 1..8),
     )
         .prop_map(
-            |((domain, sender), (reader_participant, writer, token, readers), subs)| OwnedDataDatagram {
-                domain,
-                sender,
-                reader_participant,
-                writer,
-                token,
-                readers,
-                subs,
+            |((domain, sender), (reader_participant, writer, token, readers), subs)| {
+                OwnedDataDatagram {
+                    domain,
+                    sender,
+                    reader_participant,
+                    writer,
+                    token,
+                    readers,
+                    subs,
+                }
             },
         )
 }

@@ -133,6 +133,8 @@ pub fn stats(stats: &ParticipantStats) -> Value {
         "unknown_reader": stats.unknown_reader,
         "unmatched_sender": stats.unmatched_sender,
         "wrong_address": stats.wrong_address,
+        "unvalidated_feedback": stats.unvalidated_feedback,
+        "pieces_withheld": stats.pieces_withheld,
         "dropped": dropped,
     })
 }

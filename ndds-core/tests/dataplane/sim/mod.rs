@@ -658,6 +658,7 @@ fn fnv(seed: u64, bytes: &[u8]) -> u64 {
 
 /// Participant `index`'s secret in a network seeded by `seed`.
 fn secret(seed: u64, index: usize) -> [u8; 32] {
-    let mut rng = fastrand::Rng::with_seed(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let mut rng =
+        fastrand::Rng::with_seed(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
     std::array::from_fn(|_| rng.u8(..))
 }
