@@ -278,7 +278,6 @@ impl ProducerCore {
     /// reader's address, which never sees the token) moves nothing: its acknowledgements are
     /// ignored, and the pieces it asks for are sent only within [`UNVALIDATED_FACTOR`] times
     /// the bytes such feedback brought.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn on_feedback(
         &mut self,
         tx: &mut Tx<'_>,
@@ -300,11 +299,7 @@ impl ProducerCore {
                 .allowance
                 .saturating_add(credit.saturating_mul(UNVALIDATED_FACTOR));
         }
-        let mut verdict = if validated {
-            FeedbackVerdict::Acted
-        } else {
-            FeedbackVerdict::Unvalidated { withheld: 0 }
-        };
+        let mut withheld = 0;
         match sub {
             FeedbackSub::AckNack(ack) => {
                 if validated && let Some(reliable) = &mut self.reliable {
@@ -342,9 +337,6 @@ impl ProducerCore {
                     } else {
                         dest.allowance / tx.max_datagram.max(1)
                     };
-                    let wanted = (0..nack.missing.len() * 8)
-                        .filter(|i| bit(nack.missing, *i))
-                        .count();
                     let mut missing = asked.take(limit);
                     let sent = dest.send_fragments(
                         tx,
@@ -356,14 +348,18 @@ impl ProducerCore {
                     );
                     if !validated {
                         dest.allowance = dest.allowance.saturating_sub(sent);
-                        let withheld = wanted.saturating_sub(limit);
-                        verdict = FeedbackVerdict::Unvalidated { withheld };
+                        let wanted = nack.missing.iter().map(|b| b.count_ones() as usize).sum();
+                        withheld = usize::saturating_sub(wanted, limit);
                     }
                 }
             }
         }
         self.reschedule();
-        verdict
+        if validated {
+            FeedbackVerdict::Acted
+        } else {
+            FeedbackVerdict::Unvalidated { withheld }
+        }
     }
 
     /// Runs the due timers: batch flushes, heartbeats, repairs, reader liveness.

@@ -118,11 +118,10 @@ fn forgeries(disguise: Disguise) -> (Vec<Vec<u8>>, Vec<Vec<u8>>) {
     (to_consumer, to_producer)
 }
 
-/// The genuine stream over 20 % loss with the attacker's five datagrams every 20 ms while
-/// it flows; returns how many rounds were sent.
-fn attacked(seed: u64, disguise: Disguise) -> (SimNet, u64) {
+/// The reliable producer and consumer, matched, and a writer of `total` samples every 2 ms
+/// whose even ones are 3000 bytes (three pieces); returns the writer's index.
+fn stream(seed: u64, total: u64) -> (SimNet, usize) {
     let mut net = SimNet::new(seed, 2);
-    net.set_link(PRODUCER.0, CONSUMER.0, Link::lossy(0.2));
     net.add_producer(PRODUCER.0, PRODUCER.1, reliable_producer(64));
     net.add_consumer(
         CONSUMER.0,
@@ -131,9 +130,17 @@ fn attacked(seed: u64, disguise: Disguise) -> (SimNet, u64) {
         App::Eager,
     );
     net.connect(PRODUCER, CONSUMER);
-    let mut writer = WriterApp::new(PRODUCER.0, PRODUCER.1, TOTAL, 2 * MS, 500);
+    let mut writer = WriterApp::new(PRODUCER.0, PRODUCER.1, total, 2 * MS, 500);
     writer.sizes = vec![500, 3_000];
     let writer = net.add_writer(writer);
+    (net, writer)
+}
+
+/// The genuine stream over 20 % loss with the attacker's five datagrams every 20 ms while
+/// it flows; returns how many rounds were sent.
+fn attacked(seed: u64, disguise: Disguise) -> (SimNet, u64) {
+    let (mut net, writer) = stream(seed, TOTAL);
+    net.set_link(PRODUCER.0, CONSUMER.0, Link::lossy(0.2));
     let (to_consumer, to_producer) = forgeries(disguise);
     let mut rounds = 0;
     while !net.writers[writer].finished() {
@@ -229,19 +236,8 @@ fn forged_traffic_under_a_matched_id_from_another_address_is_dropped_and_counted
 fn feedback_from_the_readers_address_without_its_token_moves_nothing_and_is_not_amplified() {
     const FIRST: u64 = 10;
     const FLOOD: usize = 200;
-    let mut net = SimNet::new(43, 2);
-    net.add_producer(PRODUCER.0, PRODUCER.1, reliable_producer(64));
-    net.add_consumer(
-        CONSUMER.0,
-        CONSUMER.1,
-        reliable_consumer(Some(64)),
-        App::Eager,
-    );
-    net.connect(PRODUCER, CONSUMER);
-    // Samples 1..=10, the even ones 3000 bytes (three pieces): 10 is the newest large one.
-    let mut writer = WriterApp::new(PRODUCER.0, PRODUCER.1, FIRST, 2 * MS, 500);
-    writer.sizes = vec![500, 3_000];
-    let writer = net.add_writer(writer);
+    // Samples 1..=10: 10 is the newest large one.
+    let (mut net, writer) = stream(43, FIRST);
     let done = net.run_until(net.at_ms(5_000), |n| {
         n.consumer(CONSUMER.0, CONSUMER.1).got.len() as u64 == FIRST
             && n.nodes[PRODUCER.0].core.unacknowledged(PRODUCER.1) == 0
