@@ -8,14 +8,16 @@
 #
 #   scripts/bench-loss.sh
 #
-# Environment: BENCH_SECONDS (measured seconds per run, default 2).
+# Environment: BENCH_SECONDS (measured seconds per run, default 2); BENCH_BIN (directory of
+# the ndds and ndds-daemon binaries to measure, default target/release).
 # All traffic stays inside the two namespaces.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 SECS=${BENCH_SECONDS:-2}
-NDDS=$ROOT/target/release/ndds
-DAEMON=$ROOT/target/release/ndds-daemon
+BIN=${BENCH_BIN:-$ROOT/target/release}
+NDDS=$BIN/ndds
+DAEMON=$BIN/ndds-daemon
 TAG=$$
 NS_A=ndds-bl-a-$TAG
 NS_B=ndds-bl-b-$TAG

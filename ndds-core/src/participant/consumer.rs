@@ -78,6 +78,10 @@ pub(crate) struct Ctx<'a> {
     pub(crate) participant: u64,
     pub(crate) out: &'a mut Transmits,
     pub(crate) events: &'a mut VecDeque<Event>,
+    /// Consumers whose reliable streams have acknowledgements to send: sent when the
+    /// driver next asks for transmits, so one burst of datagrams is answered by one
+    /// AckNack per stream rather than one per datagram.
+    pub(crate) acks_due: &'a mut Vec<u32>,
 }
 
 /// One reliable producer's stream towards this consumer.
@@ -163,6 +167,8 @@ pub(crate) struct ConsumerCore {
     credit: Option<usize>,
     capacity: usize,
     feedback: Vec<u8>,
+    /// In the participant's list of consumers with acknowledgements to send.
+    acks_queued: bool,
     arrived: u64,
     /// Cached next timer.
     pub(crate) due: Option<Instant>,
@@ -180,6 +186,7 @@ impl ConsumerCore {
             credit: spec.credit,
             capacity: spec.credit.unwrap_or(usize::MAX),
             feedback: Vec::new(),
+            acks_queued: false,
             arrived: 0,
             due: None,
         };
@@ -394,14 +401,15 @@ impl ConsumerCore {
     }
 
     /// Moves in-order samples of the reliable streams to the arbiter while there is credit,
-    /// reports lost runs, and sends the streams' acknowledgements.
+    /// reports lost runs, and queues the consumer for sending the streams'
+    /// acknowledgements.
     fn pump(&mut self, ctx: &mut Ctx<'_>, now: Instant) {
         let entity = self.entity;
         let ConsumerCore {
             arbiter,
             streams,
-            feedback,
             credit,
+            acks_queued,
             ..
         } = self;
         for (writer, stream) in streams.iter_mut() {
@@ -427,8 +435,25 @@ impl ConsumerCore {
                     None => break,
                 }
             }
+            if !*acks_queued && stream.reader.has_output() {
+                *acks_queued = true;
+                ctx.acks_due.push(entity);
+            }
+        }
+    }
+
+    /// Sends the acknowledgements the reliable streams have (see [`Ctx::acks_due`]).
+    pub(crate) fn send_acks(&mut self, ctx: &mut Ctx<'_>) {
+        self.acks_queued = false;
+        let ConsumerCore {
+            entity,
+            streams,
+            feedback,
+            ..
+        } = self;
+        for (writer, stream) in streams.iter_mut() {
             while let Some(ack) = stream.reader.poll_output() {
-                send_ack(ctx, feedback, entity, *writer, stream, ack);
+                send_ack(ctx, feedback, *entity, *writer, stream, ack);
             }
         }
     }

@@ -167,6 +167,8 @@ pub struct ParticipantCore {
     repair: Repair,
     transmits: Transmits,
     events: VecDeque<Event>,
+    /// Consumers with acknowledgements to send at the next [`ParticipantCore::poll_transmit`].
+    acks_due: Vec<u32>,
     stats: CoreStats,
     /// Admission counters of endpoints already withdrawn, so totals never go down.
     withdrawn: AdmissionStats,
@@ -184,6 +186,7 @@ impl ParticipantCore {
             // Room for what one round of a driver's datagrams produces, so a steady state
             // does not grow it.
             events: VecDeque::with_capacity(1024),
+            acks_due: Vec::with_capacity(16),
             stats: CoreStats::default(),
             withdrawn: AdmissionStats::default(),
         }
@@ -201,6 +204,7 @@ impl ParticipantCore {
                 participant: self.config.participant,
                 out: &mut self.transmits,
                 events: &mut self.events,
+                acks_due: &mut self.acks_due,
             },
             &mut self.consumers,
         )
@@ -627,13 +631,34 @@ impl ParticipantCore {
     }
 
     /// The next datagram to send.
+    ///
+    /// Acknowledgements are made here, for everything handled since the last call: a
+    /// driver that handles a burst of datagrams before it sends answers them with one
+    /// AckNack per reliable stream.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        self.send_acks();
         self.transmits.pop()
     }
 
-    /// Datagrams waiting to be sent.
-    pub fn pending_transmits(&self) -> usize {
+    /// Datagrams waiting to be sent (acknowledgements included).
+    pub fn pending_transmits(&mut self) -> usize {
+        self.send_acks();
         self.transmits.len()
+    }
+
+    fn send_acks(&mut self) {
+        if self.acks_due.is_empty() {
+            return;
+        }
+        let mut due = std::mem::take(&mut self.acks_due);
+        let (mut ctx, consumers) = self.ctx();
+        for entity in due.drain(..) {
+            if let Some(consumer) = consumers.get_mut(&entity) {
+                consumer.send_acks(&mut ctx);
+            }
+        }
+        // Its allocation is kept for the next round.
+        self.acks_due = due;
     }
 
     /// Gives a sent datagram's buffer back for reuse.

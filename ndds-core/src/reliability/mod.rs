@@ -95,7 +95,11 @@
 //! - **Retry time** adapts like TCP's retransmission timer: the round trip from a request to
 //!   the sample answering it (requests made once only) is smoothed, and the retry time is
 //!   the smoothed value plus four mean deviations, within `nack_retry_min..=nack_retry`
-//!   (1 ms, 20 ms); `nack_retry` before the first measurement.
+//!   (200 µs, 20 ms); `nack_retry` before the first measurement. A request repeated
+//!   before its first answer arrived makes the writer send the sample twice: the duplicate
+//!   shows the repeat was early, and the time from the first request to the first answer is
+//!   measured then (requests made once would otherwise be the only ones measured, which
+//!   favours fast answers).
 
 //! ## Guarantees
 //! With the window respected, no sample is evicted before every reader acknowledged it, so

@@ -30,7 +30,9 @@ pub struct ReaderConfig {
     /// wait adapts to the measured round trip (time from request to repair) within
     /// `nack_retry_min..=nack_retry`, and is `nack_retry` until a round trip was measured.
     pub nack_retry: Duration,
-    /// Shortest wait before a request is repeated (default 1 ms).
+    /// Shortest wait before a request is repeated (default 200 µs). A request repeated too
+    /// early shows itself by the duplicate its two answers make, and the round trip of the
+    /// first answer is then measured, so the retry time grows to what repairs really take.
     pub nack_retry_min: Duration,
     /// How long a sample being put together from pieces (see
     /// [`ReliableReader::handle_partial`]) is left to piece-level repair after its last piece
@@ -43,7 +45,7 @@ impl Default for ReaderConfig {
         ReaderConfig {
             depth: 256,
             nack_retry: Duration::from_millis(20),
-            nack_retry_min: Duration::from_millis(1),
+            nack_retry_min: Duration::from_micros(200),
             partial_timeout: Duration::from_millis(100),
         }
     }
@@ -103,6 +105,9 @@ pub struct ReaderStats {
     pub out_of_window: u64,
     /// Seqs reported lost.
     pub lost: u64,
+    /// Requests repeated before their first answer could arrive: a seq asked for again got
+    /// two answers (each measured the round trip the retry time had missed).
+    pub early_retries: u64,
     /// [`Delivery::Lost`] items handed out.
     pub lost_reports: u64,
     /// AckNacks emitted with missing seqs.
@@ -118,9 +123,14 @@ pub struct ReaderStats {
 struct Ask {
     /// When it was last made.
     at: Instant,
-    /// Made more than once (its answer then measures no round trip).
+    /// When it was first made.
+    first: Instant,
+    /// Made more than once (its answer then measures no round trip: it may answer either).
     repeated: bool,
 }
+
+/// Seqs answered after a repeated request, watched for a second answer, at most.
+const WATCHED_REPEATS: usize = 256;
 
 /// The reader of one reliable writer; `S` is the sample it hands back (opaque to it).
 #[derive(Debug)]
@@ -151,6 +161,11 @@ pub struct ReliableReader<S> {
     partial_check: Option<Instant>,
     /// Round trip from request to repair.
     rtt: RttEstimate,
+    /// Seqs whose request was repeated and that arrived, with the time from their first
+    /// request to their arrival: if a second copy comes, the repeat was too early, and that
+    /// time is the round trip it should have waited (Karn's problem: only requests made once
+    /// measure otherwise, which favours the fast answers and keeps the retry time short).
+    repeats: BTreeMap<u64, Duration>,
     /// When the oldest request still unanswered may be repeated.
     nack_due: Option<Instant>,
     /// Send an ack once `base` reaches this (progress held back by a slow consumer).
@@ -178,6 +193,7 @@ impl<S> ReliableReader<S> {
             partial: BTreeMap::new(),
             partial_check: None,
             rtt: RttEstimate::default(),
+            repeats: BTreeMap::new(),
             nack_due: None,
             catch_up_at: None,
             stats: ReaderStats::default(),
@@ -225,6 +241,10 @@ impl<S> ReliableReader<S> {
         let front = self.front();
         if seq < front || self.buf.contains_key(&seq) {
             self.stats.duplicates += 1;
+            if let Some(rtt) = self.repeats.remove(&seq) {
+                self.stats.early_retries += 1;
+                self.rtt.sample(rtt);
+            }
             return;
         }
         self.partial.remove(&seq);
@@ -385,6 +405,11 @@ impl<S> ReliableReader<S> {
         None
     }
 
+    /// True when an AckNack waits for [`ReliableReader::poll_output`].
+    pub fn has_output(&self) -> bool {
+        self.pending.is_some()
+    }
+
     /// The next AckNack to send.
     pub fn poll_output(&mut self) -> Option<AckNack> {
         let ack = self.pending.take()?;
@@ -466,8 +491,18 @@ impl<S> ReliableReader<S> {
     /// Queues an AckNack, noting when its missing seqs were asked for.
     fn queue(&mut self, now: Instant, ack: AckNack) {
         for seq in ack.asked() {
-            let repeated = self.asked.contains_key(&seq);
-            self.asked.insert(seq, Ask { at: now, repeated });
+            let (first, repeated) = self
+                .asked
+                .get(&seq)
+                .map_or((now, false), |ask| (ask.first, true));
+            self.asked.insert(
+                seq,
+                Ask {
+                    at: now,
+                    first,
+                    repeated,
+                },
+            );
         }
         self.replace_pending(ack);
         self.rearm();
@@ -512,6 +547,12 @@ impl<S> ReliableReader<S> {
         };
         if !ask.repeated {
             self.rtt.sample(now.saturating_duration_since(ask.at));
+        } else {
+            self.repeats
+                .insert(seq, now.saturating_duration_since(ask.first));
+            if self.repeats.len() > WATCHED_REPEATS {
+                self.repeats.pop_first();
+            }
         }
         self.rearm();
     }
