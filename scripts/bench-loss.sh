@@ -9,7 +9,8 @@
 #   scripts/bench-loss.sh
 #
 # Environment: BENCH_SECONDS (measured seconds per run, default 2); BENCH_BIN (directory of
-# the ndds and ndds-daemon binaries to measure, default target/release).
+# the ndds and ndds-daemon binaries to measure, default target/release); BENCH_CONFIGS (the
+# runs, as SIZE:BATCHING pairs, default "64:1000/65000 1024:off 8192:off").
 # All traffic stays inside the two namespaces.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -36,7 +37,7 @@ cleanup() {
     wait 2>/dev/null || true
     ip netns del "$NS_A" 2>/dev/null || true
     ip netns del "$NS_B" 2>/dev/null || true
-    rm -rf "$WORK"
+    [[ -n ${BENCH_KEEP:-} ]] && say "kept $WORK" || rm -rf "$WORK"
 }
 trap cleanup EXIT
 
@@ -108,7 +109,7 @@ run() {
     say "$size B, batching $batch, $loss % loss: $(jget "$f.b" samples_per_s 0) samples/s"
 }
 
-CONFIGS="64:1000/65000 1024:off 8192:off"
+CONFIGS=${BENCH_CONFIGS:-"64:1000/65000 1024:off 8192:off"}
 for config in $CONFIGS; do
     for loss in 0 10; do
         run "${config%%:*}" "${config#*:}" "$loss"

@@ -72,7 +72,7 @@ impl Default for WriterConfig {
             max_bytes: 64 << 20,
             heartbeat_period: Duration::from_millis(20),
             idle_heartbeat_period: Duration::from_secs(1),
-            blocked_heartbeat_period: Duration::from_millis(1),
+            blocked_heartbeat_period: Duration::from_micros(250),
             reader_liveness: Some(Duration::from_secs(1)),
             late_joiners: 0,
         }
