@@ -36,7 +36,7 @@
 //!   - to every reader that is behind (acknowledged below `last + 1`) or never heard from,
 //!     `heartbeat_period` (20 ms) after the write that put it behind, then every period while
 //!     it stays so; while the window is closed the period is `blocked_heartbeat_period`
-//!     (1 ms), doubling at each heartbeat that finds the window still closed (up to
+//!     (250 µs), doubling at each heartbeat that finds the window still closed (up to
 //!     `heartbeat_period`) and starting again when an acknowledgement makes progress;
 //!   - to those readers right after a write once a quarter of the window (`depth / 4`
 //!     samples or `max_bytes / 4` bytes) was written since the last heartbeat, and after the

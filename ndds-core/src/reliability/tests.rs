@@ -144,6 +144,49 @@ fn the_retry_time_follows_the_measured_round_trip() {
 }
 
 #[test]
+fn a_repeat_answered_twice_measures_the_round_trip_it_missed() {
+    let t0 = Instant::now();
+    let mut r = synced(t0, 64, 1);
+    // One measured round trip of 1 ms: the retry time is 1 + 4 x 0.5 = 3 ms.
+    r.handle_sample(t0, 2, 20);
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![1]);
+    r.handle_sample(t0 + MS, 1, 10);
+    let t1 = t0 + 10 * MS;
+    r.handle_sample(t1, 4, 40);
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![3]);
+    assert_eq!(r.poll_timeout(), Some(t1 + 3 * MS));
+    // The answer takes 8 ms: the request is repeated after 3, and both are answered.
+    r.handle_timeout(t1 + 3 * MS);
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![3]);
+    r.handle_sample(t1 + 8 * MS, 3, 30);
+    assert_eq!(
+        r.stats().early_retries,
+        0,
+        "one answer could be to either request"
+    );
+    r.handle_sample(t1 + 9 * MS, 3, 30);
+    assert_eq!(
+        r.stats().early_retries,
+        1,
+        "the second copy shows the repeat was early"
+    );
+    // 8 ms measured: smoothed 1.875 ms, deviation 2.125 ms, retry 10.375 ms.
+    let t2 = t1 + 20 * MS;
+    r.handle_sample(t2, 6, 60);
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![5]);
+    assert_eq!(r.poll_timeout(), Some(t2 + Duration::from_micros(10_375)));
+    // A repeat answered once (the first request was lost) measures nothing.
+    r.handle_timeout(t2 + Duration::from_micros(10_375));
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![5]);
+    r.handle_sample(t2 + 11 * MS, 5, 50);
+    let t3 = t2 + 30 * MS;
+    r.handle_sample(t3, 8, 80);
+    assert_eq!(asked(&r.poll_output().unwrap()), vec![7]);
+    assert_eq!(r.poll_timeout(), Some(t3 + Duration::from_micros(10_375)));
+    assert_eq!(r.stats().early_retries, 1);
+}
+
+#[test]
 fn duplicates_old_and_far_samples_are_dropped_and_counted() {
     let t0 = Instant::now();
     let mut r = synced(t0, 4, 1);

@@ -45,7 +45,7 @@ pub struct WriterConfig {
     pub heartbeat_period: Duration,
     /// Heartbeat period towards all readers when none is behind (default 1 s; at least 1 ms).
     pub idle_heartbeat_period: Duration,
-    /// First heartbeat period while the window is closed (default 1 ms; at least 100 µs).
+    /// First heartbeat period while the window is closed (default 250 µs; at least 100 µs).
     /// The writer then waits for acknowledgements, and a lost heartbeat or a lost last sample
     /// would otherwise hold it up for a whole `heartbeat_period`; the period doubles while
     /// no acknowledgement moves the window, up to `heartbeat_period`.

@@ -9,7 +9,8 @@
 //! - `forged`: traffic from unmatched senders or from a matched id at another address;
 //! - `late_joiners`: the kept samples of reliable and best-effort producers;
 //! - `liveness`: a reliable reader that never acknowledges leaves the window;
-//! - `replay`: a run replays exactly from its seed.
+//! - `replay`: a run replays exactly from its seed;
+//! - `throughput`: how much of its lossless rate a reliable stream keeps through 10 % loss.
 //!
 //! [`ParticipantCore`]: ndds_core::participant::ParticipantCore
 
@@ -21,6 +22,7 @@ mod reliable;
 mod replay;
 mod rules;
 mod sim;
+mod throughput;
 
 use std::time::Duration;
 
