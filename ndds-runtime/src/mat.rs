@@ -85,6 +85,9 @@ struct Shared {
     value: CsMat,
     /// `published.seq` when `value` was last refreshed from it.
     synced: u64,
+    /// Where a publication is read before it is known whole (it goes into `value` only
+    /// then): as long as the matrix, allocated again only when its shape changes.
+    scratch: Vec<f64>,
 }
 
 /// A sequence lock written only by the owner: `seq` is odd while it writes.
@@ -131,6 +134,7 @@ impl Mat {
             shared: Mutex::new(Shared {
                 value: CsMat::zeros(name, 0, 0),
                 synced: 0,
+                scratch: Vec::new(),
             }),
             writes: AtomicU64::new(0),
             taken: AtomicU64::new(0),
@@ -296,23 +300,32 @@ impl Inner {
         }
         // SAFETY: `shared` is locked, so the owner does not replace the box meanwhile.
         let values = unsafe { &*self.published.values.get() };
-        let target = shared.value.matrix_mut().as_mut_slice();
+        let Shared {
+            value,
+            synced,
+            scratch,
+        } = shared;
+        let target = value.matrix_mut().as_mut_slice();
         if target.len() != values.len() {
             // A change of shape is published through the shared copy itself.
             return;
         }
+        scratch.resize(values.len(), 0.0);
         // The owner writes a publication in a few stores and never waits for us; should it be
         // preempted in the middle (a real-time reader on its CPU would never let it go on),
-        // the shared copy stays as it is: whole, one publication older.
+        // the shared copy stays as it is: whole, one publication older. So a publication is
+        // read into `scratch`, and copied into the shared copy only once the sequence shows
+        // it was not being written meanwhile.
         for spin in 0..256_u32 {
             let before = self.published.seq.load(Ordering::Acquire);
             if before & 1 == 0 {
-                for (to, from) in target.iter_mut().zip(values.iter()) {
+                for (to, from) in scratch.iter_mut().zip(values.iter()) {
                     *to = f64::from_bits(from.load(Ordering::Relaxed));
                 }
                 fence(Ordering::Acquire);
                 if self.published.seq.load(Ordering::Relaxed) == before {
-                    shared.synced = before;
+                    target.copy_from_slice(scratch);
+                    *synced = before;
                     return;
                 }
             }
