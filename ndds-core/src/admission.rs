@@ -11,7 +11,9 @@
 //! Like the other state machines here, [`Admission`] reads no clock: expiry is driven by
 //! [`Admission::handle_timeout`] at [`Admission::poll_timeout`].
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
+
+use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant};
 
@@ -97,8 +99,8 @@ impl<S> Admission<S> {
     pub fn new(config: AdmissionConfig) -> Self {
         Admission {
             config,
-            matched: HashMap::new(),
-            departed: HashMap::new(),
+            matched: HashMap::default(),
+            departed: HashMap::default(),
             held: VecDeque::new(),
             held_bytes: 0,
             stats: AdmissionStats::default(),

@@ -151,6 +151,8 @@ pub(crate) struct DataPlane {
     /// The data socket's own address: an empty datagram sent there wakes the I/O thread.
     wake_to: SocketAddrV4,
     closed: AtomicBool,
+    /// Source timestamps.
+    wall: WallClock,
     /// Datagrams sent, and datagrams the operating system refused.
     sent: AtomicU64,
     send_errors: AtomicU64,
@@ -228,6 +230,7 @@ impl DataPlane {
             endpoints: RwLock::default(),
             wake_to: SocketAddrV4::from(locator),
             closed: AtomicBool::new(false),
+            wall: WallClock::new(),
             sent: AtomicU64::new(0),
             send_errors: AtomicU64::new(0),
         })
@@ -457,11 +460,11 @@ impl DataPlane {
         payload: Arc<Vec<u8>>,
         timeout: Duration,
     ) -> Result<(), WriteError> {
-        let timestamp_ns = now_ns();
+        let mut now = Instant::now();
+        let timestamp_ns = self.wall.at(now);
         let mut locked = self.lock();
         let mut started = None;
         loop {
-            let now = Instant::now();
             match locked
                 .core
                 .write(now, timestamp_ns, entity, Arc::clone(&payload))
@@ -504,6 +507,7 @@ impl DataPlane {
                         .wait_timeout(locked, wait)
                         .map(|(guard, _)| guard)
                         .unwrap_or_else(|poison| poison.into_inner().0);
+                    now = Instant::now();
                 }
             }
         }
@@ -793,6 +797,49 @@ fn now_ns() -> u64 {
         .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
+/// How long the wall clock's offset from the monotonic one is trusted before it is read
+/// again: a step of the wall clock (NTP, an operator) shows in timestamps within this.
+const WALL_RECHECK_NS: u64 = 1_000_000;
+
+/// The wall clock read through the monotonic one a write reads anyway: the offset between
+/// the two is read again at most every [`WALL_RECHECK_NS`], so a write costs one clock read
+/// instead of two (a read is tens of nanoseconds in a virtual machine, a few percent of
+/// writing a small sample).
+#[derive(Debug)]
+struct WallClock {
+    base: Instant,
+    /// Wall-clock ns minus `base`-relative monotonic ns (wrapping).
+    offset: AtomicU64,
+    /// `base`-relative monotonic ns when `offset` was read (`u64::MAX`: never).
+    checked: AtomicU64,
+}
+
+impl WallClock {
+    fn new() -> Self {
+        WallClock {
+            base: Instant::now(),
+            offset: AtomicU64::new(0),
+            checked: AtomicU64::new(u64::MAX),
+        }
+    }
+
+    /// The wall clock at `now` (an instant just read), in ns since the Unix epoch.
+    fn at(&self, now: Instant) -> u64 {
+        let mono =
+            u64::try_from(now.saturating_duration_since(self.base).as_nanos()).unwrap_or(u64::MAX);
+        let checked = self.checked.load(Ordering::Acquire);
+        if checked != u64::MAX && mono.wrapping_sub(checked) < WALL_RECHECK_NS {
+            return mono.wrapping_add(self.offset.load(Ordering::Relaxed));
+        }
+        // Two threads may both read it here: either offset is right.
+        let wall = now_ns();
+        self.offset
+            .store(wall.wrapping_sub(mono), Ordering::Relaxed);
+        self.checked.store(mono, Ordering::Release);
+        wall
+    }
+}
+
 /// 32 bytes from the operating system's random source, for the core's address tokens; if it
 /// cannot be read, the core's own (seeded from the operating system by `fastrand`).
 fn os_secret() -> [u8; 32] {
@@ -804,5 +851,33 @@ fn os_secret() -> [u8; 32] {
             tracing::debug!(%error, "/dev/urandom unreadable: address tokens from fastrand");
             CoreConfig::new(0, 0).secret
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_wall_clock_through_the_monotonic_one_follows_both() {
+        let clock = WallClock::new();
+        let t0 = Instant::now();
+        let before = now_ns();
+        let first = clock.at(t0);
+        let after = now_ns();
+        assert!(
+            (before..=after).contains(&first),
+            "{before} <= {first} <= {after}"
+        );
+        // Within the recheck time: the monotonic clock's progress, exactly.
+        let t1 = t0 + Duration::from_micros(400);
+        assert_eq!(clock.at(t1) - first, 400_000);
+        // Past it: read again (a wall clock that stepped would show now).
+        std::thread::sleep(Duration::from_millis(2));
+        let t2 = Instant::now();
+        let wall = now_ns();
+        let late = clock.at(t2);
+        assert!(late.abs_diff(wall) < 1_000_000, "{late} against {wall}");
+        assert!(late >= first + 2_000_000);
     }
 }

@@ -8,7 +8,9 @@
 //! made by taking samples): what the application has not taken is not acknowledged, so a
 //! slow consumer slows its producers down instead of dropping.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
+
+use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -181,8 +183,8 @@ impl ConsumerCore {
             reliable: spec.reliable,
             admission: Admission::new(AdmissionConfig::default()),
             arbiter: Arbiter::new(spec.rules, now),
-            streams: HashMap::new(),
-            resume: HashMap::new(),
+            streams: HashMap::default(),
+            resume: HashMap::default(),
             credit: spec.credit,
             capacity: spec.credit.unwrap_or(usize::MAX),
             feedback: Vec::new(),

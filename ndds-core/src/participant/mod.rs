@@ -27,7 +27,9 @@ mod repair;
 mod sample;
 mod transmit;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
+
+use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::sync::Arc;
 use std::time::{Instant, SystemTime};
@@ -179,8 +181,8 @@ impl ParticipantCore {
     pub fn new(config: CoreConfig) -> Self {
         ParticipantCore {
             config,
-            consumers: HashMap::new(),
-            producers: HashMap::new(),
+            consumers: HashMap::default(),
+            producers: HashMap::default(),
             repair: Repair::new(config.max_sample),
             transmits: Transmits::default(),
             // Room for what one round of a driver's datagrams produces, so a steady state
