@@ -12,12 +12,11 @@
 //! [`Admission::handle_timeout`] at [`Admission::poll_timeout`].
 
 use std::collections::VecDeque;
-
-use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant};
 
 use crate::wire::Guid;
+use foldhash::HashMap;
 
 /// What [`Admission::check`] says of a sender.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -9,8 +9,6 @@
 //! slow consumer slows its producers down instead of dropping.
 
 use std::collections::VecDeque;
-
-use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -21,6 +19,7 @@ use crate::reliability::{AckNack, Delivery, ReaderConfig, ReliableReader};
 use crate::wire::data::{AddressToken, FLAG_RELIABLE, Gap, Heartbeat};
 use crate::wire::feedback::{AckNack as WireAckNack, encode_feedback};
 use crate::wire::{FeedbackSub, Guid, SampleMeta};
+use foldhash::HashMap;
 
 use super::Event;
 use super::sample::{RawSample, SampleInfo};

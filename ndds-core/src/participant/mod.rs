@@ -28,13 +28,12 @@ mod sample;
 mod transmit;
 
 use std::collections::VecDeque;
-
-use foldhash::HashMap;
 use std::net::SocketAddrV4;
 use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
 use bytes::Bytes;
+use foldhash::HashMap;
 
 pub use consumer::{ConsumerCounters, ConsumerSpec};
 pub use outbox::{BatchConfig, BufferPool, MatchedConsumer};
