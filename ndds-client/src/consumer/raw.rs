@@ -119,6 +119,10 @@ pub struct ConsumerStats {
     pub unmatched: u64,
     /// Dropped because they carried a matched producer's id but came from another address.
     pub wrong_address: u64,
+    /// Reliable streams (one per reliable producer heard from since it was matched).
+    pub reliable_streams: usize,
+    /// Their readers' counters, summed (ordering, repairs requested, seqs lost).
+    pub reliable: ndds_core::reliability::ReaderStats,
 }
 
 /// How long [`RawConsumer::next_event`] may wait.
@@ -311,6 +315,8 @@ impl RawConsumer {
             decode_errors: self.state.decoder.errors.load(Ordering::Relaxed),
             unmatched: admission.unmatched,
             wrong_address: admission.wrong_address,
+            reliable_streams: counters.streams,
+            reliable: counters.reliable,
         }
     }
 }

@@ -12,10 +12,10 @@ use std::collections::VecDeque;
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant, SystemTime};
 
-use crate::admission::{Admission, AdmissionConfig, AdmissionStats};
+use crate::admission::{Admission, AdmissionConfig, AdmissionStats, Verdict};
 use crate::arbitration::SampleStatus;
 use crate::arbitration::{Arbiter, ArbiterStats, Incoming, Notification, Output, Rules};
-use crate::reliability::{AckNack, Delivery, ReaderConfig, ReliableReader};
+use crate::reliability::{AckNack, Delivery, ReaderConfig, ReaderStats, ReliableReader};
 use crate::wire::data::{AddressToken, FLAG_RELIABLE, Gap, Heartbeat};
 use crate::wire::feedback::{AckNack as WireAckNack, encode_feedback};
 use crate::wire::{FeedbackSub, Guid, SampleMeta};
@@ -149,6 +149,10 @@ pub struct ConsumerCounters {
     pub arbiter: ArbiterStats,
     /// What admission refused.
     pub admission: AdmissionStats,
+    /// Reliable streams (one per matched reliable producer heard from).
+    pub streams: usize,
+    /// Their readers' counters, summed.
+    pub reliable: ReaderStats,
 }
 
 /// A consumer's receiving end.
@@ -196,15 +200,33 @@ impl ConsumerCore {
         core
     }
 
+    /// What to make of a piece of a large sample `writer` sent from `from`: one under a
+    /// matched writer's id from another address is counted here (the caller drops it before
+    /// reassembly, where it could corrupt the genuine sample of the same seq).
+    pub(crate) fn check_piece(&mut self, writer: &Guid, from: SocketAddrV4) -> Verdict {
+        let verdict = self.admission.check(writer, from);
+        if verdict == Verdict::WrongAddress {
+            self.admission.admit(writer, from);
+        }
+        verdict
+    }
+
     pub(crate) fn is_reliable(&self) -> bool {
         self.reliable.is_some()
     }
 
     pub(crate) fn counters(&self) -> ConsumerCounters {
+        let reliable = self
+            .streams
+            .values()
+            .map(|stream| stream.reader.stats())
+            .fold(ReaderStats::default(), add_reader_stats);
         ConsumerCounters {
             arrived: self.arrived,
             arbiter: self.arbiter.stats(),
             admission: self.admission.stats(),
+            streams: self.streams.len(),
+            reliable,
         }
     }
 
@@ -537,5 +559,20 @@ fn send_ack(
     let (domain, participant, token) = (ctx.domain, ctx.participant, stream.token);
     if encode_feedback(domain, participant, writer.participant, token, &[sub], buf).is_ok() {
         ctx.out.push(stream.from, buf, None);
+    }
+}
+
+fn add_reader_stats(a: ReaderStats, b: ReaderStats) -> ReaderStats {
+    ReaderStats {
+        received: a.received + b.received,
+        delivered: a.delivered + b.delivered,
+        duplicates: a.duplicates + b.duplicates,
+        out_of_window: a.out_of_window + b.out_of_window,
+        lost: a.lost + b.lost,
+        early_retries: a.early_retries + b.early_retries,
+        lost_reports: a.lost_reports + b.lost_reports,
+        nacks: a.nacks + b.nacks,
+        acks: a.acks + b.acks,
+        invalid: a.invalid + b.invalid,
     }
 }

@@ -47,7 +47,7 @@ use self::outbox::Tx;
 use self::producer::ProducerCore;
 use self::repair::{PieceOutcome, Repair};
 use self::transmit::Transmits;
-use crate::admission::AdmissionStats;
+use crate::admission::{AdmissionStats, Verdict};
 use crate::arbitration::Notification;
 use crate::wire::data::FLAG_RELIABLE;
 use crate::wire::{
@@ -470,12 +470,34 @@ impl ParticipantCore {
                     self.offer(&readers, now, &origin, meta, sample.meta.flags, raw);
                 }
                 DataSub::Fragment(fragment) => {
-                    let reader = readers[0];
+                    // Missing pieces are asked for only of a writer discovery matched with a
+                    // consumer here (for that consumer): pieces from anyone else are put
+                    // together (a writer not matched yet is held like its samples) but
+                    // make no requests, so they neither turn this participant into a
+                    // reflector towards a forged address nor flood a writer it cannot
+                    // believe yet with requests for every sample it misses.
+                    // A piece under a matched writer's id from another address is dropped
+                    // before reassembly (counted by the consumers as from a wrong address),
+                    // where it would become part of the genuine sample of its seq.
+                    let mut asker = None;
+                    let mut misplaced = false;
+                    for reader in &readers {
+                        if let Some(consumer) = self.consumers.get_mut(reader) {
+                            match consumer.check_piece(&origin.writer, from) {
+                                Verdict::Matched => asker = asker.or(Some(*reader)),
+                                Verdict::WrongAddress => misplaced = true,
+                                Verdict::Unmatched => {}
+                            }
+                        }
+                    }
+                    if misplaced && asker.is_none() {
+                        continue;
+                    }
                     let outcome = self.repair.piece(
                         now,
                         origin.writer,
                         (from, parsed.token),
-                        reader,
+                        asker,
                         &fragment,
                     );
                     match outcome {
@@ -599,10 +621,10 @@ impl ParticipantCore {
     /// Runs every timer due at `now`: deadlines and separation windows, heartbeats,
     /// acknowledgements and repairs, batch flushes, piece requests, admission hold expiry.
     pub fn handle_timeout(&mut self, now: Instant) {
+        let config = &self.config;
         self.repair.handle_timeout(
             now,
-            self.config.domain,
-            self.config.participant,
+            (config.domain, config.participant, config.max_datagram),
             &mut self.transmits,
         );
         let (mut ctx, consumers) = self.ctx();

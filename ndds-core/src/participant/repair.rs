@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddrV4;
 use std::time::{Duration, Instant};
 
-use crate::fragment::{FragmentResult, Mode, Piece, Reassembler, ReassemblyConfig};
+use crate::fragment::{FragmentResult, Missing, Mode, Piece, Reassembler, ReassemblyConfig};
 use crate::reliability::RttEstimate;
 use crate::wire::data::{AddressToken, FLAG_RELIABLE, Fragment};
 use crate::wire::feedback::{NackFrag, encode_feedback};
@@ -26,6 +26,23 @@ const NACK_FRAG_RETRY: Duration = Duration::from_millis(20);
 /// until nothing completed (a 16 MiB reliable sample between two namespaces failed about one
 /// run in four with a 1 ms floor; 6 of 6 passed with 5 ms).
 const NACK_FRAG_RETRY_MIN: Duration = Duration::from_millis(5);
+
+/// The most a `NackFrag` submessage takes besides its bitmap (kind, ids, seq, base and the
+/// bitmap's length, as postcard varints at their longest).
+const NACK_FRAG_BYTES: usize = 1 + 5 + 5 + 10 + 5 + 2;
+/// A `Feedback` datagram's header, writer participant and token, at their longest.
+const FEEDBACK_OVERHEAD: usize = 64;
+
+/// A request due now (collected before the datagrams are made).
+#[derive(Clone, Copy, Debug)]
+struct Due {
+    writer: Guid,
+    seq: u64,
+    from: SocketAddrV4,
+    token: AddressToken,
+    reader: u32,
+    missing: Missing,
+}
 
 /// A partial sample whose missing pieces will be requested.
 #[derive(Clone, Copy, Debug)]
@@ -61,6 +78,8 @@ pub(crate) struct Repair {
     /// The keys of `wanted` never asked for nor made due yet.
     unasked: BTreeSet<(Guid, u64)>,
     feedback: Vec<u8>,
+    /// The requests of one [`Repair::handle_timeout`] (kept for its allocation).
+    due: Vec<Due>,
     /// Round trip from a piece request to the first piece answering it.
     rtt: RttEstimate,
 }
@@ -81,6 +100,7 @@ impl Repair {
             wanted: BTreeMap::new(),
             unasked: BTreeSet::new(),
             feedback: Vec::new(),
+            due: Vec::new(),
             rtt: RttEstimate::default(),
         }
     }
@@ -113,15 +133,16 @@ impl Repair {
         }
     }
 
-    /// Takes one piece from `writer` at `from` (whose datagram carried `token`), for
-    /// consumer `reader` (whose id the requests carry); returns the whole sample once it is
-    /// complete.
+    /// Takes one piece from `writer` at `from` (whose datagram carried `token`); returns the
+    /// whole sample once it is complete. Missing pieces are asked for on behalf of consumer
+    /// `asker` (whose id the requests carry); `None`: not asked for (no consumer here
+    /// believes the writer yet).
     pub(crate) fn piece(
         &mut self,
         now: Instant,
         writer: Guid,
         (from, token): (SocketAddrV4, AddressToken),
-        reader: u32,
+        asker: Option<u32>,
         fragment: &Fragment<'_>,
     ) -> PieceOutcome {
         let mode = if fragment.meta.flags & FLAG_RELIABLE != 0 {
@@ -156,6 +177,9 @@ impl Repair {
                     self.forget(writer, 0, key.1);
                     self.forget(writer, key.1.saturating_add(1), u64::MAX);
                 }
+                let Some(reader) = asker else {
+                    return PieceOutcome::Pending;
+                };
                 let asked = self.wanted.get(&key).and_then(|w| w.asked);
                 if let Some((at, false)) = asked {
                     self.rtt.sample(now.saturating_duration_since(at));
@@ -193,12 +217,14 @@ impl Repair {
     }
 
     /// Asks for the missing pieces of samples that stopped progressing; drops partial samples
-    /// that timed out.
+    /// that timed out. The requests to one writer go out together, as many to a datagram of
+    /// at most `max_datagram` bytes as fit: under heavy loss hundreds of samples may be due
+    /// at once, and one datagram each would cost the receiving thread (and the writer) a
+    /// system call per sample just when it is furthest behind.
     pub(crate) fn handle_timeout(
         &mut self,
         now: Instant,
-        domain: u16,
-        participant: u64,
+        (domain, participant, max_datagram): (u16, u64, usize),
         out: &mut Transmits,
     ) {
         let retry = self.retry();
@@ -207,28 +233,27 @@ impl Repair {
             wanted,
             unasked,
             feedback,
+            due,
             ..
         } = self;
         reassembler.handle_timeout(now);
-        wanted.retain(|(writer, seq), want| {
+        due.clear();
+        wanted.retain(|&(writer, seq), want| {
             if want.due > now {
                 return true;
             }
-            unasked.remove(&(*writer, *seq));
-            let Some(missing) = reassembler.missing(*writer, *seq) else {
+            unasked.remove(&(writer, seq));
+            let Some(missing) = reassembler.missing(writer, seq) else {
                 return false;
             };
-            let nack = FeedbackSub::NackFrag(NackFrag {
+            due.push(Due {
+                writer,
+                seq,
+                from: want.from,
+                token: want.token,
                 reader: want.reader,
-                writer: writer.entity,
-                seq: *seq,
-                base: missing.base,
-                missing: missing.bitmap(),
+                missing,
             });
-            let to = writer.participant;
-            if encode_feedback(domain, participant, to, want.token, &[nack], feedback).is_ok() {
-                out.push(want.from, feedback, None);
-            }
             want.due = now + retry;
             want.asked = Some(match want.asked {
                 Some((first, _)) => (first, true),
@@ -236,6 +261,37 @@ impl Repair {
             });
             true
         });
+        // `wanted` is ordered by writer, so one writer's requests are together.
+        let budget = max_datagram
+            .saturating_sub(FEEDBACK_OVERHEAD)
+            .max(NACK_FRAG_BYTES);
+        let mut subs: Vec<FeedbackSub<'_>> = Vec::new();
+        for group in due.chunk_by(|a, b| {
+            (a.writer.participant, a.from, a.token) == (b.writer.participant, b.from, b.token)
+        }) {
+            let first = &group[0];
+            let mut bytes = 0;
+            for (i, request) in group.iter().enumerate() {
+                let size = NACK_FRAG_BYTES + request.missing.bitmap().len();
+                if !subs.is_empty() && bytes + size > budget {
+                    send(out, feedback, (domain, participant), first, &subs);
+                    subs.clear();
+                    bytes = 0;
+                }
+                subs.push(FeedbackSub::NackFrag(NackFrag {
+                    reader: request.reader,
+                    writer: request.writer.entity,
+                    seq: request.seq,
+                    base: request.missing.base,
+                    missing: group[i].missing.bitmap(),
+                }));
+                bytes += size;
+            }
+            if !subs.is_empty() {
+                send(out, feedback, (domain, participant), first, &subs);
+                subs.clear();
+            }
+        }
     }
 
     /// When [`Repair::handle_timeout`] must run next.
@@ -245,5 +301,109 @@ impl Repair {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
+    }
+}
+
+/// Encodes `subs` (requests to `to.writer`'s participant) and queues the datagram.
+fn send(
+    out: &mut Transmits,
+    buf: &mut Vec<u8>,
+    (domain, participant): (u16, u64),
+    to: &Due,
+    subs: &[FeedbackSub<'_>],
+) {
+    let writer = to.writer.participant;
+    if encode_feedback(domain, participant, writer, to.token, subs, buf).is_ok() {
+        out.push(to.from, buf, None);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::net::Ipv4Addr;
+
+    use super::*;
+    use crate::wire::SampleMeta;
+    use crate::wire::feedback::FeedbackDatagram;
+
+    const DOMAIN: u16 = 7;
+    const WRITER: Guid = Guid {
+        participant: 0xAAAA,
+        entity: 3,
+    };
+
+    fn first_piece(seq: u64, chunk: &[u8]) -> Fragment<'_> {
+        Fragment {
+            meta: SampleMeta {
+                seq,
+                timestamp_ns: 1,
+                strength: 0,
+                persistence_us: 0,
+                flags: FLAG_RELIABLE,
+            },
+            total_len: 3 * chunk.len() as u32,
+            frag_size: chunk.len() as u32,
+            index: 0,
+            chunk,
+        }
+    }
+
+    /// Requests for the missing pieces of 300 samples of one writer, due at once, travel
+    /// together: a few datagrams of at most the limit, carrying every request once.
+    #[test]
+    fn the_requests_due_at_once_to_one_writer_share_datagrams() {
+        let from = SocketAddrV4::new(Ipv4Addr::new(10, 0, 0, 1), 7400);
+        let chunk = [1u8; 1000];
+        let mut repair = Repair::new(1 << 20);
+        let t0 = Instant::now();
+        for seq in 1..=300 {
+            let outcome = repair.piece(t0, WRITER, (from, 99), Some(5), &first_piece(seq, &chunk));
+            assert!(matches!(outcome, PieceOutcome::Pending), "{outcome:?}");
+        }
+        let mut out = Transmits::default();
+        repair.handle_timeout(t0 + NACK_FRAG_DELAY, (DOMAIN, 0xBBBB, 1472), &mut out);
+        let mut seqs = Vec::new();
+        let mut datagrams = 0;
+        while let Some(transmit) = out.pop() {
+            datagrams += 1;
+            assert_eq!(transmit.to, from);
+            let bytes = transmit.to_vec();
+            assert!(bytes.len() <= 1472, "{} bytes", bytes.len());
+            let parsed = FeedbackDatagram::parse(&bytes, DOMAIN).expect("parses");
+            for sub in parsed.subs() {
+                match sub.expect("decodes") {
+                    FeedbackSub::NackFrag(nack) => {
+                        assert_eq!((nack.reader, nack.writer, nack.base), (5, 3, 1));
+                        seqs.push(nack.seq);
+                    }
+                    other => panic!("{other:?}"),
+                }
+            }
+        }
+        assert_eq!(seqs, (1..=300).collect::<Vec<u64>>());
+        assert!(datagrams <= 8, "{datagrams} datagrams for 300 requests");
+    }
+
+    /// Pieces of a writer no consumer believes are put together but make no request.
+    #[test]
+    fn pieces_nobody_believes_are_never_asked_for() {
+        let from = SocketAddrV4::new(Ipv4Addr::new(10, 0, 0, 66), 7400);
+        let chunk = [1u8; 1000];
+        let mut repair = Repair::new(1 << 20);
+        let t0 = Instant::now();
+        for seq in 1..=10 {
+            repair.piece(t0, WRITER, (from, 0), None, &first_piece(seq, &chunk));
+        }
+        let mut out = Transmits::default();
+        repair.handle_timeout(
+            t0 + Duration::from_secs(1),
+            (DOMAIN, 0xBBBB, 1472),
+            &mut out,
+        );
+        assert_eq!(out.len(), 0);
+        assert_eq!(
+            repair.poll_timeout().filter(|_| !repair.wanted.is_empty()),
+            None
+        );
     }
 }

@@ -1,7 +1,7 @@
-//! Forged traffic: a sample, a heartbeat and a gap aimed at a reliable consumer, an
-//! AckNack and a NackFrag aimed at its reliable producer, sent by an attacker either under
-//! an id discovery never matched or under the matched peer's id from the attacker's own
-//! address. Each is dropped and counted (`CoreStats::{unmatched_sender, wrong_address}`,
+//! Forged traffic: a sample, a heartbeat, a gap and a piece of a large sample aimed at a
+//! reliable consumer, an AckNack and a NackFrag aimed at its reliable producer, sent by an
+//! attacker either under an id discovery never matched or under the matched peer's id from
+//! the attacker's own address. Each is dropped and counted (`CoreStats::{unmatched_sender, wrong_address}`,
 //! `ConsumerCounters::admission`), nothing is sent to the attacker, and the genuine stream,
 //! over a lossy link that needs every repair, is unharmed. Feedback forged with the reader's
 //! own address (which only a spoofing attacker can send) lacks the address token the
@@ -9,7 +9,7 @@
 //! stay within 3 times its bytes.
 
 use ndds_core::participant::Event;
-use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Gap, Heartbeat, Sample};
+use ndds_core::wire::data::{Addressing, FLAG_RELIABLE, Fragment, Gap, Heartbeat, Sample};
 use ndds_core::wire::feedback::{AckNack, NackFrag, encode_feedback};
 use ndds_core::wire::{DataSub, DataWriter, FeedbackSub, SampleMeta};
 
@@ -67,7 +67,7 @@ fn feedback(sender: u64, sub: FeedbackSub<'_>) -> Vec<u8> {
     datagram
 }
 
-/// The five forged datagrams: three for the consumer's host, two for the producer's.
+/// The six forged datagrams: four for the consumer's host, two for the producer's.
 fn forgeries(disguise: Disguise) -> (Vec<Vec<u8>>, Vec<Vec<u8>>) {
     let (data_sender, feedback_sender) = match disguise {
         Disguise::Stranger => (STRANGER, STRANGER),
@@ -92,7 +92,24 @@ fn forgeries(disguise: Disguise) -> (Vec<Vec<u8>>, Vec<Vec<u8>>) {
         last: 1 << 63,
     });
     let gap = DataSub::Gap(Gap { from: 1, to: far });
-    let to_consumer = [&sample, &heartbeat, &gap]
+    // The first of three pieces of a large sample: believed, the missing two would be asked
+    // for, of the attacker's address; taken into reassembly under the peer's id, it would
+    // become part of the genuine sample of its seq (seq 2 is large).
+    let chunk = [0x5a; 1000];
+    let piece = DataSub::Fragment(Fragment {
+        meta: SampleMeta {
+            seq: 2,
+            timestamp_ns: 1,
+            strength: 0,
+            persistence_us: 0,
+            flags: FLAG_RELIABLE,
+        },
+        total_len: 3000,
+        frag_size: 1000,
+        index: 0,
+        chunk: &chunk,
+    });
+    let to_consumer = [&sample, &heartbeat, &gap, &piece]
         .into_iter()
         .map(|sub| data(data_sender, PRODUCER.1, sub))
         .collect();
@@ -136,7 +153,7 @@ fn stream(seed: u64, total: u64) -> (SimNet, usize) {
     (net, writer)
 }
 
-/// The genuine stream over 20 % loss with the attacker's five datagrams every 20 ms while
+/// The genuine stream over 20 % loss with the attacker's six datagrams every 20 ms while
 /// it flows; returns how many rounds were sent.
 fn attacked(seed: u64, disguise: Disguise) -> (SimNet, u64) {
     let (mut net, writer) = stream(seed, TOTAL);
@@ -195,15 +212,16 @@ fn forged_traffic_from_an_unmatched_sender_is_dropped_and_counted() {
     let (net, rounds) = attacked(41, Disguise::Stranger);
     assert_unharmed(&net);
     // The consumer held the sample, heartbeat and gap a moment for a match, then dropped
-    // them; the producer holds no feedback.
+    // them; and the piece once (its copies are duplicates to reassembly, which holds it
+    // without asking anyone for the rest). The producer holds no feedback.
     let consumer = net.nodes[CONSUMER.0].core.stats();
-    assert_eq!(consumer.unmatched_sender, 3 * rounds, "{consumer:?}");
+    assert_eq!(consumer.unmatched_sender, 3 * rounds + 1, "{consumer:?}");
     assert_eq!(consumer.wrong_address, 0);
     let counters = net.nodes[CONSUMER.0]
         .core
         .consumer_counters(CONSUMER.1)
         .expect("declared");
-    assert_eq!(counters.admission.unmatched, 3 * rounds);
+    assert_eq!(counters.admission.unmatched, 3 * rounds + 1);
     assert_eq!(counters.admission.released, 0);
     let producer = net.nodes[PRODUCER.0].core.stats();
     assert_eq!(producer.unmatched_sender, 2 * rounds, "{producer:?}");
@@ -215,13 +233,13 @@ fn forged_traffic_under_a_matched_id_from_another_address_is_dropped_and_counted
     let (net, rounds) = attacked(42, Disguise::Peer);
     assert_unharmed(&net);
     let consumer = net.nodes[CONSUMER.0].core.stats();
-    assert_eq!(consumer.wrong_address, 3 * rounds, "{consumer:?}");
+    assert_eq!(consumer.wrong_address, 4 * rounds, "{consumer:?}");
     assert_eq!(consumer.unmatched_sender, 0);
     let counters = net.nodes[CONSUMER.0]
         .core
         .consumer_counters(CONSUMER.1)
         .expect("declared");
-    assert_eq!(counters.admission.wrong_address, 3 * rounds);
+    assert_eq!(counters.admission.wrong_address, 4 * rounds);
     let producer = net.nodes[PRODUCER.0].core.stats();
     assert_eq!(producer.wrong_address, 2 * rounds, "{producer:?}");
     assert_eq!(producer.unmatched_sender, 0);

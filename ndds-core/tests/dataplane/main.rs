@@ -8,6 +8,7 @@
 //! - `rules`: arbitration fail-over and fail-back, minimum separation, deadlines;
 //! - `forged`: traffic from unmatched senders or from a matched id at another address;
 //! - `late_joiners`: the kept samples of reliable and best-effort producers;
+//! - `late_match`: a consumer matched only after the producer silenced it picks up the stream;
 //! - `liveness`: a reliable reader that never acknowledges leaves the window;
 //! - `replay`: a run replays exactly from its seed;
 //! - `throughput`: how much of its lossless rate a reliable stream keeps through 10 % loss.
@@ -17,6 +18,7 @@
 mod forged;
 mod large;
 mod late_joiners;
+mod late_match;
 mod liveness;
 mod reliable;
 mod replay;

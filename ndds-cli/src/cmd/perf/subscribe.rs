@@ -109,6 +109,48 @@ fn subscribe_ndds(daemon: &DaemonArgs, args: &Args, window: &Window) -> anyhow::
     let measured = throughput::measure(window, || {
         tally.lock().unwrap_or_else(|p| p.into_inner()).counts
     });
+    let measured = measured
+        .map_err(|err| anyhow::anyhow!("{err:#} ({})", diagnosis(&participant, direct.consumer())));
     drop(direct);
     measured
+}
+
+/// What the consumer and its participant saw, for a run that measured nothing: whether the
+/// producer was matched, whether datagrams came, and what was dropped.
+fn diagnosis(
+    participant: &ndds_client::Participant,
+    consumer: &ndds_client::RawConsumer,
+) -> String {
+    let c = consumer.stats();
+    let p = participant.stats();
+    let dropped: Vec<String> = p
+        .dropped
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(why, n)| format!("{why} {n}"))
+        .collect();
+    format!(
+        "{} producer(s) matched; consumer: {} samples arrived, {} delivered, {} from unmatched \
+         senders, {} reliable stream(s) ({} received, {} handed on, {} lost, {} requests, {} \
+         acknowledgements); participant: {} datagrams received, {} sent, {} fragments refused, \
+         dropped: {}",
+        consumer.matched().len(),
+        c.received,
+        c.delivered,
+        c.unmatched,
+        c.reliable_streams,
+        c.reliable.received,
+        c.reliable.delivered,
+        c.reliable.lost,
+        c.reliable.nacks,
+        c.reliable.acks,
+        p.received,
+        p.sent,
+        p.fragments_refused,
+        if dropped.is_empty() {
+            "none".to_string()
+        } else {
+            dropped.join(", ")
+        },
+    )
 }

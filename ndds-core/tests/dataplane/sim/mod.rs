@@ -331,6 +331,14 @@ impl SimNet {
         self.drain_all();
     }
 
+    /// Only the producer's side hears of the match (the consumer's daemon has not learned of
+    /// the producer yet: its announcement was lost); [`SimNet::connect`] later tells both.
+    pub fn connect_producer_side(&mut self, producer: (usize, u32), consumer: (usize, u32)) {
+        self.matches.insert((producer, consumer));
+        self.apply_producer(producer);
+        self.drain_all();
+    }
+
     /// Discovery no longer matches them: both sides are told, and the consumer hears that
     /// the producer was lost.
     pub fn disconnect(&mut self, producer: (usize, u32), consumer: (usize, u32)) {
