@@ -40,13 +40,13 @@ fn run(seed: u64, size: usize, loss: f64) {
     });
     net.add_consumer(CONSUMER.0, CONSUMER.1, consumer, App::Eager);
     net.connect_producer_side(PRODUCER, CONSUMER);
-    // 25 k samples/s for 2.4 s.
-    let total = 60_000;
+    // 10 k samples/s for 2 s: half a second of it after the match.
+    let total = 20_000;
     net.add_writer(WriterApp::new(
         PRODUCER.0,
         PRODUCER.1,
         total,
-        Duration::from_micros(40),
+        Duration::from_micros(100),
         size,
     ));
     net.run_until(net.at_ms(1500), |_| false);
@@ -79,14 +79,14 @@ fn run(seed: u64, size: usize, loss: f64) {
 
 #[test]
 fn a_reader_matched_after_its_silencing_picks_up_the_stream_of_large_samples() {
-    for seed in 1..=3 {
+    for seed in 1..=2 {
         run(seed, 8192, 0.1);
     }
 }
 
 #[test]
 fn a_reader_matched_after_its_silencing_picks_up_the_stream_of_small_samples() {
-    for seed in 1..=3 {
+    for seed in 1..=2 {
         run(seed, 1024, 0.1);
     }
 }

@@ -111,6 +111,11 @@ impl<K: Copy + Ord + Debug> Reassembler<K> {
     pub(in crate::fragment) fn audit(&self) -> usize {
         assert_eq!(self.age.len(), self.partials.len());
         assert!(self.writers.consistent());
+        let mut held = std::collections::BTreeMap::new();
+        for &(writer, _) in self.partials.keys() {
+            *held.entry(writer).or_insert(0usize) += 1;
+        }
+        assert_eq!(held, self.held);
         for (&(writer, seq), partial) in &self.partials {
             assert_eq!(self.age.get(&partial.age), Some(&(writer, seq)));
             assert!(self.writers.contains(writer) && !self.writers.is_idle(writer));

@@ -51,6 +51,10 @@ enum End {
 pub struct Reassembler<K> {
     config: ReassemblyConfig,
     partials: BTreeMap<(K, u64), Partial>,
+    /// How many of `partials` each writer has (kept so that admitting a sample does not
+    /// count them: with thousands held under heavy loss, counting on every new sample made
+    /// reassembly the receiving thread's main cost just when it was furthest behind).
+    held: BTreeMap<K, usize>,
     /// Partial samples by (first piece's time, serial): the oldest first.
     age: BTreeMap<(Instant, u64), (K, u64)>,
     writers: Writers<K>,
@@ -92,6 +96,7 @@ impl<K: Copy + Ord + Debug> Reassembler<K> {
         Reassembler {
             config,
             partials: BTreeMap::new(),
+            held: BTreeMap::new(),
             age: BTreeMap::new(),
             writers: Writers::new(),
             spares: Vec::new(),
@@ -250,7 +255,7 @@ impl<K: Copy + Ord + Debug> Reassembler<K> {
                 }
             }
             Mode::KeepAll { max_partials } if count > 1 => {
-                while self.partial_seqs(writer).count() >= max_partials {
+                while self.held.get(&writer).copied().unwrap_or(0) >= max_partials {
                     match self.newest_partial(writer) {
                         Some(newest) if newest > seq => {
                             self.end((writer, newest), End::Evicted);
@@ -312,7 +317,9 @@ impl<K: Copy + Ord + Debug> Reassembler<K> {
         let mut partial = Partial::new(split, buf, age, mode == Mode::LastIsBest);
         partial.add(piece.index, piece.chunk);
         self.charge(partial.heap() + Self::PARTIAL_OVERHEAD);
-        self.partials.insert((writer, piece.seq), partial);
+        if self.partials.insert((writer, piece.seq), partial).is_none() {
+            *self.held.entry(writer).or_insert(0) += 1;
+        }
         self.age.insert(age, (writer, piece.seq));
         self.writers.set_active(writer);
         FragmentResult::Pending
@@ -347,6 +354,12 @@ impl<K: Copy + Ord + Debug> Reassembler<K> {
         let Some(partial) = self.partials.remove(&key) else {
             return Vec::new();
         };
+        if let Some(held) = self.held.get_mut(&key.0) {
+            *held -= 1;
+            if *held == 0 {
+                self.held.remove(&key.0);
+            }
+        }
         self.age.remove(&partial.age);
         self.uncharge(partial.heap() + Self::PARTIAL_OVERHEAD);
         match why {
