@@ -381,35 +381,34 @@ issue 15's data-plane rewrite (b4d6c55) and after it, alternately; the figures m
 to run (on this virtual machine by more than the differences between builds), the reasons
 do not.
 
-- **Round trips with both processes on one CPU** (64 B reliable, 8 KiB reliable): on one CPU
-  every microsecond either process spends adds to the round trip, and raw UDP spends almost
-  nothing besides two system calls. A reliable sample costs each side a second datagram (the
-  acknowledgement) and its system calls, plus the history entry and the reader's ordering;
-  the write takes three uncontended locks (buffer pool, producer order, the data plane's
-  core) and reads two clocks. The I/O thread waits in a blocking receive, so an arriving
-  datagram costs one system call as for raw UDP (it was three with epoll, which put reliable
-  64 B at 1.6-1.9 x). What would move it: acknowledging every few samples (coalesced on a
-  short timer) instead of each one, and one lock per write instead of three.
+- **Round trips with both processes on one CPU**: on one CPU every microsecond either
+  process spends adds to the round trip, and raw UDP spends almost nothing besides two
+  system calls. A reliable ping-pong sends no extra acknowledgement datagram per sample
+  (AckNacks are coalesced per burst of received datagrams, and \`strace\` of a reliable
+  \`perf ping\` shows about one \`sendmsg\` per datagram received): the difference to raw UDP
+  is user-space work on both sides (encoding, admission, the reader's ordering and the
+  history entry, the hand-over to the application), about a third of the CPU in a profile.
+  Across CPUs the goal is met. What would move it: fewer steps per sample between the
+  socket and the callback (the event queue and the dispatch map), and one lock per write.
 - **64 B, 12 x raw unbatched UDP on one CPU**: publisher and subscriber share one CPU, so the
-  rate is bounded by their summed cost per sample: serializing into a pooled buffer, a clock
-  read for the source timestamp, three locks and appending to the batch; then parsing,
-  admission and arbitration, an event per sample and its hand-over to the consumer. Across
-  CPUs the goal is met. Reliable batches pay more per sample (history entry, acknowledgement
-  accounting).
+  rate is bounded by their summed cost per sample: serializing into a pooled buffer, the
+  source timestamp, appending to the batch; then parsing, admission and arbitration, an
+  event per sample and its hand-over to the consumer. Reliable batches pay more per sample
+  (history entry, ordering).
 - **8 KiB without batching, 0.8 x raw UDP**: one datagram per sample as raw UDP, plus the
-  encoding copy and the per-sample work above (0.7-0.85 x from run to run, old and new
-  builds alike). Reliable 8 KiB without batching also keeps up to 1024 samples (8 MiB) in
-  flight, more than the receiver's socket buffer (\`net.core.rmem_max\`), so datagrams are
-  dropped by the kernel and repaired. With batching 8 KiB exceeds raw UDP.
-- **Reliable through 10 % loss**: 1 KiB and 8 KiB samples now keep 0.70-0.95 of their lossless
-  rate (0.24-0.58 and 0.10-0.37 before the rewrite, in the same sitting): one I/O thread
-  handles a whole burst of datagrams and repair requests under one lock, where the receive
-  and timer threads used to contend for every consumer's lock. 64 B batched stays at about
-  0.5: a lost datagram carries about 19 batched samples, the window (counted in samples,
-  1024) cannot move past it until its repair arrives, and a repair lost again waits for the
-  retry time (at least 1 ms). What would move it: a window in bytes sized to the
-  bandwidth-delay product, a retry floor from the measured round trip, and a receive buffer
-  at least the window.
+  encoding copy and the per-sample work above (0.65-0.85 x from run to run). Reliable 8 KiB
+  without batching also keeps up to 1024 samples (8 MiB) in flight, more than the receiver's
+  socket buffer (\`net.core.rmem_max\`), so datagrams are dropped by the kernel and repaired.
+  With batching 8 KiB exceeds raw UDP on one CPU.
+- **Reliable through 10 % loss**: the ratios move from run to run by more than most
+  changes do (64 B batched 0.5-0.75, 1 KiB 0.5-0.7, 8 KiB 0.7-0.9 in repeated runs of
+  \`scripts/bench-loss.sh\`). In virtual time, where the machine adds nothing, the protocol
+  keeps 0.74 (64 B batched) and 0.99 (1 KiB) of its lossless rate
+  (\`ndds-core/tests/dataplane/throughput.rs\`): what is lost here is the CPU both processes
+  spend on repairs when publisher, subscriber and the kernel's forwarding share two CPUs. A
+  lost datagram carries about 19 batched samples of 64 B, and the window (counted in samples,
+  1024) cannot move past it until its repair arrives. What would move it: a window in bytes
+  sized to the bandwidth-delay product, and a receive buffer at least the window.
 
 $LOSS_SECTION
 
