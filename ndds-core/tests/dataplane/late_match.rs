@@ -18,16 +18,7 @@ const CONSUMER: (usize, u32) = (1, 10);
 
 fn run(seed: u64, size: usize, loss: f64) {
     let mut net = SimNet::new(seed, 2);
-    net.set_link(
-        0,
-        1,
-        Link {
-            latency: Duration::from_micros(100),
-            jitter: Duration::ZERO,
-            loss,
-            duplicate: 0.0,
-        },
-    );
+    net.set_link(0, 1, Link::local(loss));
     let producer = reliable_producer_with(WriterConfig {
         depth: 1024,
         ..WriterConfig::default()

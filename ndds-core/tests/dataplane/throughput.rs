@@ -15,16 +15,7 @@ use crate::{MS, reliable_consumer, reliable_producer_with};
 /// One run: how long the consumer took to get all `total` samples, each exactly once.
 fn run(seed: u64, loss: f64, size: usize, batch: bool, total: u64, interval: Duration) -> Duration {
     let mut net = SimNet::new(seed, 2);
-    net.set_link(
-        0,
-        1,
-        Link {
-            latency: Duration::from_micros(100),
-            jitter: Duration::ZERO,
-            loss,
-            duplicate: 0.0,
-        },
-    );
+    net.set_link(0, 1, Link::local(loss));
     let mut producer = reliable_producer_with(WriterConfig {
         depth: 1024,
         ..WriterConfig::default()

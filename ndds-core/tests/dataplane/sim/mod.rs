@@ -100,6 +100,14 @@ impl Link {
             ..Link::clean()
         }
     }
+
+    /// A link of 100 µs each way (two hosts on one switch) that loses `loss`.
+    pub fn local(loss: f64) -> Self {
+        Link {
+            latency: Duration::from_micros(100),
+            ..Link::lossy(loss)
+        }
+    }
 }
 
 /// One simulated participant.
