@@ -151,7 +151,8 @@ pub struct ConsumerCounters {
     pub admission: AdmissionStats,
     /// Reliable streams (one per matched reliable producer heard from).
     pub streams: usize,
-    /// Their readers' counters, summed.
+    /// Their readers' counters, summed (of the streams there are now: a producer that went
+    /// away takes its stream's counts with it).
     pub reliable: ReaderStats,
 }
 

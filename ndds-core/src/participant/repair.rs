@@ -271,7 +271,7 @@ impl Repair {
         }) {
             let first = &group[0];
             let mut bytes = 0;
-            for (i, request) in group.iter().enumerate() {
+            for request in group {
                 let size = NACK_FRAG_BYTES + request.missing.bitmap().len();
                 if !subs.is_empty() && bytes + size > budget {
                     send(out, feedback, (domain, participant), first, &subs);
@@ -283,7 +283,7 @@ impl Repair {
                     writer: request.writer.entity,
                     seq: request.seq,
                     base: request.missing.base,
-                    missing: group[i].missing.bitmap(),
+                    missing: request.missing.bitmap(),
                 }));
                 bytes += size;
             }
