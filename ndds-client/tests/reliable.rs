@@ -50,7 +50,10 @@ fn reliable_pair(
             },
         )
         .unwrap();
+    // Both sides matched: a consumer whose match comes after the writes holds them for it
+    // and gets them all, which is no test of falling behind.
     assert!(producer.wait_for_consumers(1, WAIT));
+    assert!(consumer.wait_for_producers(1, WAIT));
     ((dir, writer_side, reader_side), consumer, producer)
 }
 
