@@ -436,33 +436,46 @@ impl ConsumerCore {
             acks_queued,
             ..
         } = self;
-        for (writer, stream) in streams.iter_mut() {
-            while credit.is_none_or(|c| c > 0) {
-                match stream.reader.poll_deliver() {
-                    Some(Delivery::Sample {
-                        sample: (meta, raw),
-                        ..
-                    }) => {
-                        arbiter.handle_sample(now, meta, raw);
-                        drain_into(arbiter, entity, credit, ctx.events);
+        // With unlimited credit each stream is drained in turn. With limited credit the
+        // streams take one sample each per pass, so that no stream waits for another one to
+        // empty (the map's order would otherwise favour the same stream every time).
+        let per_pass = if credit.is_none() { usize::MAX } else { 1 };
+        loop {
+            let mut delivered = false;
+            for (writer, stream) in streams.iter_mut() {
+                let mut taken = 0;
+                while taken < per_pass && credit.is_none_or(|c| c > 0) {
+                    match stream.reader.poll_deliver() {
+                        Some(Delivery::Sample {
+                            sample: (meta, raw),
+                            ..
+                        }) => {
+                            arbiter.handle_sample(now, meta, raw);
+                            drain_into(arbiter, entity, credit, ctx.events);
+                        }
+                        Some(Delivery::Lost { from, to }) => {
+                            ctx.events.push_back(Event::Notification {
+                                consumer: entity,
+                                notification: Notification::SamplesLost {
+                                    writer: *writer,
+                                    from,
+                                    to,
+                                },
+                            });
+                        }
+                        None => break,
                     }
-                    Some(Delivery::Lost { from, to }) => {
-                        ctx.events.push_back(Event::Notification {
-                            consumer: entity,
-                            notification: Notification::SamplesLost {
-                                writer: *writer,
-                                from,
-                                to,
-                            },
-                        });
-                    }
-                    None => break,
+                    taken += 1;
                 }
+                delivered |= taken > 0;
             }
-            if !*acks_queued && stream.reader.has_output() {
-                *acks_queued = true;
-                ctx.acks_due.push(entity);
+            if per_pass == usize::MAX || !delivered || credit.is_some_and(|c| c == 0) {
+                break;
             }
+        }
+        if !*acks_queued && streams.values().any(|stream| stream.reader.has_output()) {
+            *acks_queued = true;
+            ctx.acks_due.push(entity);
         }
     }
 

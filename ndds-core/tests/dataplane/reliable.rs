@@ -241,3 +241,38 @@ fn reliable_and_best_effort_consumers_of_one_participant_get_their_own_guarantee
         best_effort.len()
     );
 }
+
+#[test]
+fn a_slow_consumer_of_two_reliable_producers_takes_from_both_in_turn() {
+    // Two producers of equal strength (both accepted) write 60 samples each, flat out, to a
+    // consumer that holds at most 4 and takes 2 every 10 ms. Both streams always have
+    // samples ready, so the consumer's credit must go round: neither producer waits for the
+    // other to finish.
+    let mut net = SimNet::new(23, 3);
+    for node in 0..2 {
+        net.add_producer(node, 1, reliable_producer(16));
+    }
+    let slow = App::Slow {
+        every: 10 * MS,
+        batch: 2,
+    };
+    net.add_consumer(2, 10, reliable_consumer(Some(4)), slow);
+    for node in 0..2 {
+        net.connect((node, 1), (2, 10));
+        net.add_writer(WriterApp::new(node, 1, 60, MS / 10, 100));
+    }
+    let done = net.run_until(net.at_ms(30_000), |n| n.consumer(2, 10).got.len() == 120);
+    assert!(done, "{:?}", net.stats);
+    let log = net.consumer(2, 10);
+    for node in 0..2 {
+        assert_eq!(exactly(&log.seqs_from(guid(node, 1)), 1, 60), Ok(()));
+    }
+    assert_eq!(log.lost(), vec![]);
+    assert!(log.max_pending <= 4, "held {}", log.max_pending);
+    // In the first 40 samples taken, each producer has at least a third.
+    let first = &log.got[..40];
+    for node in 0..2 {
+        let from = first.iter().filter(|g| g.writer == guid(node, 1)).count();
+        assert!(from >= 13, "{from} of the first 40 from producer {node}");
+    }
+}
