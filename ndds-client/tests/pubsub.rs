@@ -449,12 +449,11 @@ fn samples_written_from_two_threads_leave_in_the_order_they_were_written() {
         }
     });
     // Loopback may drop datagrams when the socket's buffer is full; it does not reorder.
-    let settled = |stats: &ndds_client::ConsumerStats| stats.received;
-    let mut last = settled(&consumer.stats());
-    while eventually(Duration::from_millis(300), || {
-        settled(&consumer.stats()) != last
-    }) {
-        last = settled(&consumer.stats());
+    // Waits until nothing more arrives.
+    let received = || consumer.stats().received;
+    let mut last = received();
+    while eventually(Duration::from_millis(300), || received() != last) {
+        last = received();
     }
     let stats = consumer.stats();
     assert!(stats.received > 0, "{stats:?}");
