@@ -622,11 +622,13 @@ impl ParticipantCore {
     /// acknowledgements and repairs, batch flushes, piece requests, admission hold expiry.
     pub fn handle_timeout(&mut self, now: Instant) {
         let config = &self.config;
-        self.repair.handle_timeout(
-            now,
-            (config.domain, config.participant, config.max_datagram),
-            &mut self.transmits,
-        );
+        if self.repair.poll_timeout().is_some_and(|at| at <= now) {
+            self.repair.handle_timeout(
+                now,
+                (config.domain, config.participant, config.max_datagram),
+                &mut self.transmits,
+            );
+        }
         let (mut ctx, consumers) = self.ctx();
         for consumer in consumers.values_mut() {
             if consumer.due.is_some_and(|due| due <= now) {

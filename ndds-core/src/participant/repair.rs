@@ -77,6 +77,11 @@ pub(crate) struct Repair {
     wanted: BTreeMap<(Guid, u64), Wanted>,
     /// The keys of `wanted` never asked for nor made due yet.
     unasked: BTreeSet<(Guid, u64)>,
+    /// No entry of `wanted` is due before this (`None`: none is wanted). A lower bound, not
+    /// the minimum: entries that complete leave it where it was, and the next
+    /// [`Repair::handle_timeout`] makes it exact again. Under heavy loss thousands of
+    /// samples are wanted, and the driver asks for the next timeout at every turn.
+    next_due: Option<Instant>,
     feedback: Vec<u8>,
     /// The requests of one [`Repair::handle_timeout`] (kept for its allocation).
     due: Vec<Due>,
@@ -99,6 +104,7 @@ impl Repair {
             reassembler: Reassembler::new(config),
             wanted: BTreeMap::new(),
             unasked: BTreeSet::new(),
+            next_due: None,
             feedback: Vec::new(),
             due: Vec::new(),
             rtt: RttEstimate::default(),
@@ -111,6 +117,11 @@ impl Repair {
             self.wanted.remove(&key);
             self.unasked.remove(&key);
         }
+    }
+
+    /// An entry of `wanted` is now due at `at`.
+    fn due_at(&mut self, at: Instant) {
+        self.next_due = Some(self.next_due.map_or(at, |next| next.min(at)));
     }
 
     /// How long a piece request stands before it is repeated: adapted to the measured round
@@ -129,6 +140,7 @@ impl Repair {
             self.unasked.remove(&earlier);
             if let Some(want) = self.wanted.get_mut(&earlier) {
                 want.due = want.due.min(now);
+                self.due_at(now);
             }
         }
     }
@@ -188,6 +200,7 @@ impl Repair {
                     Some(_) => self.retry(),
                     None => NACK_FRAG_DELAY,
                 };
+                self.due_at(now + wait);
                 self.wanted.insert(
                     key,
                     Wanted {
@@ -232,14 +245,18 @@ impl Repair {
             reassembler,
             wanted,
             unasked,
+            next_due,
             feedback,
             due,
             ..
         } = self;
         reassembler.handle_timeout(now);
         due.clear();
+        *next_due = None;
+        let mut later = |at: Instant| *next_due = Some(next_due.map_or(at, |n| n.min(at)));
         wanted.retain(|&(writer, seq), want| {
             if want.due > now {
+                later(want.due);
                 return true;
             }
             unasked.remove(&(writer, seq));
@@ -255,6 +272,7 @@ impl Repair {
                 missing,
             });
             want.due = now + retry;
+            later(want.due);
             want.asked = Some(match want.asked {
                 Some((first, _)) => (first, true),
                 None => (now, false),
@@ -294,10 +312,10 @@ impl Repair {
         }
     }
 
-    /// When [`Repair::handle_timeout`] must run next.
+    /// When [`Repair::handle_timeout`] must run next (at the latest; it may find nothing
+    /// due, see `next_due`).
     pub(crate) fn poll_timeout(&self) -> Option<Instant> {
-        let next = self.wanted.values().map(|w| w.due).min();
-        match (next, self.reassembler.poll_timeout()) {
+        match (self.next_due, self.reassembler.poll_timeout()) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         }
@@ -405,5 +423,49 @@ mod tests {
             repair.poll_timeout().filter(|_| !repair.wanted.is_empty()),
             None
         );
+    }
+
+    /// The next timeout is never later than the earliest wanted request (it may be earlier:
+    /// completed samples leave it behind until the next round makes it exact).
+    #[test]
+    fn the_next_timeout_never_passes_a_wanted_request() {
+        let from = SocketAddrV4::new(Ipv4Addr::new(10, 0, 0, 1), 7400);
+        let chunk = [1u8; 1000];
+        let mut repair = Repair::new(1 << 20);
+        let t0 = Instant::now();
+        let earliest = |repair: &Repair| repair.wanted.values().map(|w| w.due).min();
+        let check = |repair: &Repair| {
+            if let Some(due) = earliest(repair) {
+                assert!(repair.poll_timeout().is_some_and(|at| at <= due));
+            }
+        };
+        for seq in 1..=20 {
+            let at = t0 + Duration::from_millis(seq);
+            repair.piece(at, WRITER, (from, 99), Some(5), &first_piece(seq, &chunk));
+            check(&repair);
+        }
+        let mut out = Transmits::default();
+        let mut now = t0;
+        for _ in 0..50 {
+            now += Duration::from_millis(3);
+            if repair.poll_timeout().is_some_and(|at| at <= now) {
+                repair.handle_timeout(now, (DOMAIN, 0xBBBB, 1472), &mut out);
+                // A round makes it exact.
+                let exact = earliest(&repair);
+                let reassembly = repair.reassembler.poll_timeout();
+                let expected = match (exact, reassembly) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
+                assert_eq!(repair.poll_timeout(), expected);
+            }
+            check(&repair);
+        }
+        assert!(out.pop().is_some(), "the requests went out");
+        // Samples skipped stop being wanted; nothing due is ever left unscheduled.
+        repair.skip_before(WRITER, 11);
+        check(&repair);
+        repair.skip_before(WRITER, 100);
+        assert!(repair.wanted.is_empty());
     }
 }
