@@ -119,11 +119,6 @@ impl Repair {
         }
     }
 
-    /// An entry of `wanted` is now due at `at`.
-    fn due_at(&mut self, at: Instant) {
-        self.next_due = Some(self.next_due.map_or(at, |next| next.min(at)));
-    }
-
     /// How long a piece request stands before it is repeated: adapted to the measured round
     /// trip, like a reliable reader's requests.
     fn retry(&self) -> Duration {
@@ -140,7 +135,7 @@ impl Repair {
             self.unasked.remove(&earlier);
             if let Some(want) = self.wanted.get_mut(&earlier) {
                 want.due = want.due.min(now);
-                self.due_at(now);
+                lower(&mut self.next_due, now);
             }
         }
     }
@@ -200,7 +195,7 @@ impl Repair {
                     Some(_) => self.retry(),
                     None => NACK_FRAG_DELAY,
                 };
-                self.due_at(now + wait);
+                lower(&mut self.next_due, now + wait);
                 self.wanted.insert(
                     key,
                     Wanted {
@@ -253,10 +248,9 @@ impl Repair {
         reassembler.handle_timeout(now);
         due.clear();
         *next_due = None;
-        let mut later = |at: Instant| *next_due = Some(next_due.map_or(at, |n| n.min(at)));
         wanted.retain(|&(writer, seq), want| {
             if want.due > now {
-                later(want.due);
+                lower(next_due, want.due);
                 return true;
             }
             unasked.remove(&(writer, seq));
@@ -272,7 +266,7 @@ impl Repair {
                 missing,
             });
             want.due = now + retry;
-            later(want.due);
+            lower(next_due, want.due);
             want.asked = Some(match want.asked {
                 Some((first, _)) => (first, true),
                 None => (now, false),
@@ -320,6 +314,11 @@ impl Repair {
             (a, b) => a.or(b),
         }
     }
+}
+
+/// An entry of `wanted` is due at `at`: `next` stays at or before it.
+fn lower(next: &mut Option<Instant>, at: Instant) {
+    *next = Some(next.map_or(at, |next| next.min(at)));
 }
 
 /// Encodes `subs` (requests to `to.writer`'s participant) and queues the datagram.
