@@ -17,7 +17,7 @@
 mod socket;
 
 use std::cell::RefCell;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::os::fd::AsRawFd;
@@ -125,6 +125,28 @@ struct Endpoints {
     producers: HashMap<u32, Arc<str>>,
 }
 
+/// The I/O thread's own copy of the consumers' delivery ends, taken again only when
+/// [`DataPlane::consumers_changed`] moved: handing out an event costs no lock and no
+/// reference count.
+#[derive(Debug, Default)]
+struct LocalConsumers {
+    generation: u64,
+    consumers: HashMap<u32, Arc<Delivery>>,
+}
+
+impl LocalConsumers {
+    /// Up to date with `plane`'s consumers.
+    fn refresh(&mut self, plane: &DataPlane) {
+        let generation = plane.consumers_changed.load(Ordering::Acquire);
+        if generation == self.generation {
+            return;
+        }
+        let endpoints = read(&plane.endpoints);
+        self.consumers.clone_from(&endpoints.consumers);
+        self.generation = plane.consumers_changed.load(Ordering::Acquire);
+    }
+}
+
 /// The core and what the driver keeps beside it, under one lock.
 #[derive(Debug)]
 struct Locked {
@@ -148,6 +170,8 @@ pub(crate) struct DataPlane {
     /// Signalled (with `locked`) when a reliable producer's window may have opened.
     window: Condvar,
     endpoints: RwLock<Endpoints>,
+    /// Moved (under `endpoints`' write lock) whenever a consumer is added or removed.
+    consumers_changed: AtomicU64,
     /// The data socket's own address: an empty datagram sent there wakes the I/O thread.
     wake_to: SocketAddrV4,
     closed: AtomicBool,
@@ -228,6 +252,7 @@ impl DataPlane {
             }),
             window: Condvar::new(),
             endpoints: RwLock::default(),
+            consumers_changed: AtomicU64::new(0),
             wake_to: SocketAddrV4::from(locator),
             closed: AtomicBool::new(false),
             wall: WallClock::new(),
@@ -368,13 +393,30 @@ impl DataPlane {
     // ---- consumers ----
 
     pub(crate) fn add_consumer(&self, entity: u32, spec: ConsumerSpec, delivery: Arc<Delivery>) {
-        write(&self.endpoints).consumers.insert(entity, delivery);
+        // Known to the I/O thread before the core can produce an event for it (the core's
+        // lock orders the two).
+        {
+            let mut endpoints = write(&self.endpoints);
+            endpoints.consumers.insert(entity, delivery);
+            self.consumers_changed.fetch_add(1, Ordering::AcqRel);
+        }
         self.command(|core, now| core.add_consumer(now, entity, spec));
     }
 
     pub(crate) fn remove_consumer(&self, entity: u32) {
         self.command(|core, _| core.remove_consumer(entity));
-        write(&self.endpoints).consumers.remove(&entity);
+        {
+            let mut endpoints = write(&self.endpoints);
+            endpoints.consumers.remove(&entity);
+            self.consumers_changed.fetch_add(1, Ordering::AcqRel);
+        }
+        // The I/O thread lets go of its copy of the delivery end (and of the samples queued
+        // there) at its next round: one now.
+        if on_io_thread() {
+            IO_DIRTY.with(|dirty| dirty.set(true));
+        } else {
+            self.wake_io();
+        }
     }
 
     pub(crate) fn set_consumer_matched(
@@ -457,7 +499,7 @@ impl DataPlane {
     pub(crate) fn write(
         &self,
         entity: u32,
-        payload: Arc<Vec<u8>>,
+        payload: &Arc<Vec<u8>>,
         timeout: Duration,
     ) -> Result<(), WriteError> {
         let mut now = Instant::now();
@@ -465,10 +507,7 @@ impl DataPlane {
         let mut locked = self.lock();
         let mut started = None;
         loop {
-            match locked
-                .core
-                .write(now, timestamp_ns, entity, Arc::clone(&payload))
-            {
+            match locked.core.write(now, timestamp_ns, entity, &payload) {
                 Ok(_) => break,
                 Err(WriteRefused::TooLarge { size, max }) => {
                     return Err(WriteError::TooLarge { size, max });
@@ -576,8 +615,9 @@ impl DataPlane {
         IO_THREAD.with(|t| t.set(true));
         let mut buf = BytesMut::new();
         let mut batch: Vec<(Bytes, SocketAddrV4)> = Vec::with_capacity(RECV_BATCH);
-        let mut events: Vec<Event> = Vec::with_capacity(1024);
+        let mut events: VecDeque<Event> = VecDeque::with_capacity(1024);
         let mut credits: Vec<(u32, usize)> = Vec::new();
+        let mut local = LocalConsumers::default();
         let mut next: Option<Instant> = None;
         let mut receive_timeout = ReceiveTimeout::default();
         // Whether the last round found more than one datagram waiting: then the socket is
@@ -611,20 +651,19 @@ impl DataPlane {
                     }
                     locked.core.handle_datagram(now, received, from, datagram);
                 }
-                if locked.core.poll_timeout().is_some_and(|at| at <= now) {
-                    locked.core.handle_timeout(now);
-                }
-                while let Some(event) = locked.core.poll_event() {
-                    events.push(event);
-                }
                 next = locked.core.poll_timeout();
+                if next.is_some_and(|at| at <= now) {
+                    locked.core.handle_timeout(now);
+                    next = locked.core.poll_timeout();
+                }
+                locked.core.take_events(&mut events);
                 locked.io_wakes_at = next;
                 if locked.ack_waiters > 0 {
                     self.window.notify_all();
                 }
                 let sent = self.release(locked);
                 self.count(&sent);
-                self.dispatch(&mut events, &mut credits);
+                self.dispatch(&mut local, &mut events, &mut credits);
                 // The buffers just sent go back now if nobody holds the core, rather than
                 // when this thread next wakes: a writer meanwhile finds them spare.
                 if let Ok(mut locked) = self.locked.try_lock() {
@@ -724,9 +763,14 @@ impl DataPlane {
 
     /// Hands the core's events to the consumers' queues and the producers' waiters, outside
     /// every lock of the core (a direct callback runs here).
-    fn dispatch(&self, events: &mut Vec<Event>, credits: &mut Vec<(u32, usize)>) {
+    fn dispatch(
+        &self,
+        local: &mut LocalConsumers,
+        events: &mut VecDeque<Event>,
+        credits: &mut Vec<(u32, usize)>,
+    ) {
+        local.refresh(self);
         let mut window = false;
-        let mut cached: Option<(u32, Arc<Delivery>)> = None;
         for event in events.drain(..) {
             let (consumer, event) = match event {
                 Event::Sample { consumer, sample } => (consumer, RawEvent::Sample(sample)),
@@ -748,17 +792,7 @@ impl DataPlane {
                     continue;
                 }
             };
-            // Consecutive events are mostly for one consumer: its queue is looked up once.
-            if cached
-                .as_ref()
-                .is_none_or(|(entity, _)| *entity != consumer)
-            {
-                cached = read(&self.endpoints)
-                    .consumers
-                    .get(&consumer)
-                    .map(|delivery| (consumer, Arc::clone(delivery)));
-            }
-            if let Some((_, delivery)) = &cached {
+            if let Some(delivery) = local.consumers.get(&consumer) {
                 delivery.push(event);
                 let evicted = delivery.take_evicted();
                 if evicted > 0 {

@@ -28,12 +28,11 @@ pub(crate) struct ProducerState {
     pub(crate) peers: Peers,
     plane: Arc<DataPlane>,
     /// Buffers samples are encoded into before the data plane takes them (and shares them
-    /// with its history and the datagrams that carry them).
-    pool: Mutex<BufferPool>,
-    /// Held by a write from the moment the data plane takes the sample until its datagrams
-    /// are sent, so two threads writing with this producer never put its datagrams on the
-    /// wire out of order (the data plane's own lock is not held while sending).
-    order: Mutex<()>,
+    /// with its history and the datagrams that carry them). Held by a write from encoding
+    /// until its datagrams are sent, so two threads writing with this producer never put its
+    /// datagrams on the wire out of order (the data plane's own lock is not held while
+    /// sending); one lock per write for both.
+    writing: Mutex<BufferPool>,
 }
 
 impl ProducerState {
@@ -77,8 +76,7 @@ impl ProducerState {
             qos,
             peers: Peers::new(topic, type_desc),
             plane,
-            pool: Mutex::new(BufferPool::new(buffers)),
-            order: Mutex::new(()),
+            writing: Mutex::new(BufferPool::new(buffers)),
         }
     }
 
@@ -105,13 +103,15 @@ impl ProducerState {
         &self,
         encode: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
     ) -> Result<(), WriteError> {
-        let payload = lock(&self.pool).fill(encode)?;
-        self.send(payload, self.qos.write_timeout)
+        let mut pool = lock(&self.writing);
+        let payload = pool.fill(encode)?;
+        self.plane
+            .write(self.entity, &payload, self.qos.write_timeout)
     }
 
     /// Hands an encoded sample to the data plane, in order with this producer's other writes.
-    fn send(&self, payload: Arc<Vec<u8>>, timeout: Duration) -> Result<(), WriteError> {
-        let _order = lock(&self.order);
+    fn send(&self, payload: &Arc<Vec<u8>>, timeout: Duration) -> Result<(), WriteError> {
+        let _order = lock(&self.writing);
         self.plane.write(self.entity, payload, timeout)
     }
 }
@@ -150,13 +150,13 @@ impl<T: Serialize> Producer<T> {
     /// the wait ends.
     pub async fn write_async(&self, value: &T) -> Result<(), WriteError> {
         let state = &self.raw.state;
-        let payload = lock(&state.pool).fill(|payload| {
+        let payload = lock(&state.writing).fill(|payload| {
             let buffer = std::mem::take(payload);
             *payload = postcard::to_extend(value, buffer)?;
             Ok::<(), WriteError>(())
         })?;
         loop {
-            match state.send(Arc::clone(&payload), Duration::ZERO) {
+            match state.send(&payload, Duration::ZERO) {
                 Err(WriteError::WouldBlock { .. }) => {
                     std::future::poll_fn(|cx| {
                         if state.plane.poll_window(state.entity, cx) {
@@ -202,12 +202,13 @@ pub struct RawProducer {
 impl RawProducer {
     /// Sends an encoded sample to every matched consumer.
     pub fn write_bytes(&self, payload: &[u8]) -> Result<(), WriteError> {
-        // Sent from the caller's bytes, with no copy into the producer's buffer.
+        // Copied into a pooled buffer, which the history and the datagrams then share.
         let state = &self.state;
-        let payload = lock(&state.pool).copy(payload);
+        let mut pool = lock(&state.writing);
+        let payload = pool.copy(payload);
         state
             .plane
-            .write(state.entity, payload, state.qos.write_timeout)
+            .write(state.entity, &payload, state.qos.write_timeout)
     }
 
     /// Sends every sample waiting in a batch now.

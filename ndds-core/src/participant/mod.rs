@@ -346,13 +346,14 @@ impl ParticipantCore {
 
     /// Writes one encoded sample with producer `entity`, stamped `timestamp_ns` (the source
     /// time, nanoseconds since the Unix epoch); returns its sequence number. The payload is
-    /// shared with the datagrams that carry it (take it from a [`BufferPool`]).
+    /// shared (not copied) with the history and the datagrams that carry it where they keep
+    /// it (take it from a [`BufferPool`]); a batched sample is copied into its batch.
     pub fn write(
         &mut self,
         now: Instant,
         timestamp_ns: u64,
         entity: u32,
-        payload: Arc<Vec<u8>>,
+        payload: &Arc<Vec<u8>>,
     ) -> Result<u64, WriteRefused> {
         let max_sample = self.config.max_sample;
         let (mut tx, producers, _) = self.tx();
@@ -694,6 +695,17 @@ impl ParticipantCore {
     /// The next event for the application or the producers' handles.
     pub fn poll_event(&mut self) -> Option<Event> {
         self.events.pop_front()
+    }
+
+    /// Moves every waiting event to the end of `into`, in order: a swap of the queues when
+    /// `into` is empty, so a driver takes a round's events without moving them one by one
+    /// (and the queue it gives back keeps its capacity).
+    pub fn take_events(&mut self, into: &mut VecDeque<Event>) {
+        if into.is_empty() {
+            std::mem::swap(&mut self.events, into);
+        } else {
+            into.append(&mut self.events);
+        }
     }
 
     /// True when events wait.

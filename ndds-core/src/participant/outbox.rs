@@ -171,7 +171,8 @@ impl Dest {
     }
 
     /// Queues one whole sample in a datagram of its own (after any pending batch), to all
-    /// readers or to `only`; the payload follows the head without being copied.
+    /// readers or to `only`; the payload follows the head without being copied (but for a
+    /// small one).
     fn send_sample(
         &mut self,
         tx: &mut Tx<'_>,

@@ -213,7 +213,7 @@ impl ProducerCore {
         now: Instant,
         timestamp_ns: u64,
         max_sample: usize,
-        payload: Arc<Vec<u8>>,
+        payload: &Arc<Vec<u8>>,
     ) -> Result<u64, WriteRefused> {
         let size = payload.len();
         if size > max_sample {
@@ -245,16 +245,16 @@ impl ProducerCore {
             // Recorded before sending, so an acknowledgement racing the send finds it.
             let kept = Kept {
                 meta,
-                bytes: Arc::clone(&payload),
+                bytes: Arc::clone(payload),
             };
             let _ = reliable.writer.write(now, meta.seq, kept, size);
         }
         self.outbox
-            .send(tx, self.entity, meta, &payload, now, self.spec.batching);
+            .send(tx, self.entity, meta, payload, now, self.spec.batching);
         if fragmented || latest {
             self.kept = Some(Kept {
                 meta,
-                bytes: payload,
+                bytes: Arc::clone(payload),
             });
         }
         self.written += 1;

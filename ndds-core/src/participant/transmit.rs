@@ -16,9 +16,14 @@ const LARGE_HEADS: usize = 8;
 const RESERVED_HEADS: usize = 8;
 /// A new head buffer holds at least this much.
 const MIN_HEAD: usize = 2 * 1024;
+/// A payload up to this size is copied after the head instead of sent from its own buffer:
+/// copying it costs less than sharing it (a reference count taken and dropped, a second
+/// piece for the kernel to gather).
+const COPIED_TAIL: usize = 512;
 
 /// One datagram to send: `head` followed by `tail`, which the driver hands to the kernel
-/// together (scatter-gather), so a sample's payload is never copied into the datagram.
+/// together (scatter-gather), so a sample's payload is not copied into the datagram (unless
+/// it is small: see [`COPIED_TAIL`]).
 #[derive(Debug)]
 pub struct Transmit {
     /// Where it goes.
@@ -77,7 +82,8 @@ pub(crate) struct Transmits {
 }
 
 impl Transmits {
-    /// Queues `head ++ tail` for `to` (the head is copied into a spare buffer).
+    /// Queues `head ++ tail` for `to` (the head, and a tail of at most [`COPIED_TAIL`]
+    /// bytes, are copied into a spare buffer; a longer tail is shared).
     pub(crate) fn push(
         &mut self,
         to: SocketAddrV4,
@@ -87,7 +93,12 @@ impl Transmits {
         // The most recently freed spare large enough (a small one would have to grow). A new
         // one is rounded up to a power of two, so heads that grow a little at a time (a batch
         // a few samples longer than any before) do not each need a new buffer.
-        let mut buffer = match self.free.iter().rposition(|b| b.capacity() >= head.len()) {
+        let copied = tail
+            .as_ref()
+            .filter(|(_, range)| range.len() <= COPIED_TAIL)
+            .map_or(0, |(_, range)| range.len());
+        let needed = head.len() + copied;
+        let mut buffer = match self.free.iter().rposition(|b| b.capacity() >= needed) {
             Some(index) => self.free.swap_remove(index),
             None => {
                 if self.free.is_empty() && self.datagrams == 0 {
@@ -97,12 +108,18 @@ impl Transmits {
                     self.free
                         .extend((0..RESERVED_HEADS).map(|_| Vec::with_capacity(MIN_HEAD)));
                 }
-                Vec::with_capacity(head.len().max(MIN_HEAD).next_power_of_two())
+                Vec::with_capacity(needed.max(MIN_HEAD).next_power_of_two())
             }
         };
         buffer.clear();
         buffer.extend_from_slice(head);
-        let tail = tail.map(|(bytes, range)| (Arc::clone(bytes), range));
+        let tail = match tail {
+            Some((bytes, range)) if range.len() <= COPIED_TAIL => {
+                buffer.extend_from_slice(bytes.get(range).unwrap_or_default());
+                None
+            }
+            tail => tail.map(|(bytes, range)| (Arc::clone(bytes), range)),
+        };
         let transmit = Transmit {
             to,
             head: buffer,
@@ -137,5 +154,43 @@ impl Transmits {
             return;
         }
         self.free.push(transmit.head);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn to() -> SocketAddrV4 {
+        SocketAddrV4::new(std::net::Ipv4Addr::LOCALHOST, 7400)
+    }
+
+    #[test]
+    fn a_small_payload_is_copied_after_the_head_and_a_large_one_shared() {
+        let mut transmits = Transmits::default();
+        let small = Arc::new(vec![7u8; COPIED_TAIL]);
+        let large = Arc::new(vec![9u8; COPIED_TAIL + 1]);
+        transmits.push(to(), b"head", Some((&small, 0..small.len())));
+        transmits.push(to(), b"head", Some((&large, 0..large.len())));
+
+        let first = transmits.pop().expect("the small one is queued");
+        assert!(first.tail().is_empty());
+        assert_eq!(first.head().len(), 4 + COPIED_TAIL);
+        assert_eq!(
+            Arc::strong_count(&small),
+            1,
+            "the small payload is not held"
+        );
+
+        let second = transmits.pop().expect("the large one is queued");
+        assert_eq!(second.head(), b"head");
+        assert_eq!(second.tail().len(), COPIED_TAIL + 1);
+        assert_eq!(Arc::strong_count(&large), 2, "the large payload is shared");
+
+        let mut expected = b"head".to_vec();
+        expected.extend_from_slice(&small);
+        assert_eq!(first.to_vec(), expected);
+        assert_eq!(first.len(), expected.len());
+        assert_eq!(second.len(), 5 + COPIED_TAIL);
     }
 }

@@ -521,7 +521,7 @@ impl SimNet {
                 let seq = writer.written() + 1;
                 let size = writer.sizes[(seq as usize - 1) % writer.sizes.len()];
                 let bytes = Arc::new(payload(tag(writer.node, writer.entity), seq, size));
-                match node.core.write(now, timestamp, writer.entity, bytes) {
+                match node.core.write(now, timestamp, writer.entity, &bytes) {
                     Ok(written) => {
                         assert_eq!(written, seq, "the core numbers samples 1, 2, ...");
                         writer.written_at.push(elapsed);
