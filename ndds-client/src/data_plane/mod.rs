@@ -507,7 +507,7 @@ impl DataPlane {
         let mut locked = self.lock();
         let mut started = None;
         loop {
-            match locked.core.write(now, timestamp_ns, entity, &payload) {
+            match locked.core.write(now, timestamp_ns, entity, payload) {
                 Ok(_) => break,
                 Err(WriteRefused::TooLarge { size, max }) => {
                     return Err(WriteError::TooLarge { size, max });
