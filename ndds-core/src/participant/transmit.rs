@@ -23,7 +23,7 @@ const COPIED_TAIL: usize = 512;
 
 /// One datagram to send: `head` followed by `tail`, which the driver hands to the kernel
 /// together (scatter-gather), so a sample's payload is not copied into the datagram (unless
-/// it is small: see [`COPIED_TAIL`]).
+/// it is 512 bytes or less: copying a payload that small costs less than sharing it).
 #[derive(Debug)]
 pub struct Transmit {
     /// Where it goes.
