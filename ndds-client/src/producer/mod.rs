@@ -106,7 +106,7 @@ impl ProducerState {
         let mut pool = lock(&self.writing);
         let payload = pool.fill(encode)?;
         self.plane
-            .write(self.entity, &payload, self.qos.write_timeout)
+            .write(self.entity, payload, self.qos.write_timeout)
     }
 
     /// Hands an encoded sample to the data plane, in order with this producer's other writes.
@@ -150,11 +150,12 @@ impl<T: Serialize> Producer<T> {
     /// the wait ends.
     pub async fn write_async(&self, value: &T) -> Result<(), WriteError> {
         let state = &self.raw.state;
-        let payload = lock(&state.writing).fill(|payload| {
+        // Its own reference: the pool is not held while the task waits.
+        let payload = Arc::clone(lock(&state.writing).fill(|payload| {
             let buffer = std::mem::take(payload);
             *payload = postcard::to_extend(value, buffer)?;
             Ok::<(), WriteError>(())
-        })?;
+        })?);
         loop {
             match state.send(&payload, Duration::ZERO) {
                 Err(WriteError::WouldBlock { .. }) => {
@@ -208,7 +209,7 @@ impl RawProducer {
         let payload = pool.copy(payload);
         state
             .plane
-            .write(state.entity, &payload, state.qos.write_timeout)
+            .write(state.entity, payload, state.qos.write_timeout)
     }
 
     /// Sends every sample waiting in a batch now.

@@ -417,7 +417,9 @@ impl Outbox {
 /// Buffers for samples, reused once nothing holds them any more (the history let go of the
 /// sample and the datagrams carrying it were sent), so a producer allocates nothing per
 /// sample in a steady state. The producer's handle keeps one and encodes into it *before*
-/// handing the sample to the core.
+/// handing the sample to the core. A filled buffer is lent, not handed out: the core takes
+/// its own reference only where it keeps the sample, so a write whose sample is copied into
+/// a batch or a datagram costs no reference count at all.
 #[derive(Debug, Default)]
 pub struct BufferPool {
     buffers: Vec<Arc<Vec<u8>>>,
@@ -427,6 +429,8 @@ pub struct BufferPool {
     /// The largest sample kept so far: a new buffer starts with this capacity, so filling it
     /// does not grow it again.
     largest: usize,
+    /// A buffer made when every kept one was busy and the pool was full: lent from here.
+    extra: Option<Arc<Vec<u8>>>,
 }
 
 impl BufferPool {
@@ -437,11 +441,12 @@ impl BufferPool {
             buffers: Vec::with_capacity(capacity.clamp(2, 4096)),
             next: 0,
             largest: 0,
+            extra: None,
         }
     }
 
     /// A buffer holding a copy of `payload`.
-    pub fn copy(&mut self, payload: &[u8]) -> Arc<Vec<u8>> {
+    pub fn copy(&mut self, payload: &[u8]) -> &Arc<Vec<u8>> {
         let filled = self.fill(|buffer| {
             buffer.extend_from_slice(payload);
             Ok::<(), std::convert::Infallible>(())
@@ -452,11 +457,12 @@ impl BufferPool {
         }
     }
 
-    /// A buffer filled by `fill` (given it empty), such as a sample encoded straight into it.
+    /// A buffer filled by `fill` (given it empty), such as a sample encoded straight into it;
+    /// clone the `Arc` to keep it beyond the next call.
     pub fn fill<E>(
         &mut self,
         fill: impl FnOnce(&mut Vec<u8>) -> Result<(), E>,
-    ) -> Result<Arc<Vec<u8>>, E> {
+    ) -> Result<&Arc<Vec<u8>>, E> {
         let len = self.buffers.len();
         for step in 0..len {
             let index = (self.next + step) % len;
@@ -465,7 +471,7 @@ impl BufferPool {
                 fill(buffer)?;
                 self.largest = self.largest.max(buffer.len());
                 self.next = (index + 1) % len;
-                return Ok(self.buffers[index].clone());
+                return Ok(&self.buffers[index]);
             }
         }
         let mut buffer = Vec::with_capacity(self.largest);
@@ -473,8 +479,9 @@ impl BufferPool {
         self.largest = self.largest.max(buffer.len());
         let buffer = Arc::new(buffer);
         if self.buffers.len() < self.buffers.capacity() {
-            self.buffers.push(buffer.clone());
+            self.buffers.push(buffer);
+            return Ok(&self.buffers[len]);
         }
-        Ok(buffer)
+        Ok(self.extra.insert(buffer))
     }
 }
