@@ -9,7 +9,8 @@
 //! before it is taken and sent after it is released, samples are encoded before (by the
 //! producer's handle, into a pooled buffer), and no user code ever runs under it. An
 //! application thread that writes sends its own datagrams, so a write costs no thread
-//! switch; when a command moves the core's next timer earlier than the I/O thread's wake-up,
+//! switch (unless another thread is sending at that moment: that one sends them next, so
+//! that datagrams leave in the core's order; see `Outgoing`); when a command moves the core's next timer earlier than the I/O thread's wake-up,
 //! or leaves events for it, the I/O thread is woken by an empty datagram to its own socket.
 //! The thread waits in a blocking receive while its next timer is far (one system call per
 //! datagram, as a plain UDP receiver), in `ppoll` while it is near.
@@ -180,6 +181,21 @@ pub(crate) struct DataPlane {
     /// Datagrams sent, and datagrams the operating system refused.
     sent: AtomicU64,
     send_errors: AtomicU64,
+    /// Datagrams taken from the core and not sent yet.
+    outgoing: Mutex<Outgoing>,
+}
+
+/// Datagrams taken from the core, in its order, waiting to be sent. Any thread that released
+/// the core may have queued some; the first of them to find nobody sending sends them all,
+/// also those the others queue meanwhile, while they go on. So datagrams leave in the order
+/// the core made them (a best-effort consumer drops a sample that overtook a later one as old
+/// data, and a reliable one asks again for what seems missing), no thread waits for another's
+/// system calls, and the core is never held across one.
+#[derive(Debug)]
+struct Outgoing {
+    queue: VecDeque<Transmit>,
+    /// A thread is sending from the queue.
+    sending: bool,
 }
 
 /// The data socket's receive timeout, set only when the I/O thread's wait needs another
@@ -258,6 +274,11 @@ impl DataPlane {
             wall: WallClock::new(),
             sent: AtomicU64::new(0),
             send_errors: AtomicU64::new(0),
+            outgoing: Mutex::new(Outgoing {
+                // Room for a burst, so a steady state does not grow it.
+                queue: VecDeque::with_capacity(256),
+                sending: false,
+            }),
         })
     }
 
@@ -292,7 +313,7 @@ impl DataPlane {
 
     /// Releases the core after a command: wakes the I/O thread if the command left it work
     /// (events, or a timer earlier than its wake-up), then sends the datagrams the command
-    /// produced, outside the lock.
+    /// produced, outside the lock and in the core's order (see [`Outgoing`]).
     fn release(&self, mut locked: MutexGuard<'_, Locked>) -> Sent {
         let core = &mut locked.core;
         let wake = core.has_events()
@@ -307,6 +328,31 @@ impl DataPlane {
                 locked.io_wakes_at = Some(Instant::now());
             }
         }
+        // Queued while the core is held, so the queue holds them in the core's order.
+        let sender = {
+            let mut outgoing = lock(&self.outgoing);
+            while let Some(transmit) = locked.core.poll_transmit() {
+                outgoing.queue.push_back(transmit);
+            }
+            let idle = !outgoing.sending && !outgoing.queue.is_empty();
+            outgoing.sending |= idle;
+            idle
+        };
+        drop(locked);
+        if wake && !on_io_thread() {
+            self.wake_io();
+        }
+        if sender {
+            self.send_outgoing()
+        } else {
+            Sent::default()
+        }
+    }
+
+    /// Sends what is queued in [`DataPlane::outgoing`] until it is empty; called by the one
+    /// thread that set its `sending`.
+    fn send_outgoing(&self) -> Sent {
+        let mut result = Sent::default();
         let mut local = Vec::new();
         SENT.with(|sent| {
             let mut borrowed = sent.try_borrow_mut().ok();
@@ -325,29 +371,31 @@ impl DataPlane {
                 // buffers are simply freed.
                 None => &mut local,
             };
-            let first = sent.len();
-            while let Some(transmit) = locked.core.poll_transmit() {
-                sent.push(transmit);
-            }
-            drop(locked);
-            if wake && !on_io_thread() {
-                self.wake_io();
-            }
-            let mut result = Sent::default();
-            for transmit in &mut sent[first..] {
-                match socket::send(&self.socket, transmit) {
-                    Ok(()) => result.ok += 1,
-                    Err(err) => {
-                        tracing::debug!(to = %transmit.to, %err, "data send failed");
-                        result.failed += 1;
-                        result.last_error = Some(err);
+            loop {
+                let first = sent.len();
+                {
+                    let mut outgoing = lock(&self.outgoing);
+                    if outgoing.queue.is_empty() {
+                        outgoing.sending = false;
+                        break;
                     }
+                    sent.extend(outgoing.queue.drain(..));
                 }
-                // The payload goes back to its producer's pool now, not at the next lock.
-                transmit.release_tail();
+                for transmit in &mut sent[first..] {
+                    match socket::send(&self.socket, transmit) {
+                        Ok(()) => result.ok += 1,
+                        Err(err) => {
+                            tracing::debug!(to = %transmit.to, %err, "data send failed");
+                            result.failed += 1;
+                            result.last_error = Some(err);
+                        }
+                    }
+                    // The payload goes back to its producer's pool now, not at the next lock.
+                    transmit.release_tail();
+                }
             }
-            result
-        })
+        });
+        result
     }
 
     /// Runs `command` on the core, then [`DataPlane::release`].
@@ -554,7 +602,8 @@ impl DataPlane {
         self.count(&sent);
         match sent.last_error {
             // Only when no destination got it (as one unreachable consumer must not fail
-            // the write for the others).
+            // the write for the others). A write whose datagrams another thread sent learns
+            // of no error; the participant's `send_errors` counts it.
             Some(err) if sent.ok == 0 => Err(WriteError::Io(err)),
             _ => Ok(()),
         }
