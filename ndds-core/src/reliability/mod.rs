@@ -110,6 +110,7 @@
 //! [`FLAG_RELIABLE`]: crate::wire::data::FLAG_RELIABLE
 
 mod bitmap;
+mod held;
 mod history;
 mod ranges;
 pub mod reader;

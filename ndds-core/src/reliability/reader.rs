@@ -16,6 +16,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use super::bitmap::{Bitmap, MAX_BITS};
+use super::held::Held;
 use super::ranges::RangeSet;
 use super::rtt::RttEstimate;
 
@@ -140,8 +141,10 @@ pub struct ReliableReader<S> {
     synced: bool,
     /// Next seq to hand out: everything below was handed out or reported lost.
     base: u64,
-    /// Samples received and not handed out.
-    buf: BTreeMap<u64, S>,
+    /// Samples received and not handed out (once synced).
+    buf: Held<S>,
+    /// Samples received before the first heartbeat (see [`ReliableReader::hold_unsynced`]).
+    unsynced: BTreeMap<u64, S>,
     /// Seqs the writer said will never come (at or above `base`).
     lost: RangeSet,
     /// Highest seq known to exist (from samples and heartbeats).
@@ -183,7 +186,8 @@ impl<S> ReliableReader<S> {
             },
             synced: false,
             base: 0,
-            buf: BTreeMap::new(),
+            buf: Held::default(),
+            unsynced: BTreeMap::new(),
             lost: RangeSet::default(),
             known_last: 0,
             highest: 0,
@@ -228,7 +232,7 @@ impl<S> ReliableReader<S> {
 
     /// Samples held.
     pub fn buffered(&self) -> usize {
-        self.buf.len()
+        self.buf.len() + self.unsynced.len()
     }
 
     /// A sample (original or resend) with sequence number `seq`.
@@ -239,7 +243,7 @@ impl<S> ReliableReader<S> {
             return;
         }
         let front = self.front();
-        if seq < front || self.buf.contains_key(&seq) {
+        if seq < front || self.buf.contains(seq) {
             self.stats.duplicates += 1;
             if let Some(rtt) = self.repeats.remove(&seq) {
                 self.stats.early_retries += 1;
@@ -275,7 +279,7 @@ impl<S> ReliableReader<S> {
             return;
         }
         let front = self.front();
-        if seq < front || self.buf.contains_key(&seq) || seq - front >= self.config.depth as u64 {
+        if seq < front || self.buf.contains(seq) || seq - front >= self.config.depth as u64 {
             return;
         }
         let opens_hole = seq > self.highest.saturating_add(1).max(front);
@@ -387,14 +391,14 @@ impl<S> ReliableReader<S> {
     /// reported once the sample after it is here (or a heartbeat said the writer has nothing
     /// for us from the end of the range on), so that one report covers it.
     pub fn poll_deliver(&mut self) -> Option<Delivery<S>> {
-        if let Some(sample) = self.buf.remove(&self.base) {
+        if let Some(sample) = self.buf.take_first(self.base) {
             let seq = self.base;
             self.stats.delivered += 1;
             self.advance(seq.saturating_add(1));
             return Some(Delivery::Sample { seq, sample });
         }
         let front = self.front();
-        let complete = self.buf.contains_key(&front) || self.drained_at == Some(front);
+        let complete = self.buf.contains(front) || self.drained_at == Some(front);
         if front > self.base && complete {
             let from = self.base;
             self.stats.lost = self.stats.lost.saturating_add(front - from);
@@ -427,8 +431,9 @@ impl<S> ReliableReader<S> {
         let Some((_, end)) = self.lost.containing(self.base) else {
             return self.base;
         };
-        match self.buf.range(self.base..).next() {
-            Some((&held, _)) => held.min(end),
+        // Every held sample is at or above `base`.
+        match self.buf.first() {
+            Some(held) => held.min(end),
             None => end,
         }
     }
@@ -436,6 +441,9 @@ impl<S> ReliableReader<S> {
     /// Moves `base` forward and forgets what lies below it.
     fn advance(&mut self, base: u64) {
         self.base = base;
+        // Nothing is held below `base` (samples are admitted at or above `front`); kept so
+        // by construction rather than by that argument alone.
+        self.buf.drop_below(base);
         self.lost.remove_below(base);
         self.asked = self.asked.split_off(&base);
         self.partial = self.partial.split_off(&base);
@@ -485,7 +493,7 @@ impl<S> ReliableReader<S> {
 
     /// Neither held nor known lost (the caller bounds `seq` to the window).
     fn is_missing(&self, seq: u64) -> bool {
-        !self.buf.contains_key(&seq) && !self.lost.contains(seq) && !self.partial.contains_key(&seq)
+        !self.buf.contains(seq) && !self.lost.contains(seq) && !self.partial.contains_key(&seq)
     }
 
     /// Queues an AckNack, noting when its missing seqs were asked for.
@@ -525,11 +533,12 @@ impl<S> ReliableReader<S> {
     fn rearm(&mut self) {
         let front = self.front();
         self.asked = self.asked.split_off(&front);
+        let retry = self.retry();
         self.nack_due = self
             .asked
             .iter()
             .filter(|&(&seq, _)| self.is_missing(seq))
-            .filter_map(|(_, ask)| ask.at.checked_add(self.retry()))
+            .filter_map(|(_, ask)| ask.at.checked_add(retry))
             .min();
     }
 
@@ -559,19 +568,7 @@ impl<S> ReliableReader<S> {
 
     /// Number of consecutive samples held from `base` on: received, not yet handed out.
     fn held(&self) -> u64 {
-        let mut next = self.base;
-        let mut held = 0;
-        for &seq in self.buf.range(self.base..).map(|(seq, _)| seq) {
-            if seq != next {
-                break;
-            }
-            held += 1;
-            match next.checked_add(1) {
-                Some(n) => next = n,
-                None => break,
-            }
-        }
-        held
+        self.buf.run_from(self.base)
     }
 
     /// A stream this reader followed before, up to `next` (its writer was lost, and is
@@ -586,14 +583,14 @@ impl<S> ReliableReader<S> {
 
     /// Before the first heartbeat: keep the lowest `depth` samples, hand out nothing.
     fn hold_unsynced(&mut self, seq: u64, sample: S) {
-        if self.buf.contains_key(&seq) {
+        if self.unsynced.contains_key(&seq) {
             self.stats.duplicates += 1;
             return;
         }
-        if self.buf.len() >= self.config.depth {
-            match self.buf.last_key_value() {
+        if self.unsynced.len() >= self.config.depth {
+            match self.unsynced.last_key_value() {
                 Some((&top, _)) if top > seq => {
-                    self.buf.pop_last();
+                    self.unsynced.pop_last();
                 }
                 _ => {
                     self.stats.out_of_window += 1;
@@ -603,17 +600,20 @@ impl<S> ReliableReader<S> {
             self.stats.out_of_window += 1;
         }
         self.highest = self.highest.max(seq);
-        self.buf.insert(seq, sample);
+        self.unsynced.insert(seq, sample);
     }
 
     /// The first heartbeat: the stream starts at `first`.
     fn sync(&mut self, first: u64) {
         self.synced = true;
         self.base = first;
-        self.buf = self.buf.split_off(&first);
+        let mut kept = std::mem::take(&mut self.unsynced).split_off(&first);
         let end = first.saturating_add(self.config.depth as u64);
-        let beyond = self.buf.split_off(&end);
+        let beyond = kept.split_off(&end);
         self.stats.out_of_window += beyond.len() as u64;
+        for (seq, sample) in kept {
+            self.buf.insert(seq, sample);
+        }
         self.highest = self.highest.max(first.saturating_sub(1));
         self.known_last = self.highest;
     }
