@@ -376,25 +376,31 @@ The reliable-under-10 %-loss goal is in its own section below (it needs two host
 
 ## What bounds the goals not met
 
-Written from the runs above and from a sitting that ran this script for the build before
-issue 15's data-plane rewrite (b4d6c55) and after it, alternately; the figures move from run
-to run (on this virtual machine by more than the differences between builds), the reasons
-do not.
+Written from the runs above and from sittings of \`scripts/bench-ab.sh\` that ran the build
+before issue 15's data-plane rewrite (b4d6c55) beside later ones; the figures move from run
+to run (on these virtual machines by more than most differences between builds), the reasons
+do not. Which goals a run meets also depends on the machine: the sitting of 2026-12-03
+measured raw UDP round trips of 4.3 µs on one CPU, the one of 2026-12-04 13.1 µs (system
+calls three times dearer), which makes the same user-space cost per sample a smaller share.
 
-- **Round trips with both processes on one CPU**: on one CPU every microsecond either
-  process spends adds to the round trip, and raw UDP spends almost nothing besides two
-  system calls. A reliable ping-pong sends no extra acknowledgement datagram per sample
-  (AckNacks are coalesced per burst of received datagrams, and \`strace\` of a reliable
-  \`perf ping\` shows about one \`sendmsg\` per datagram received): the difference to raw UDP
-  is user-space work on both sides (encoding, admission, the reader's ordering and the
-  history entry, the hand-over to the application), about a third of the CPU in a profile.
-  Across CPUs the goal is met. What would move it: fewer steps per sample between the
-  socket and the callback (the event queue and the dispatch map), and one lock per write.
-- **64 B, 12 x raw unbatched UDP on one CPU**: publisher and subscriber share one CPU, so the
-  rate is bounded by their summed cost per sample: serializing into a pooled buffer, the
-  source timestamp, appending to the batch; then parsing, admission and arbitration, an
-  event per sample and its hand-over to the consumer. Reliable batches pay more per sample
-  (history entry, ordering).
+- **Round trips with both processes on one CPU** (met on 2026-12-04 at 1.15-1.26, not on
+  2026-12-03 at 1.40-1.64): on one CPU every microsecond either process spends adds to the
+  round trip, and raw UDP spends almost nothing besides two system calls. A reliable
+  ping-pong sends no extra acknowledgement datagram per sample (AckNacks are coalesced per
+  burst of received datagrams): the difference to raw UDP is user-space work on both sides
+  (encoding, admission, the reader's ordering and the history entry, the hand-over to the
+  application), about 2 µs per round trip. What would move it: fewer steps per sample
+  between the socket and the callback (the event queue and the dispatch map).
+- **Round trips across CPUs**: two wake-ups of the other CPU (about 30 µs each here) make
+  almost all of it, and they vary by more than the goals' margins from run to run (raw UDP
+  8 KiB measured below raw UDP 64 B in the 2026-12-04 run; reliable 8 KiB was 1.14 x raw UDP
+  on 2026-12-03 and 1.36 x on 2026-12-04). Against ddsperf ndds is within 0.95-1.09 x in every
+  sitting.
+- **64 B reliable, 12 x raw unbatched UDP on one CPU** (best effort meets it): publisher and
+  subscriber share one CPU, so the rate is bounded by their summed cost per sample:
+  serializing into a pooled buffer, the source timestamp, appending to the batch and, for
+  reliable, the history entry; then parsing, admission and arbitration, the reader's
+  ordering, an event per sample and its hand-over to the consumer.
 - **8 KiB without batching, 0.8 x raw UDP**: one datagram per sample as raw UDP, plus the
   encoding copy and the per-sample work above (0.65-0.85 x from run to run). Reliable 8 KiB
   without batching also keeps up to 1024 samples (8 MiB) in flight, more than the receiver's

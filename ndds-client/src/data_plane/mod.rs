@@ -328,30 +328,6 @@ impl DataPlane {
                 locked.io_wakes_at = Some(Instant::now());
             }
         }
-        // Queued while the core is held, so the queue holds them in the core's order.
-        let sender = {
-            let mut outgoing = lock(&self.outgoing);
-            while let Some(transmit) = locked.core.poll_transmit() {
-                outgoing.queue.push_back(transmit);
-            }
-            let idle = !outgoing.sending && !outgoing.queue.is_empty();
-            outgoing.sending |= idle;
-            idle
-        };
-        drop(locked);
-        if wake && !on_io_thread() {
-            self.wake_io();
-        }
-        if sender {
-            self.send_outgoing()
-        } else {
-            Sent::default()
-        }
-    }
-
-    /// Sends what is queued in [`DataPlane::outgoing`] until it is empty; called by the one
-    /// thread that set its `sending`.
-    fn send_outgoing(&self) -> Sent {
         let mut result = Sent::default();
         let mut local = Vec::new();
         SENT.with(|sent| {
@@ -371,31 +347,60 @@ impl DataPlane {
                 // buffers are simply freed.
                 None => &mut local,
             };
-            loop {
-                let first = sent.len();
-                {
-                    let mut outgoing = lock(&self.outgoing);
-                    if outgoing.queue.is_empty() {
-                        outgoing.sending = false;
-                        break;
+            // Taken while the core is held, so they follow everything taken before them.
+            // With nobody sending (the queue is then empty), this thread sends them itself,
+            // straight from its list; otherwise they join the queue for the thread that is.
+            let first = sent.len();
+            let sender = {
+                let mut outgoing = lock(&self.outgoing);
+                if outgoing.sending {
+                    while let Some(transmit) = locked.core.poll_transmit() {
+                        outgoing.queue.push_back(transmit);
                     }
-                    sent.extend(outgoing.queue.drain(..));
-                }
-                for transmit in &mut sent[first..] {
-                    match socket::send(&self.socket, transmit) {
-                        Ok(()) => result.ok += 1,
-                        Err(err) => {
-                            tracing::debug!(to = %transmit.to, %err, "data send failed");
-                            result.failed += 1;
-                            result.last_error = Some(err);
-                        }
+                    false
+                } else {
+                    while let Some(transmit) = locked.core.poll_transmit() {
+                        sent.push(transmit);
                     }
-                    // The payload goes back to its producer's pool now, not at the next lock.
-                    transmit.release_tail();
+                    outgoing.sending = sent.len() > first;
+                    outgoing.sending
                 }
+            };
+            drop(locked);
+            if wake && !on_io_thread() {
+                self.wake_io();
+            }
+            if sender {
+                self.send_outgoing(sent, first, &mut result);
             }
         });
         result
+    }
+
+    /// Sends `sent[first..]`, then what the other threads queued in [`DataPlane::outgoing`]
+    /// meanwhile, until it is empty; called by the one thread that set its `sending`.
+    fn send_outgoing(&self, sent: &mut Vec<Transmit>, mut first: usize, result: &mut Sent) {
+        loop {
+            for transmit in &mut sent[first..] {
+                match socket::send(&self.socket, transmit) {
+                    Ok(()) => result.ok += 1,
+                    Err(err) => {
+                        tracing::debug!(to = %transmit.to, %err, "data send failed");
+                        result.failed += 1;
+                        result.last_error = Some(err);
+                    }
+                }
+                // The payload goes back to its producer's pool now, not at the next lock.
+                transmit.release_tail();
+            }
+            first = sent.len();
+            let mut outgoing = lock(&self.outgoing);
+            if outgoing.queue.is_empty() {
+                outgoing.sending = false;
+                return;
+            }
+            sent.extend(outgoing.queue.drain(..));
+        }
     }
 
     /// Runs `command` on the core, then [`DataPlane::release`].
