@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use common::{eventually, participant, sibling, unique_config};
 use ndds_client::{
-    Batching, ConsumerQos, EmbeddedPolicy, Event, Notification, Participant, ProducerQos,
-    RecvError, TypeDescription,
+    Batching, Consumer, ConsumerQos, DaemonConfig, EmbeddedPolicy, Event, Notification,
+    Participant, Producer, ProducerQos, RecvError, TypeDescription,
 };
 use serde::{Deserialize, Serialize};
 
@@ -420,21 +420,8 @@ fn samples_written_from_two_threads_leave_in_the_order_they_were_written() {
     // this was seen.)
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
-    let (writer_side, reader_side) = (participant(&config), participant(&config));
-    let consumer = reader_side
-        .consumer::<u64>(
-            "order/two-threads",
-            ConsumerQos {
-                depth: 1 << 16,
-                ..ConsumerQos::default()
-            },
-        )
-        .unwrap();
-    let producer = writer_side
-        .producer::<u64>("order/two-threads", ProducerQos::default())
-        .unwrap();
-    assert!(producer.wait_for_consumers(1, WAIT));
-    assert!(consumer.wait_for_producers(1, WAIT));
+    let (_writer_side, _reader_side, producer, consumer) =
+        ordered_pair(&config, "order/two-threads", ProducerQos::default());
     const PER_THREAD: u64 = 50_000;
     std::thread::scope(|scope| {
         for thread in 0..2 {
@@ -449,16 +436,7 @@ fn samples_written_from_two_threads_leave_in_the_order_they_were_written() {
             });
         }
     });
-    // Loopback may drop datagrams when the socket's buffer is full; it does not reorder.
-    // Waits until nothing more arrives.
-    let received = || consumer.stats().received;
-    let mut last = received();
-    while eventually(Duration::from_millis(300), || received() != last) {
-        last = received();
-    }
-    let stats = consumer.stats();
-    assert!(stats.received > 0, "{stats:?}");
-    assert_eq!(stats.old_data, 0, "samples overtaken on the way: {stats:?}");
+    assert_none_overtaken(&consumer);
 }
 
 #[test]
@@ -473,33 +451,47 @@ fn batches_flushed_by_the_io_thread_and_by_the_writer_leave_in_order() {
     pin_to_first_cpu(); // before the participants: their threads inherit it
     let dir = tempfile::tempdir().unwrap();
     let config = unique_config(dir.path(), "a");
-    let (writer_side, reader_side) = (participant(&config), participant(&config));
+    let batched = ProducerQos {
+        batching: Batching::On {
+            max_delay: Duration::from_micros(50),
+            max_bytes: 4096,
+        },
+        ..ProducerQos::default()
+    };
+    let (_writer_side, _reader_side, producer, consumer) =
+        ordered_pair(&config, "order/batches", batched);
+    for i in 0..300_000u64 {
+        producer.write(&i).unwrap();
+    }
+    assert_none_overtaken(&consumer);
+}
+
+/// A producer and a best-effort consumer of `topic` (deep enough to hold every sample), in
+/// two participants, matched both ways.
+fn ordered_pair(
+    config: &DaemonConfig,
+    topic: &str,
+    qos: ProducerQos,
+) -> (Participant, Participant, Producer<u64>, Consumer<u64>) {
+    let (writer_side, reader_side) = (participant(config), participant(config));
     let consumer = reader_side
         .consumer::<u64>(
-            "order/batches",
+            topic,
             ConsumerQos {
                 depth: 1 << 16,
                 ..ConsumerQos::default()
             },
         )
         .unwrap();
-    let producer = writer_side
-        .producer::<u64>(
-            "order/batches",
-            ProducerQos {
-                batching: Batching::On {
-                    max_delay: Duration::from_micros(50),
-                    max_bytes: 4096,
-                },
-                ..ProducerQos::default()
-            },
-        )
-        .unwrap();
+    let producer = writer_side.producer::<u64>(topic, qos).unwrap();
     assert!(producer.wait_for_consumers(1, WAIT));
     assert!(consumer.wait_for_producers(1, WAIT));
-    for i in 0..300_000u64 {
-        producer.write(&i).unwrap();
-    }
+    (writer_side, reader_side, producer, consumer)
+}
+
+/// Waits until nothing more arrives (loopback may drop datagrams when the socket's buffer is
+/// full; it does not reorder), then checks that none was judged old data.
+fn assert_none_overtaken(consumer: &Consumer<u64>) {
     let received = || consumer.stats().received;
     let mut last = received();
     while eventually(Duration::from_millis(300), || received() != last) {
