@@ -36,6 +36,7 @@ pub mod ipc;
 pub mod participant;
 pub mod ports;
 pub mod reliability;
+pub mod seal;
 pub mod suggest;
 pub mod types;
 pub mod wire;

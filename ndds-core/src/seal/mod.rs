@@ -1,0 +1,183 @@
+//! Sealed domains: every datagram of a domain that has a key is authenticated (and, by
+//! default, encrypted) with ChaCha20-Poly1305 before anything parses it.
+//!
+//! A sealed datagram keeps the fixed header in clear (receivers still sort by magic, version,
+//! kind and domain before any cryptography), with the top bit of the kind byte set, and puts a
+//! 20-byte seal head between the header and the body:
+//!
+//! ```text
+//!  0               4       5       6               8                              16
+//!  +---------------+-------+-------+---------------+-------------------------------+
+//!  | magic "NDDS"  |version|S|C|knd| domain (u16le)|       sender id (u64le)       |
+//!  +---------------+-------+-------+---------------+-------------------------------+
+//!  16              20                              28                              36
+//!  +---------------+-------------------------------+-------------------------------+
+//!  | epoch (u32le) |       session (u64le)         |       counter (u64le)         |
+//!  +---------------+-------------------------------+-------------------------------+
+//!  36
+//!  +-----------------------------------------------------------+-------------------+
+//!  | body: encrypted, or in clear when C is set                |   tag (16 bytes)  |
+//!  +-----------------------------------------------------------+-------------------+
+//! ```
+//!
+//! - `S` (0x80 of the kind byte): sealed. `C` (0x40): integrity only — the body is in clear
+//!   and the tag authenticates it with everything before it, for hosts that must stay
+//!   inspectable. The low six bits are the message kind.
+//! - The key: HKDF-SHA256 of the domain key of `epoch` (salt `ndds-seal-v1`), expanded with
+//!   the domain, epoch, sender id and session, so every sender has keys of its own and a key
+//!   is never shared by two processes.
+//! - `session`: chosen by the sender when it starts (the driver gives its start time in
+//!   microseconds, so a restarted sender's sessions grow); `counter` counts the sender's
+//!   datagrams in the session and is the nonce (8 bytes little-endian, then 4 zero bytes).
+//!   A sender never reuses a counter: it stops sealing before the counter would wrap.
+//! - Associated data: the 36 bytes of header and seal head (and, integrity only, the body).
+//!
+//! A receiver ([`Opener`]) drops, before parsing the body and counted by [`OpenError`], a
+//! datagram that is not sealed, too short, of an epoch it does not accept, whose tag does not
+//! verify, whose counter it has already accepted or that is too old for its replay window
+//! ([`REPLAY_WINDOW`] counters), or of a session older than the newest one it accepted from
+//! that sender. State is kept per sender only once a tag verified, so forged traffic costs a
+//! receiver no memory; the number of senders remembered is bounded ([`MAX_SENDERS`]).
+//!
+//! ChaCha20-Poly1305 rather than AES-GCM: it is constant-time in software on every processor
+//! a robot may carry (AES-GCM is fast and safe only with AES and carry-less multiply
+//! instructions, which many ARM boards lack), and its 96-bit nonce takes our per-sender
+//! counter directly.
+
+mod keyring;
+mod opener;
+mod sealer;
+mod window;
+
+pub use keyring::{DomainKey, KeyFileError, Keyring};
+pub use opener::{OpenStats, Opened, Opener, SESSION_IDLE};
+pub use sealer::{SealError, Sealer};
+pub use window::REPLAY_WINDOW;
+
+use crate::wire::HEADER_LEN;
+
+/// The kind byte's flag of a sealed datagram.
+pub const SEALED: u8 = 0x80;
+/// The kind byte's flag of an integrity-only sealed datagram (body in clear).
+pub const CLEAR: u8 = 0x40;
+/// Bytes of the seal head (epoch, session, counter).
+pub const SEAL_HEAD_LEN: usize = 20;
+/// Bytes of the tag at the end.
+pub const TAG_LEN: usize = 16;
+/// What sealing adds to a datagram.
+pub const OVERHEAD: usize = SEAL_HEAD_LEN + TAG_LEN;
+/// Senders whose replay state a receiver keeps at most (the least recently heard goes first).
+pub const MAX_SENDERS: usize = 4096;
+
+/// Where the kind byte sits in the fixed header.
+const KIND_BYTE: usize = 5;
+/// Header and seal head: the associated data of an encrypted datagram.
+const SEALED_HEAD: usize = HEADER_LEN + SEAL_HEAD_LEN;
+
+/// How a domain's datagrams are sealed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SealMode {
+    /// Authenticated and encrypted.
+    #[default]
+    Encrypt,
+    /// Authenticated only: bodies stay readable on the wire.
+    IntegrityOnly,
+}
+
+/// Why a datagram was not opened; every variant is a counter of [`OpenStats`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, thiserror::Error)]
+pub enum OpenError {
+    /// Shorter than header, seal head and tag.
+    #[error("too short to be sealed")]
+    Truncated,
+    /// Not sealed, in a domain that has a key.
+    #[error("not sealed (a sender without the domain key?)")]
+    NotSealed,
+    /// Integrity only, where this receiver requires encryption.
+    #[error("integrity-only datagram where encryption is required")]
+    ClearRefused,
+    /// Sealed with a key epoch this receiver does not hold or no longer accepts.
+    #[error("unknown or retired key epoch")]
+    UnknownEpoch,
+    /// The tag did not verify: forged, corrupted, or sealed with another key.
+    #[error("authentication failed")]
+    BadTag,
+    /// A counter already accepted, or too old for the replay window.
+    #[error("replayed or too old")]
+    Replayed,
+    /// From a session older than the newest one accepted from that sender.
+    #[error("stale session")]
+    StaleSession,
+}
+
+impl OpenError {
+    /// Every reason, for counter tables.
+    pub const ALL: [OpenError; 7] = [
+        OpenError::Truncated,
+        OpenError::NotSealed,
+        OpenError::ClearRefused,
+        OpenError::UnknownEpoch,
+        OpenError::BadTag,
+        OpenError::Replayed,
+        OpenError::StaleSession,
+    ];
+
+    /// Its index in [`OpenError::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its name in counters and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            OpenError::Truncated => "truncated",
+            OpenError::NotSealed => "not_sealed",
+            OpenError::ClearRefused => "clear_refused",
+            OpenError::UnknownEpoch => "unknown_epoch",
+            OpenError::BadTag => "bad_tag",
+            OpenError::Replayed => "replayed",
+            OpenError::StaleSession => "stale_session",
+        }
+    }
+}
+
+/// True if `datagram` carries the sealed flag (a receiver without a key drops it and says
+/// that the domain is sealed).
+pub fn is_sealed(datagram: &[u8]) -> bool {
+    datagram
+        .get(KIND_BYTE)
+        .is_some_and(|kind| kind & SEALED != 0)
+}
+
+/// The per-sender cipher of one session.
+fn derive(
+    key: &DomainKey,
+    domain: u16,
+    epoch: u32,
+    sender: u64,
+    session: u64,
+) -> chacha20poly1305::ChaCha20Poly1305 {
+    use chacha20poly1305::KeyInit;
+    let hkdf = hkdf::Hkdf::<sha2::Sha256>::new(Some(b"ndds-seal-v1"), key.bytes());
+    let mut info = [0u8; 2 + 4 + 8 + 8];
+    info[..2].copy_from_slice(&domain.to_le_bytes());
+    info[2..6].copy_from_slice(&epoch.to_le_bytes());
+    info[6..14].copy_from_slice(&sender.to_le_bytes());
+    info[14..].copy_from_slice(&session.to_le_bytes());
+    let mut okm = [0u8; 32];
+    // 32 bytes is far below HKDF-SHA256's limit of 8160: this cannot fail.
+    let _ = hkdf.expand(&info, &mut okm);
+    let cipher = chacha20poly1305::ChaCha20Poly1305::new(&okm.into());
+    okm.fill(0);
+    cipher
+}
+
+/// The nonce of `counter`.
+fn nonce(counter: u64) -> chacha20poly1305::Nonce {
+    let mut nonce = [0u8; 12];
+    nonce[..8].copy_from_slice(&counter.to_le_bytes());
+    nonce.into()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,229 @@
+//! Opening what arrives: authentication, replay and session checks, before any parsing.
+
+use std::time::{Duration, Instant};
+
+use chacha20poly1305::{AeadInOut, ChaCha20Poly1305, Tag};
+use foldhash::HashMap;
+
+use super::window::ReplayWindow;
+use super::{
+    CLEAR, KIND_BYTE, Keyring, MAX_SENDERS, OpenError, SEAL_HEAD_LEN, SEALED, SEALED_HEAD, TAG_LEN,
+    derive, nonce,
+};
+use crate::wire::HEADER_LEN;
+
+/// A sender's older session is refused while its newest one was heard within this; after it,
+/// an older session may start again (a restarted sender whose clock stepped back).
+pub const SESSION_IDLE: Duration = Duration::from_secs(60);
+
+/// Counters of an [`Opener`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OpenStats {
+    /// Datagrams opened.
+    pub opened: u64,
+    /// Datagrams dropped, by [`OpenError::index`].
+    pub dropped: [u64; OpenError::ALL.len()],
+    /// Senders' states forgotten to make room for another ([`MAX_SENDERS`]).
+    pub evicted: u64,
+}
+
+impl OpenStats {
+    /// The drop count for one reason.
+    pub fn dropped(&self, reason: OpenError) -> u64 {
+        self.dropped[reason.index()]
+    }
+}
+
+/// An opened datagram: the plain datagram (header with the seal flags cleared, then the
+/// body) inside the buffer given to [`Opener::open`].
+pub type Opened<'a> = &'a [u8];
+
+/// What a receiver remembers of one sender under one epoch.
+struct SenderState {
+    session: u64,
+    cipher: ChaCha20Poly1305,
+    window: ReplayWindow,
+    heard: Instant,
+}
+
+/// The receiving side of a sealed domain (see the module documentation).
+pub struct Opener {
+    keyring: Keyring,
+    domain: u16,
+    require_encryption: bool,
+    senders: HashMap<(u64, u32), SenderState>,
+    stats: OpenStats,
+}
+
+impl std::fmt::Debug for Opener {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Opener")
+            .field("domain", &self.domain)
+            .field("epochs", &self.keyring.epochs().collect::<Vec<_>>())
+            .field("require_encryption", &self.require_encryption)
+            .field("senders", &self.senders.len())
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl Opener {
+    /// Opens datagrams of `domain` sealed with any key of `keyring`; integrity-only ones only
+    /// unless `require_encryption`.
+    pub fn new(keyring: Keyring, domain: u16, require_encryption: bool) -> Self {
+        Opener {
+            keyring,
+            domain,
+            require_encryption,
+            senders: HashMap::default(),
+            stats: OpenStats::default(),
+        }
+    }
+
+    /// Takes a new keyring (a rotation step): senders of epochs it no longer holds are
+    /// forgotten, and their datagrams refused from now on.
+    pub fn set_keyring(&mut self, keyring: Keyring) {
+        self.senders
+            .retain(|(_, epoch), _| keyring.key(*epoch).is_some());
+        self.keyring = keyring;
+    }
+
+    /// The keyring in force.
+    pub fn keyring(&self) -> &Keyring {
+        &self.keyring
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> &OpenStats {
+        &self.stats
+    }
+
+    /// Senders whose state is kept.
+    pub fn senders(&self) -> usize {
+        self.senders.len()
+    }
+
+    /// Checks and opens `datagram` in place, returning the plain datagram within it; or
+    /// says, and counts, why not. Never panics, allocates only for a sender whose tag
+    /// verified, and spends no cryptography on replays and stale sessions.
+    pub fn open<'a>(
+        &mut self,
+        now: Instant,
+        datagram: &'a mut [u8],
+    ) -> Result<Opened<'a>, OpenError> {
+        match self.check(now, datagram) {
+            Ok(len) => {
+                self.stats.opened += 1;
+                // The header moves up against the body, its seal flags cleared.
+                datagram.copy_within(..HEADER_LEN, SEAL_HEAD_LEN);
+                datagram[SEAL_HEAD_LEN + KIND_BYTE] &= !(SEALED | CLEAR);
+                Ok(&datagram[SEAL_HEAD_LEN..SEAL_HEAD_LEN + len])
+            }
+            Err(error) => {
+                self.stats.dropped[error.index()] += 1;
+                Err(error)
+            }
+        }
+    }
+
+    /// Verifies and decrypts; the length of the plain datagram.
+    fn check(&mut self, now: Instant, datagram: &mut [u8]) -> Result<usize, OpenError> {
+        if datagram.len() < SEALED_HEAD + TAG_LEN {
+            return Err(
+                if super::is_sealed(datagram) || datagram.len() < HEADER_LEN {
+                    OpenError::Truncated
+                } else {
+                    OpenError::NotSealed
+                },
+            );
+        }
+        let kind = datagram[KIND_BYTE];
+        if kind & SEALED == 0 {
+            return Err(OpenError::NotSealed);
+        }
+        let clear = kind & CLEAR != 0;
+        if clear && self.require_encryption {
+            return Err(OpenError::ClearRefused);
+        }
+        let sender = u64_at(datagram, 8);
+        let epoch = u32::from_le_bytes([datagram[16], datagram[17], datagram[18], datagram[19]]);
+        let session = u64_at(datagram, 20);
+        let counter = u64_at(datagram, 28);
+        let Some(key) = self.keyring.key(epoch) else {
+            return Err(OpenError::UnknownEpoch);
+        };
+        let known = self.senders.get(&(sender, epoch));
+        let same_session = known.is_some_and(|state| state.session == session);
+        if let Some(state) = known {
+            if same_session && !state.window.fresh(counter) {
+                return Err(OpenError::Replayed);
+            }
+            let idle = now.saturating_duration_since(state.heard) >= SESSION_IDLE;
+            if session < state.session && !idle {
+                return Err(OpenError::StaleSession);
+            }
+        }
+        // A new session's cipher is derived (and kept only if its tag verifies).
+        let derived = (!same_session).then(|| derive(key, self.domain, epoch, sender, session));
+        let cipher = match (&derived, self.senders.get(&(sender, epoch))) {
+            (Some(cipher), _) => cipher,
+            (None, Some(state)) => &state.cipher,
+            // Unreachable: same_session implies a state.
+            (None, None) => return Err(OpenError::StaleSession),
+        };
+        let body_end = datagram.len() - TAG_LEN;
+        let (sealed, tag) = datagram.split_at_mut(body_end);
+        let tag = Tag::try_from(&tag[..]).map_err(|_| OpenError::Truncated)?;
+        let nonce = nonce(counter);
+        let verified = if clear {
+            cipher.decrypt_inout_detached(&nonce, sealed, (&mut [][..]).into(), &tag)
+        } else {
+            let (aad, body) = sealed.split_at_mut(SEALED_HEAD);
+            cipher.decrypt_inout_detached(&nonce, aad, body.into(), &tag)
+        };
+        verified.map_err(|_| OpenError::BadTag)?;
+        match derived {
+            None => {
+                if let Some(state) = self.senders.get_mut(&(sender, epoch)) {
+                    state.window.accept(counter);
+                    state.heard = now;
+                }
+            }
+            Some(cipher) => {
+                let mut window = ReplayWindow::new();
+                window.accept(counter);
+                let known = self.senders.contains_key(&(sender, epoch));
+                if !known && self.senders.len() >= MAX_SENDERS {
+                    self.evict_one();
+                }
+                let state = SenderState {
+                    session,
+                    cipher,
+                    window,
+                    heard: now,
+                };
+                self.senders.insert((sender, epoch), state);
+            }
+        }
+        Ok(body_end - SEAL_HEAD_LEN)
+    }
+
+    /// Forgets the sender heard least recently.
+    fn evict_one(&mut self) {
+        let oldest = self
+            .senders
+            .iter()
+            .min_by_key(|(_, state)| state.heard)
+            .map(|(key, _)| *key);
+        if let Some(oldest) = oldest {
+            self.senders.remove(&oldest);
+            self.stats.evicted += 1;
+        }
+    }
+}
+
+fn u64_at(bytes: &[u8], at: usize) -> u64 {
+    let mut word = [0u8; 8];
+    word.copy_from_slice(&bytes[at..at + 8]);
+    u64::from_le_bytes(word)
+}

@@ -1,0 +1,114 @@
+//! Sealing what one sender sends.
+
+use chacha20poly1305::{AeadInOut, ChaCha20Poly1305};
+
+use super::{CLEAR, KIND_BYTE, Keyring, SEALED, SEALED_HEAD, SealMode, derive, nonce};
+use crate::wire::HEADER_LEN;
+
+/// Why a datagram was not sealed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SealError {
+    /// Shorter than the fixed header: not a datagram of ours.
+    #[error("not a datagram (shorter than the header)")]
+    NotADatagram,
+    /// The session's counter is used up (2^64 datagrams): a new session is needed.
+    #[error("the session's counter is used up")]
+    Exhausted,
+}
+
+/// The sealing state of one sender (a daemon or a participant) for one session.
+pub struct Sealer {
+    domain: u16,
+    sender: u64,
+    session: u64,
+    epoch: u32,
+    mode: SealMode,
+    cipher: ChaCha20Poly1305,
+    counter: u64,
+}
+
+impl std::fmt::Debug for Sealer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Sealer")
+            .field("domain", &self.domain)
+            .field("sender", &self.sender)
+            .field("session", &self.session)
+            .field("epoch", &self.epoch)
+            .field("mode", &self.mode)
+            .field("counter", &self.counter)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Sealer {
+    /// Seals as `sender` of `domain` with `keyring`'s sending key. `session` must grow from
+    /// one start of the sender to the next (its start time in microseconds does).
+    pub fn new(keyring: &Keyring, domain: u16, sender: u64, session: u64, mode: SealMode) -> Self {
+        let epoch = keyring.send_epoch();
+        Sealer {
+            domain,
+            sender,
+            session,
+            epoch,
+            mode,
+            cipher: derive(keyring.send_key(), domain, epoch, sender, session),
+            counter: 0,
+        }
+    }
+
+    /// Seals with `keyring`'s sending key from now on (after a rotation).
+    pub fn rekey(&mut self, keyring: &Keyring) {
+        if keyring.send_epoch() != self.epoch {
+            self.epoch = keyring.send_epoch();
+            self.cipher = derive(
+                keyring.send_key(),
+                self.domain,
+                self.epoch,
+                self.sender,
+                self.session,
+            );
+        }
+    }
+
+    /// Datagrams sealed so far in this session.
+    pub fn sealed(&self) -> u64 {
+        self.counter
+    }
+
+    /// Seals `datagram` (a plain one: header and body) in place: the seal head goes after
+    /// the header, the body is encrypted (or left in clear, integrity only), the tag appended.
+    pub fn seal(&mut self, datagram: &mut Vec<u8>) -> Result<(), SealError> {
+        if datagram.len() < HEADER_LEN {
+            return Err(SealError::NotADatagram);
+        }
+        if self.counter == u64::MAX {
+            return Err(SealError::Exhausted);
+        }
+        let counter = self.counter;
+        self.counter += 1;
+        datagram[KIND_BYTE] |= SEALED;
+        if self.mode == SealMode::IntegrityOnly {
+            datagram[KIND_BYTE] |= CLEAR;
+        }
+        let mut head = [0u8; super::SEAL_HEAD_LEN];
+        head[..4].copy_from_slice(&self.epoch.to_le_bytes());
+        head[4..12].copy_from_slice(&self.session.to_le_bytes());
+        head[12..].copy_from_slice(&counter.to_le_bytes());
+        datagram.splice(HEADER_LEN..HEADER_LEN, head);
+        let nonce = nonce(counter);
+        let tag = match self.mode {
+            SealMode::Encrypt => {
+                let (aad, body) = datagram.split_at_mut(SEALED_HEAD);
+                self.cipher.encrypt_inout_detached(&nonce, aad, body.into())
+            }
+            SealMode::IntegrityOnly => {
+                self.cipher
+                    .encrypt_inout_detached(&nonce, datagram, (&mut [][..]).into())
+            }
+        };
+        // Only lengths beyond ChaCha20's 256 GiB per message make this fail.
+        let tag = tag.map_err(|_| SealError::NotADatagram)?;
+        datagram.extend_from_slice(&tag);
+        Ok(())
+    }
+}

@@ -1,0 +1,238 @@
+//! Sealing and opening together: round trips, tampering, replays, sessions, rotation.
+
+use std::time::{Duration, Instant};
+
+use proptest::prelude::*;
+
+use super::*;
+use crate::wire::{Header, MessageKind};
+
+const DOMAIN: u16 = 7;
+
+fn ring(epoch: u32, byte: u8) -> Keyring {
+    Keyring::new(epoch, DomainKey::from_bytes([byte; 32]))
+}
+
+fn plain(sender: u64, body: &[u8]) -> Vec<u8> {
+    let mut datagram = Vec::new();
+    Header {
+        kind: MessageKind::Data,
+        domain: DOMAIN,
+        sender,
+    }
+    .emit(&mut datagram);
+    datagram.extend_from_slice(body);
+    datagram
+}
+
+fn sealed(sealer: &mut Sealer, sender: u64, body: &[u8]) -> Vec<u8> {
+    let mut datagram = plain(sender, body);
+    sealer.seal(&mut datagram).unwrap();
+    datagram
+}
+
+#[test]
+fn a_sealed_datagram_opens_to_the_plain_one_and_hides_its_body() {
+    let t0 = Instant::now();
+    let mut sealer = Sealer::new(&ring(1, 9), DOMAIN, 42, 1000, SealMode::Encrypt);
+    let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+    let body = b"the arm's pose, in clear nowhere on the wire";
+    let mut datagram = sealed(&mut sealer, 42, body);
+    assert_eq!(datagram.len(), HEADER_LEN + body.len() + OVERHEAD);
+    assert!(is_sealed(&datagram));
+    assert!(
+        !datagram.windows(8).any(|w| w == b"the arm'"),
+        "body in clear"
+    );
+    assert_eq!(opener.open(t0, &mut datagram), Ok(&plain(42, body)[..]));
+    assert_eq!(opener.stats().opened, 1);
+}
+
+#[test]
+fn integrity_only_leaves_the_body_readable_and_still_authenticates_it() {
+    let t0 = Instant::now();
+    let mut sealer = Sealer::new(&ring(1, 9), DOMAIN, 42, 1, SealMode::IntegrityOnly);
+    let body = b"readable by tcpdump";
+    let datagram = sealed(&mut sealer, 42, body);
+    assert!(datagram.windows(body.len()).any(|w| w == body));
+    let mut strict = Opener::new(ring(1, 9), DOMAIN, true);
+    assert_eq!(
+        strict.open(t0, &mut datagram.clone()),
+        Err(OpenError::ClearRefused)
+    );
+    let mut lenient = Opener::new(ring(1, 9), DOMAIN, false);
+    let mut changed = datagram.clone();
+    let at = HEADER_LEN + SEAL_HEAD_LEN;
+    changed[at] ^= 1;
+    assert_eq!(lenient.open(t0, &mut changed), Err(OpenError::BadTag));
+    assert_eq!(
+        lenient.open(t0, &mut datagram.clone()),
+        Ok(&plain(42, body)[..])
+    );
+}
+
+#[test]
+fn every_changed_byte_and_every_wrong_key_fails_the_tag() {
+    let t0 = Instant::now();
+    let mut sealer = Sealer::new(&ring(1, 9), DOMAIN, 42, 1, SealMode::Encrypt);
+    let datagram = sealed(&mut sealer, 42, b"0123456789");
+    for at in 0..datagram.len() {
+        if at == 5 {
+            continue; // the kind byte: its flags are judged before the tag
+        }
+        let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+        let mut changed = datagram.clone();
+        changed[at] ^= 0x10;
+        let result = opener.open(t0, &mut changed);
+        assert!(
+            matches!(result, Err(OpenError::BadTag | OpenError::UnknownEpoch)),
+            "byte {at}: {result:?}"
+        );
+    }
+    let mut other_key = Opener::new(ring(1, 8), DOMAIN, true);
+    assert_eq!(
+        other_key.open(t0, &mut datagram.clone()),
+        Err(OpenError::BadTag)
+    );
+    let mut other_domain = Opener::new(ring(1, 9), DOMAIN + 1, true);
+    assert_eq!(
+        other_domain.open(t0, &mut datagram.clone()),
+        Err(OpenError::BadTag)
+    );
+    assert_eq!(other_key.senders(), 0, "no state for what did not verify");
+}
+
+#[test]
+fn a_replayed_datagram_is_refused_and_reordering_is_not() {
+    let t0 = Instant::now();
+    let mut sealer = Sealer::new(&ring(1, 9), DOMAIN, 42, 1, SealMode::Encrypt);
+    let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+    let first = sealed(&mut sealer, 42, b"a");
+    let second = sealed(&mut sealer, 42, b"b");
+    assert!(opener.open(t0, &mut second.clone()).is_ok());
+    assert!(opener.open(t0, &mut first.clone()).is_ok(), "reordered");
+    assert_eq!(
+        opener.open(t0, &mut first.clone()),
+        Err(OpenError::Replayed)
+    );
+    assert_eq!(
+        opener.open(t0, &mut second.clone()),
+        Err(OpenError::Replayed)
+    );
+    assert_eq!(opener.stats().dropped(OpenError::Replayed), 2);
+}
+
+#[test]
+fn an_older_session_is_refused_until_the_newer_one_falls_silent() {
+    let t0 = Instant::now();
+    let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+    let mut old = Sealer::new(&ring(1, 9), DOMAIN, 42, 100, SealMode::Encrypt);
+    let recorded = sealed(&mut old, 42, b"yesterday");
+    // The sender restarts (a later session) and is heard.
+    let mut restarted = Sealer::new(&ring(1, 9), DOMAIN, 42, 200, SealMode::Encrypt);
+    assert!(
+        opener
+            .open(t0, &mut sealed(&mut restarted, 42, b"now"))
+            .is_ok()
+    );
+    assert_eq!(
+        opener.open(t0, &mut recorded.clone()),
+        Err(OpenError::StaleSession)
+    );
+    // Silent for the idle time: an older session may start again (a clock stepped back).
+    let later = t0 + SESSION_IDLE + Duration::from_secs(1);
+    assert!(opener.open(later, &mut recorded.clone()).is_ok());
+}
+
+#[test]
+fn rotation_accepts_both_epochs_during_the_overlap_and_the_new_one_after() {
+    let t0 = Instant::now();
+    let mut old_ring = ring(1, 1);
+    let mut sender = Sealer::new(&old_ring, DOMAIN, 42, 1, SealMode::Encrypt);
+    // Step 1: every host adds the new key.
+    old_ring.add(2, DomainKey::from_bytes([2; 32]));
+    let mut opener = Opener::new(old_ring.clone(), DOMAIN, true);
+    let before = sealed(&mut sender, 42, b"epoch 1");
+    // Step 2: the sender switches.
+    assert!(old_ring.set_send(2));
+    sender.rekey(&old_ring);
+    let after = sealed(&mut sender, 42, b"epoch 2");
+    assert!(opener.open(t0, &mut after.clone()).is_ok());
+    assert!(opener.open(t0, &mut before.clone()).is_ok(), "overlap");
+    // Step 3: the old key is retired.
+    let straggler = before.clone();
+    assert!(old_ring.retire(1));
+    opener.set_keyring(old_ring);
+    assert_eq!(
+        opener.open(t0, &mut straggler.clone()),
+        Err(OpenError::UnknownEpoch)
+    );
+    assert!(
+        opener
+            .open(t0, &mut sealed(&mut sender, 42, b"still"))
+            .is_ok()
+    );
+}
+
+#[test]
+fn plain_and_short_datagrams_are_told_apart() {
+    let t0 = Instant::now();
+    let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+    assert_eq!(
+        opener.open(
+            t0,
+            &mut plain(42, b"no seal at all, but long enough to hold one")
+        ),
+        Err(OpenError::NotSealed)
+    );
+    assert_eq!(
+        opener.open(t0, &mut plain(42, b"short")),
+        Err(OpenError::NotSealed)
+    );
+    let mut cut = plain(42, b"x");
+    cut[5] |= SEALED;
+    assert_eq!(opener.open(t0, &mut cut), Err(OpenError::Truncated));
+    assert_eq!(opener.open(t0, &mut [0u8; 3]), Err(OpenError::Truncated));
+}
+
+#[test]
+fn forged_senders_cost_no_state_and_genuine_ones_are_bounded() {
+    let t0 = Instant::now();
+    let mut opener = Opener::new(ring(1, 9), DOMAIN, true);
+    let mut forger = Sealer::new(&ring(1, 66), DOMAIN, 1, 1, SealMode::Encrypt);
+    for sender in 0..500 {
+        let _ = opener.open(t0, &mut sealed(&mut forger, sender, b"x"));
+    }
+    assert_eq!(opener.senders(), 0);
+    assert_eq!(opener.stats().dropped(OpenError::BadTag), 500);
+    for sender in 0..(MAX_SENDERS as u64 + 10) {
+        let mut genuine = Sealer::new(&ring(1, 9), DOMAIN, sender, 1, SealMode::Encrypt);
+        let at = t0 + Duration::from_micros(sender);
+        assert!(
+            opener
+                .open(at, &mut sealed(&mut genuine, sender, b"x"))
+                .is_ok()
+        );
+    }
+    assert_eq!(opener.senders(), MAX_SENDERS);
+    assert_eq!(opener.stats().evicted, 10);
+}
+
+proptest! {
+    #[test]
+    fn any_body_round_trips(body in proptest::collection::vec(any::<u8>(), 0..2000),
+                            session in any::<u64>(), clear in any::<bool>()) {
+        let mode = if clear { SealMode::IntegrityOnly } else { SealMode::Encrypt };
+        let mut sealer = Sealer::new(&ring(3, 5), DOMAIN, 9, session, mode);
+        let mut opener = Opener::new(ring(3, 5), DOMAIN, false);
+        let mut datagram = sealed(&mut sealer, 9, &body);
+        prop_assert_eq!(opener.open(Instant::now(), &mut datagram), Ok(&plain(9, &body)[..]));
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_open_and_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+        let mut opener = Opener::new(ring(1, 9), DOMAIN, false);
+        prop_assert!(opener.open(Instant::now(), &mut bytes).is_err());
+        prop_assert_eq!(opener.senders(), 0);
+    }
+}
