@@ -49,6 +49,9 @@ use self::repair::{PieceOutcome, Repair};
 use self::transmit::Transmits;
 use crate::admission::{AdmissionStats, Verdict};
 use crate::arbitration::Notification;
+use crate::seal::{
+    self, Keyring, OVERHEAD, OpenError, OpenStats, Opener, SEAL_HEAD_LEN, SealMode, Sealer,
+};
 use crate::wire::data::FLAG_RELIABLE;
 use crate::wire::{
     self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MAX_DATAGRAM,
@@ -147,6 +150,12 @@ pub struct CoreStats {
     pub transmits: u64,
     /// Bytes in those datagrams.
     pub transmit_bytes: u64,
+    /// Sealed datagrams that arrived while this participant holds no domain key.
+    pub sealed_without_key: u64,
+    /// What opening sealed datagrams came to (a domain with a key; see [`crate::seal`]).
+    pub seal: OpenStats,
+    /// Datagrams not sent because they could not be sealed.
+    pub unsealable: u64,
 }
 
 impl CoreStats {
@@ -154,6 +163,20 @@ impl CoreStats {
     pub fn dropped(&self, reason: DropReason) -> u64 {
         self.dropped[reason.index()]
     }
+}
+
+/// How a participant of a domain with a key seals and opens its datagrams.
+#[derive(Clone, Debug)]
+pub struct SealSetup {
+    /// The domain's keys.
+    pub keyring: Keyring,
+    /// Encrypted, or integrity only.
+    pub mode: SealMode,
+    /// This start of the participant: must grow from one start to the next (the driver
+    /// gives its start time in microseconds).
+    pub session: u64,
+    /// Refuse integrity-only datagrams.
+    pub require_encryption: bool,
 }
 
 /// The consumers one datagram addresses.
@@ -173,6 +196,10 @@ pub struct ParticipantCore {
     stats: CoreStats,
     /// Admission counters of endpoints already withdrawn, so totals never go down.
     withdrawn: AdmissionStats,
+    /// Opens what arrives, in a domain with a key.
+    opener: Option<Opener>,
+    /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
+    warned: (bool, bool),
 }
 
 impl ParticipantCore {
@@ -190,6 +217,39 @@ impl ParticipantCore {
             acks_due: Vec::with_capacity(16),
             stats: CoreStats::default(),
             withdrawn: AdmissionStats::default(),
+            opener: None,
+            warned: (false, false),
+        }
+    }
+
+    /// Seals every datagram sent from now on and accepts only sealed ones (a domain with a
+    /// key). Called before any traffic; datagrams shrink by [`crate::seal::OVERHEAD`] so that
+    /// sealed ones still fit `max_datagram`.
+    pub fn seal_with(&mut self, setup: SealSetup) {
+        if self.transmits.sealer.is_none() {
+            self.config.max_datagram = self.config.max_datagram.saturating_sub(OVERHEAD);
+        }
+        self.transmits.sealer = Some(Sealer::new(
+            &setup.keyring,
+            self.config.domain,
+            self.config.participant,
+            setup.session,
+            setup.mode,
+        ));
+        self.opener = Some(Opener::new(
+            setup.keyring,
+            self.config.domain,
+            setup.require_encryption,
+        ));
+    }
+
+    /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.
+    pub fn set_keyring(&mut self, keyring: Keyring) {
+        if let Some(sealer) = &mut self.transmits.sealer {
+            sealer.rekey(&keyring);
+        }
+        if let Some(opener) = &mut self.opener {
+            opener.set_keyring(keyring);
         }
     }
 
@@ -402,6 +462,9 @@ impl ParticipantCore {
         datagram: Bytes,
     ) {
         self.stats.received += 1;
+        let Some(datagram) = self.unseal(now, from, datagram) else {
+            return;
+        };
         let kind = match wire::Header::parse(&datagram) {
             Ok((header, _)) if header.domain != self.config.domain => {
                 return self.count_drop(DropReason::OtherDomain);
@@ -422,6 +485,41 @@ impl ParticipantCore {
         if let Err(reason) = result {
             self.count_drop(reason);
         }
+    }
+
+    /// The plain datagram: opened in a domain with a key (a copy: the received bytes are
+    /// shared), as it came otherwise; `None`, counted (and said once in the log, naming the
+    /// sender's address), when it must be dropped.
+    fn unseal(&mut self, now: Instant, from: SocketAddrV4, datagram: Bytes) -> Option<Bytes> {
+        let Some(opener) = &mut self.opener else {
+            if seal::is_sealed(&datagram) {
+                self.stats.sealed_without_key += 1;
+                if !std::mem::replace(&mut self.warned.1, true) {
+                    tracing::warn!(
+                        %from,
+                        "sealed data arrives and this participant has no domain key: give it the \
+                         domain's key file (NDDS_KEY_FILE), or unseal the sender's domain"
+                    );
+                }
+                return None;
+            }
+            return Some(datagram);
+        };
+        let mut buffer = bytes::BytesMut::from(&datagram[..]);
+        let len = match opener.open(now, &mut buffer) {
+            Ok(plain) => plain.len(),
+            Err(error) => {
+                if error == OpenError::NotSealed && !std::mem::replace(&mut self.warned.0, true) {
+                    tracing::warn!(
+                        %from,
+                        "unsealed data arrives in a domain with a key: dropped; give the sender \
+                         the domain's key file (NDDS_KEY_FILE), or remove the key here"
+                    );
+                }
+                return None;
+            }
+        };
+        Some(buffer.freeze().slice(SEAL_HEAD_LEN..SEAL_HEAD_LEN + len))
     }
 
     fn count_drop(&mut self, reason: DropReason) {
@@ -726,6 +824,10 @@ impl ParticipantCore {
         stats.wrong_address = unbelieved.wrong_address;
         stats.transmits = self.transmits.datagrams;
         stats.transmit_bytes = self.transmits.bytes;
+        stats.unsealable = self.transmits.unsealable;
+        if let Some(opener) = &self.opener {
+            stats.seal = opener.stats().clone();
+        }
         stats
     }
 }

@@ -5,6 +5,8 @@ use std::net::SocketAddrV4;
 use std::ops::Range;
 use std::sync::Arc;
 
+use crate::seal::{OVERHEAD, Sealer};
+
 /// Head buffers kept for reuse: a driver that recycles what it sent allocates nothing per
 /// datagram once this many exist.
 const FREE_HEADS: usize = 256;
@@ -79,6 +81,11 @@ pub(crate) struct Transmits {
     /// Datagrams and bytes queued so far.
     pub(crate) datagrams: u64,
     pub(crate) bytes: u64,
+    /// Seals every datagram (a domain with a key): the payload is then copied after the
+    /// head and sealed with it, never shared.
+    pub(crate) sealer: Option<Sealer>,
+    /// Datagrams not sent because they could not be sealed (a session's counter used up).
+    pub(crate) unsealable: u64,
 }
 
 impl Transmits {
@@ -93,11 +100,12 @@ impl Transmits {
         // The most recently freed spare large enough (a small one would have to grow). A new
         // one is rounded up to a power of two, so heads that grow a little at a time (a batch
         // a few samples longer than any before) do not each need a new buffer.
+        let sealed = self.sealer.is_some();
         let copied = tail
             .as_ref()
-            .filter(|(_, range)| range.len() <= COPIED_TAIL)
+            .filter(|(_, range)| sealed || range.len() <= COPIED_TAIL)
             .map_or(0, |(_, range)| range.len());
-        let needed = head.len() + copied;
+        let needed = head.len() + copied + if sealed { OVERHEAD } else { 0 };
         let mut buffer = match self.free.iter().rposition(|b| b.capacity() >= needed) {
             Some(index) => self.free.swap_remove(index),
             None => {
@@ -114,12 +122,19 @@ impl Transmits {
         buffer.clear();
         buffer.extend_from_slice(head);
         let tail = match tail {
-            Some((bytes, range)) if range.len() <= COPIED_TAIL => {
+            Some((bytes, range)) if sealed || range.len() <= COPIED_TAIL => {
                 buffer.extend_from_slice(bytes.get(range).unwrap_or_default());
                 None
             }
             tail => tail.map(|(bytes, range)| (Arc::clone(bytes), range)),
         };
+        if let Some(sealer) = &mut self.sealer
+            && sealer.seal(&mut buffer).is_err()
+        {
+            self.unsealable += 1;
+            self.free.push(buffer);
+            return;
+        }
         let transmit = Transmit {
             to,
             head: buffer,

@@ -11,6 +11,7 @@
 //! - `late_match`: a consumer matched only after the producer silenced it picks up the stream;
 //! - `liveness`: a reliable reader that never acknowledges leaves the window;
 //! - `replay`: a run replays exactly from its seed;
+//! - `sealed`: a domain with a key: streams as usual, outsiders without the key shut out;
 //! - `throughput`: how much of its lossless rate a reliable stream keeps through 10 % loss.
 //!
 //! [`ParticipantCore`]: ndds_core::participant::ParticipantCore
@@ -23,6 +24,7 @@ mod liveness;
 mod reliable;
 mod replay;
 mod rules;
+mod sealed;
 mod sim;
 mod throughput;
 
