@@ -30,6 +30,7 @@ use super::config::{ConfigError, DiscoveryConfig};
 use super::event::{Destination, Event, LossReason, Transmit};
 use super::fanout::{Fanout, Via};
 use super::table::{Entry, Origin, Table};
+use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, SealSetup, Sealer};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
     NodeInfo, Solicit, Withdraw,
@@ -93,6 +94,12 @@ pub struct Stats {
     /// fingerprint, a guid of one of our own endpoints, or more than
     /// [`MAX_ENDPOINTS_PER_NODE`] endpoints for one node.
     pub invalid_endpoints: u64,
+    /// Sealed datagrams that arrived while this node holds no domain key.
+    pub sealed_without_key: u64,
+    /// What opening sealed datagrams came to (a domain with a key; see [`crate::seal`]).
+    pub seal: OpenStats,
+    /// Datagrams not sent because they could not be sealed or grew too large sealed.
+    pub unsealable: u64,
 }
 
 impl Stats {
@@ -155,6 +162,12 @@ pub struct Engine {
     stats: Stats,
     closed: bool,
     id_clash_reported: bool,
+    /// Seals what is sent and opens what arrives, in a domain with a key.
+    seal: Option<(Sealer, Opener)>,
+    /// A received datagram's copy, opened in place (reused).
+    opened: Vec<u8>,
+    /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
+    warned: (bool, bool),
 }
 
 impl Engine {
@@ -190,7 +203,32 @@ impl Engine {
             stats: Stats::default(),
             closed: false,
             id_clash_reported: false,
+            seal: None,
+            opened: Vec::new(),
+            warned: (false, false),
         })
+    }
+
+    /// Seals every datagram sent from now on and accepts only sealed ones (a domain with a
+    /// key). Called right after [`Engine::new`], before any traffic.
+    pub fn seal_with(&mut self, setup: SealSetup) {
+        let sealer = Sealer::new(
+            &setup.keyring,
+            self.config.domain,
+            self.node_id,
+            setup.session,
+            setup.mode,
+        );
+        let opener = Opener::new(setup.keyring, self.config.domain, setup.require_encryption);
+        self.seal = Some((sealer, opener));
+    }
+
+    /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.
+    pub fn set_keyring(&mut self, keyring: Keyring) {
+        if let Some((sealer, opener)) = &mut self.seal {
+            sealer.rekey(&keyring);
+            opener.set_keyring(keyring);
+        }
     }
 
     /// This node's id (the sender id of its datagrams).
@@ -259,7 +297,14 @@ impl Engine {
         self.now = self.now.max(now);
         self.stats.received += 1;
         self.stats.bytes_received += bytes.len() as u64;
-        match self.accept(now, from, via, bytes) {
+        let mut opened = std::mem::take(&mut self.opened);
+        let Some(plain) = self.unseal(now, from, bytes, &mut opened) else {
+            self.opened = opened;
+            return;
+        };
+        let result = self.accept(now, from, via, plain);
+        self.opened = opened;
+        match result {
             Ok(()) => self.stats.accepted += 1,
             Err(reason) => {
                 self.stats.dropped[reason.index()] += 1;
@@ -267,6 +312,50 @@ impl Engine {
             }
         }
         self.update_expiry();
+    }
+
+    /// The plain datagram: opened (into `scratch`) in a domain with a key, as it came
+    /// otherwise; `None`, counted (and said once in the log, naming the sender's address),
+    /// when it must be dropped.
+    fn unseal<'a>(
+        &mut self,
+        now: Instant,
+        from: SocketAddr,
+        bytes: &'a [u8],
+        scratch: &'a mut Vec<u8>,
+    ) -> Option<&'a [u8]> {
+        let Some((_, opener)) = &mut self.seal else {
+            if seal::is_sealed(bytes) {
+                self.stats.sealed_without_key += 1;
+                if !std::mem::replace(&mut self.warned.1, true) {
+                    tracing::warn!(
+                        %from,
+                        "sealed discovery traffic arrives and this daemon has no domain key: give \
+                         it the domain's key file (--key-file or NDDS_KEY_FILE), or unseal the \
+                         sender"
+                    );
+                }
+                return None;
+            }
+            return Some(bytes);
+        };
+        scratch.clear();
+        scratch.extend_from_slice(bytes);
+        let opened = opener.open(now, scratch);
+        self.stats.seal.clone_from(opener.stats());
+        match opened {
+            Ok(plain) => Some(plain),
+            Err(error) => {
+                if error == OpenError::NotSealed && !std::mem::replace(&mut self.warned.0, true) {
+                    tracing::warn!(
+                        %from,
+                        "unsealed discovery traffic arrives in a domain with a key: dropped; give \
+                         the sender the domain's key file (--key-file), or remove the key here"
+                    );
+                }
+                None
+            }
+        }
     }
 
     fn accept(
@@ -675,6 +764,23 @@ impl Engine {
 
     /// Queues one datagram for each destination; the copies share their bytes.
     fn push_transmits(&mut self, destinations: &[Destination], payload: Arc<[u8]>) {
+        // Sealed once: every destination keeps its own replay window, so copies may share
+        // one counter.
+        let payload = match &mut self.seal {
+            None => payload,
+            Some((sealer, _)) => {
+                let mut sealed = payload.to_vec();
+                if sealer.seal(&mut sealed).is_err() || sealed.len() > MAX_DATAGRAM {
+                    self.stats.unsealable += 1;
+                    tracing::error!(
+                        bytes = payload.len(),
+                        "discovery datagram not sealed: not sent"
+                    );
+                    return;
+                }
+                sealed.into()
+            }
+        };
         for destination in destinations {
             self.stats.sent += 1;
             self.stats.bytes_sent += payload.len() as u64;

@@ -49,9 +49,8 @@ use self::repair::{PieceOutcome, Repair};
 use self::transmit::Transmits;
 use crate::admission::{AdmissionStats, Verdict};
 use crate::arbitration::Notification;
-use crate::seal::{
-    self, Keyring, OVERHEAD, OpenError, OpenStats, Opener, SEAL_HEAD_LEN, SealMode, Sealer,
-};
+pub use crate::seal::SealSetup;
+use crate::seal::{self, Keyring, OVERHEAD, OpenError, OpenStats, Opener, SEAL_HEAD_LEN, Sealer};
 use crate::wire::data::FLAG_RELIABLE;
 use crate::wire::{
     self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MAX_DATAGRAM,
@@ -163,20 +162,6 @@ impl CoreStats {
     pub fn dropped(&self, reason: DropReason) -> u64 {
         self.dropped[reason.index()]
     }
-}
-
-/// How a participant of a domain with a key seals and opens its datagrams.
-#[derive(Clone, Debug)]
-pub struct SealSetup {
-    /// The domain's keys.
-    pub keyring: Keyring,
-    /// Encrypted, or integrity only.
-    pub mode: SealMode,
-    /// This start of the participant: must grow from one start to the next (the driver
-    /// gives its start time in microseconds).
-    pub session: u64,
-    /// Refuse integrity-only datagrams.
-    pub require_encryption: bool,
 }
 
 /// The consumers one datagram addresses.

@@ -74,6 +74,20 @@ const KIND_BYTE: usize = 5;
 /// Header and seal head: the associated data of an encrypted datagram.
 const SEALED_HEAD: usize = HEADER_LEN + SEAL_HEAD_LEN;
 
+/// How a daemon or a participant of a domain with a key seals and opens its datagrams.
+#[derive(Clone, Debug)]
+pub struct SealSetup {
+    /// The domain's keys.
+    pub keyring: Keyring,
+    /// Encrypted, or integrity only.
+    pub mode: SealMode,
+    /// This start of the daemon or participant: must grow from one start to the next (the driver
+    /// gives its start time in microseconds).
+    pub session: u64,
+    /// Refuse integrity-only datagrams.
+    pub require_encryption: bool,
+}
+
 /// How a domain's datagrams are sealed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SealMode {

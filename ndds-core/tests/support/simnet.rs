@@ -134,13 +134,23 @@ impl SimNet {
 
     /// Starts an engine now; returns its index. `config.unicast` must be `locator(index)`.
     pub fn add_node(&mut self, config: DiscoveryConfig) -> usize {
+        self.add_node_with(config, |_| {})
+    }
+
+    /// Starts an engine now after `prepare` (sealing, say) had it; returns its index.
+    pub fn add_node_with(
+        &mut self,
+        config: DiscoveryConfig,
+        prepare: impl FnOnce(&mut Engine),
+    ) -> usize {
         let index = self.nodes.len();
         assert_eq!(
             config.unicast,
             locator(index),
             "node {index} has the wrong locator"
         );
-        let engine = Engine::new(config, self.now).expect("valid configuration");
+        let mut engine = Engine::new(config, self.now).expect("valid configuration");
+        prepare(&mut engine);
         self.nodes.push(SimNode {
             engine,
             events: Vec::new(),
@@ -345,10 +355,16 @@ impl SimNet {
     }
 
     fn send(&mut self, from: usize, destination: Destination, payload: Arc<[u8]>) {
-        let kind = wire::decode(&payload)
-            .expect("engines send valid datagrams")
-            .0
-            .kind;
+        let kind = if ndds_core::seal::is_sealed(&payload) {
+            // Sealed: only the header is in clear.
+            let flags = ndds_core::seal::SEALED | ndds_core::seal::CLEAR;
+            MessageKind::from_u8(payload[5] & !flags).expect("engines send valid datagrams")
+        } else {
+            wire::decode(&payload)
+                .expect("engines send valid datagrams")
+                .0
+                .kind
+        };
         let targets: Vec<usize> = match destination {
             Destination::Multicast => {
                 assert!(
@@ -393,6 +409,15 @@ impl SimNet {
     }
 
     // ----- inspection ----------------------------------------------------------------------
+    /// Hands `bytes` to node `to` now, as if unicast from `from` (a forger's datagram).
+    pub fn inject(&mut self, to: usize, from: Locator, bytes: &[u8]) {
+        let from = SocketAddr::V4(SocketAddrV4::from(from));
+        let now = self.now;
+        self.nodes[to]
+            .engine
+            .handle_datagram(now, from, Via::Unicast, bytes);
+        self.flush();
+    }
 
     /// Virtual time since the network was created.
     pub fn elapsed(&self) -> Duration {
