@@ -127,6 +127,14 @@ impl DaemonProcess {
         Self::launch(command, domain, name, Ipv4Addr::LOCALHOST)
     }
 
+    /// Starts a daemon in `domain` on loopback with `env` in its environment (for example
+    /// `NDDS_KEY_FILE`), and waits until its socket accepts connections.
+    pub fn start_with_env(domain: &TestDomain, name: &str, env: &[(&str, &Path)]) -> Self {
+        let mut command = Command::new(binary("ndds-daemon"));
+        command.envs(env.iter().map(|(k, v)| (*k, *v)));
+        Self::launch(command, domain, name, Ipv4Addr::LOCALHOST)
+    }
+
     /// Starts a daemon in `domain` inside `host`, bound to the host's address, and waits until
     /// its socket accepts connections. The socket lives in the domain's directory, which every
     /// host shares.
@@ -241,6 +249,14 @@ impl ClientProcess {
     /// Starts `ndds-test-node` with `args`, connected to the daemon at `socket`.
     pub fn test_node(socket: &Path, args: &[&str]) -> Self {
         Self::spawn(Command::new(binary("ndds-test-node")), socket, args)
+    }
+
+    /// Starts `ndds-test-node` with `args` and `env` in its environment, connected to the
+    /// daemon at `socket`.
+    pub fn test_node_with_env(socket: &Path, args: &[&str], env: &[(&str, &Path)]) -> Self {
+        let mut command = Command::new(binary("ndds-test-node"));
+        command.envs(env.iter().map(|(k, v)| (*k, *v)));
+        Self::spawn(command, socket, args)
     }
 
     /// Starts `ndds-test-node` with `args` inside `host`, connected to the daemon at `socket`

@@ -14,6 +14,9 @@ pub struct DaemonArgs {
     /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-DOMAIN.sock].
     #[arg(long, global = true)]
     pub socket: Option<PathBuf>,
+    /// The domain's key file, in a sealed domain [env: NDDS_KEY_FILE].
+    #[arg(long, global = true)]
+    pub key_file: Option<PathBuf>,
 }
 
 /// Opens a tool session with the local daemon; never starts an embedded daemon.
@@ -27,6 +30,9 @@ pub fn connect(args: &DaemonArgs) -> anyhow::Result<Participant> {
     }
     if let Some(socket) = &args.socket {
         builder = builder.socket(socket);
+    }
+    if let Some(key_file) = &args.key_file {
+        builder = builder.key_file(key_file);
     }
     let participant = builder.connect().map_err(|err| match err {
         ConnectError::NoDaemon { path, reason } => anyhow::anyhow!(

@@ -17,6 +17,7 @@ use ndds_core::domain;
 use ndds_core::ipc::{ClientMessage, EndpointDecl, Graph, Hello, IPC_VERSION, Role, Welcome};
 use ndds_core::participant::ConsumerSpec;
 use ndds_core::reliability::ReaderConfig;
+use ndds_core::seal::{Keyring, SealMode};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{EndpointQos, Reliability};
 use ndds_daemon::{DaemonConfig, DaemonError, EmbedError};
@@ -71,6 +72,8 @@ pub struct ParticipantBuilder {
     name: Option<String>,
     role: Option<Role>,
     max_sample: Option<usize>,
+    key_file: Option<PathBuf>,
+    integrity_only: bool,
 }
 
 /// Smallest accepted [`ParticipantBuilder::max_sample_size`].
@@ -122,6 +125,21 @@ impl ParticipantBuilder {
         self
     }
 
+    /// The domain's key file (default: `NDDS_KEY_FILE`, else none: an open domain). With a
+    /// key, every datagram this participant sends is sealed and only sealed ones are
+    /// accepted; an embedded daemon gets the key too. See `docs/security.md`.
+    pub fn key_file(mut self, path: impl Into<PathBuf>) -> Self {
+        self.key_file = Some(path.into());
+        self
+    }
+
+    /// With a key: authenticate datagrams without encrypting them (they stay readable on the
+    /// wire).
+    pub fn integrity_only(mut self, integrity_only: bool) -> Self {
+        self.integrity_only = integrity_only;
+        self
+    }
+
     /// Connect as a tool (listed apart from control programs).
     pub fn tool(mut self) -> Self {
         self.role = Some(Role::Tool);
@@ -168,12 +186,39 @@ impl ParticipantBuilder {
                 .map_err(|err: String| ConnectError::Setting(format!("NDDS_EMBEDDED: {err}")))?,
             (None, None) => EmbeddedPolicy::Auto,
         };
+        let key = match self
+            .key_file
+            .or_else(|| env("NDDS_KEY_FILE").map(PathBuf::from))
+        {
+            Some(path) => Some(
+                ndds_daemon::keys::load(&path)
+                    .map_err(|err| ConnectError::Setting(err.to_string()))?,
+            ),
+            None => None,
+        };
+        let seal_mode = if self.integrity_only {
+            SealMode::IntegrityOnly
+        } else {
+            SealMode::Encrypt
+        };
         let embedded_explicit = self.embedded_config.is_some();
-        let embedded_config = self.embedded_config.unwrap_or_else(|| {
+        let mut embedded_config = self.embedded_config.unwrap_or_else(|| {
             let mut config = DaemonConfig::new(domain, Ipv4Addr::LOCALHOST);
             config.socket = socket.clone();
             config
         });
+        if embedded_config.key.is_none() && key.is_some() {
+            embedded_config.key.clone_from(&key);
+            embedded_config.seal_mode = seal_mode;
+        }
+        // A key given only in the embedded daemon's configuration serves the participant too.
+        let seal = match key {
+            Some(keyring) => Some((keyring, seal_mode)),
+            None => embedded_config
+                .key
+                .clone()
+                .map(|keyring| (keyring, embedded_config.seal_mode)),
+        };
         let max_sample = match (self.max_sample, env("NDDS_MAX_SAMPLE")) {
             (Some(bytes), _) => bytes,
             (None, Some(text)) => text.parse().map_err(|_| {
@@ -194,6 +239,7 @@ impl ParticipantBuilder {
             name: self.name.unwrap_or_else(process_name),
             role: self.role.unwrap_or(Role::Client),
             max_sample,
+            seal,
         })
     }
 }
@@ -208,6 +254,8 @@ struct Settings {
     name: String,
     role: Role,
     max_sample: usize,
+    /// The domain's keys and how to seal, in a sealed domain.
+    seal: Option<(Keyring, SealMode)>,
 }
 
 impl Settings {
@@ -345,8 +393,19 @@ impl Participant {
             max_sample: settings.max_sample,
             ..Limits::for_interface(interface)
         };
-        let data = match DataPlane::open(interface, welcome.domain, participant, limits(interface))
-        {
+        let seal = || {
+            settings
+                .seal
+                .clone()
+                .map(|(keyring, mode)| ndds_daemon::keys::setup(keyring, mode))
+        };
+        let data = match DataPlane::open(
+            interface,
+            welcome.domain,
+            participant,
+            limits(interface),
+            seal(),
+        ) {
             Ok(data) => data,
             // A tool may reach a daemon's socket from where the daemon's interface does not
             // exist (another network namespace); listings need no data socket that works.
@@ -357,6 +416,7 @@ impl Participant {
                     welcome.domain,
                     participant,
                     limits(Ipv4Addr::LOCALHOST),
+                    seal(),
                 )
                 .map_err(|source| ConnectError::DataSocket { interface, source })?
             }

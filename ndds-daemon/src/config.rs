@@ -16,6 +16,8 @@
 //! | `announce_period_ms` | 1000 |
 //! | `lease_ms` | 5000 |
 //! | `multicast_ttl` | 1 |
+//! | `key_file` | none: the domain is open (`NDDS_KEY_FILE`) |
+//! | `integrity_only` | false: sealed datagrams are encrypted |
 
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
@@ -23,6 +25,7 @@ use std::time::Duration;
 
 use ndds_core::discovery::MAX_PEERS;
 use ndds_core::domain;
+use ndds_core::seal::{Keyring, SealMode};
 use serde::Deserialize;
 
 use crate::iface;
@@ -78,6 +81,17 @@ pub struct ConfigFile {
     /// Random seed of announcement jitter [default: random].
     #[cfg_attr(feature = "cli", arg(long))]
     pub seed: Option<u64>,
+    /// The domain's key file (`ndds key new FILE` makes one): every discovery datagram is
+    /// then sealed, and only sealed ones are accepted [default: none, an open domain].
+    #[cfg_attr(feature = "cli", arg(long, env = "NDDS_KEY_FILE"))]
+    pub key_file: Option<PathBuf>,
+    /// With a key file: authenticate datagrams without encrypting them, so they stay
+    /// readable on the wire (config file: integrity_only = true).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "integrity-only", num_args = 0, default_missing_value = "true")
+    )]
+    pub integrity_only: Option<bool>,
 }
 
 impl ConfigFile {
@@ -110,6 +124,8 @@ impl ConfigFile {
             lease_ms: self.lease_ms.or(lower.lease_ms),
             multicast_ttl: self.multicast_ttl.or(lower.multicast_ttl),
             seed: self.seed.or(lower.seed),
+            key_file: self.key_file.or(lower.key_file),
+            integrity_only: self.integrity_only.or(lower.integrity_only),
         }
     }
 
@@ -146,6 +162,12 @@ impl ConfigFile {
         }
         config.ttl = self.multicast_ttl.unwrap_or(config.ttl);
         config.seed = self.seed;
+        if let Some(path) = self.key_file {
+            config.key = Some(crate::keys::load(&path)?);
+        }
+        if self.integrity_only.unwrap_or(false) {
+            config.seal_mode = SealMode::IntegrityOnly;
+        }
         config.discovery().validate()?;
         Ok(config)
     }
@@ -180,6 +202,11 @@ pub struct DaemonConfig {
     pub ttl: u32,
     /// Random seed; `None` picks one at start.
     pub seed: Option<u64>,
+    /// The domain's keys: every datagram sealed with them, only sealed ones accepted
+    /// (`None`: an open domain).
+    pub key: Option<Keyring>,
+    /// How datagrams are sealed when there is a key.
+    pub seal_mode: SealMode,
 }
 
 impl DaemonConfig {
@@ -202,6 +229,8 @@ impl DaemonConfig {
             lease: defaults.lease,
             ttl: 1,
             seed: None,
+            key: None,
+            seal_mode: SealMode::Encrypt,
         }
     }
 
@@ -253,6 +282,9 @@ pub enum ConfigError {
     /// Inconsistent discovery settings (timers).
     #[error(transparent)]
     Discovery(#[from] ndds_core::discovery::ConfigError),
+    /// The key file cannot be used.
+    #[error(transparent)]
+    Key(#[from] crate::keys::KeyError),
 }
 
 #[cfg(test)]

@@ -118,7 +118,15 @@ impl Daemon {
         discovery.unicast = unicast;
         discovery.version = env!("CARGO_PKG_VERSION").to_owned();
         discovery.peers = peers.iter().map(|peer| peer.locator).collect();
-        let engine = Engine::new(discovery, Instant::now())?;
+        let mut engine = Engine::new(discovery, Instant::now())?;
+        if let Some(keyring) = &config.key {
+            engine.seal_with(crate::keys::setup(keyring.clone(), config.seal_mode));
+            tracing::info!(
+                epochs = ?keyring.epochs().collect::<Vec<_>>(),
+                mode = ?config.seal_mode,
+                "sealed domain: only datagrams sealed with the domain key are accepted"
+            );
+        }
         Ok(Daemon {
             config,
             engine,

@@ -15,6 +15,7 @@
 //! ## Layout
 //! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution;
 //!   [`peers`]: static unicast peers, parsed and resolved.
+//! - [`keys`]: domain key files (sealed domains).
 //! - [`claim`]: one daemon per socket path; [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
 //! - `cli`: the binary's command line, usable from other binaries too (feature `cli`, on by
 //!   default; the SDK turns it off, so a program embedding a daemon compiles neither clap nor
@@ -30,6 +31,7 @@ pub mod daemon;
 pub mod driver;
 pub mod embed;
 pub mod iface;
+pub mod keys;
 pub mod peers;
 pub mod sockets;
 

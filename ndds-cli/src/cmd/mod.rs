@@ -3,6 +3,7 @@
 mod echo;
 mod fsm;
 mod hz;
+mod key;
 mod nodes;
 mod perf;
 mod ports;
@@ -44,6 +45,8 @@ enum Command {
     Ports(ports::Args),
     /// Load a system description file, verify it and run it, with a live status.
     Run(run::Args),
+    /// Domain key files: a new one, and the steps of a key rotation.
+    Key(key::Args),
 }
 
 impl Cli {
@@ -66,6 +69,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Perf(args) => perf::run(&cli.daemon, &args),
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
+        Command::Key(args) => key::run(&args),
         Command::Run(args) => run::run(&cli.daemon, &args),
     }
 }

@@ -30,7 +30,7 @@ use bytes::{Bytes, BytesMut};
 use ndds_core::arbitration::Notification;
 use ndds_core::participant::{
     ConsumerCounters, ConsumerSpec, CoreConfig, Event, MatchedConsumer, ParticipantCore,
-    ProducerSpec, Transmit, WriteRefused,
+    ProducerSpec, SealSetup, Transmit, WriteRefused,
 };
 use ndds_core::wire::{DropReason, Guid, Locator};
 
@@ -244,6 +244,7 @@ impl DataPlane {
         domain: u16,
         participant: u64,
         limits: Limits,
+        seal: Option<SealSetup>,
     ) -> io::Result<Self> {
         let socket = UdpSocket::bind(SocketAddrV4::new(interface, 0))?;
         socket::set_buffers(&socket);
@@ -251,12 +252,15 @@ impl DataPlane {
             SocketAddr::V4(addr) => Locator::from(addr),
             SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
         };
-        let core = ParticipantCore::new(CoreConfig {
+        let mut core = ParticipantCore::new(CoreConfig {
             max_datagram: limits.max_datagram,
             max_sample: limits.max_sample,
             secret: os_secret(),
             ..CoreConfig::new(domain, participant)
         });
+        if let Some(seal) = seal {
+            core.seal_with(seal);
+        }
         Ok(DataPlane {
             socket,
             locator,

@@ -75,7 +75,7 @@ const KIND_BYTE: usize = 5;
 const SEALED_HEAD: usize = HEADER_LEN + SEAL_HEAD_LEN;
 
 /// How a daemon or a participant of a domain with a key seals and opens its datagrams.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SealSetup {
     /// The domain's keys.
     pub keyring: Keyring,

@@ -1,0 +1,113 @@
+//! A sealed domain between real processes on loopback: daemons and programs given the
+//! domain's key file (made by `ndds key new`) find each other and exchange samples; a daemon
+//! with another key, or none, sees nothing of them and they nothing of it, and each side says
+//! so in its log, naming the other's address.
+
+use std::path::{Path, PathBuf};
+
+use std::time::Duration;
+
+use interop_tests::{ClientProcess, DaemonProcess, TestDomain, binary, wait_until};
+
+const TOPIC: &str = "sealed/telemetry";
+const WAIT: Duration = Duration::from_secs(10);
+
+fn new_key(domain: &TestDomain, name: &str) -> PathBuf {
+    let path = domain.path(name);
+    let out = interop_tests::process::run(
+        &binary("ndds"),
+        &["key".into(), "new".into(), path.display().to_string()],
+        WAIT,
+    );
+    assert_eq!(out.code, Some(0), "ndds key new: {}", out.stderr);
+    path
+}
+
+fn consumer(domain: &TestDomain, daemon: &str, key: Option<&Path>) -> ClientProcess {
+    let env: Vec<(&str, &Path)> = key.map(|k| ("NDDS_KEY_FILE", k)).into_iter().collect();
+    let node = ClientProcess::test_node_with_env(
+        &domain.socket(daemon),
+        &["consume", "--topic", TOPIC, "--count", "100000"],
+        &env,
+    );
+    node.event("ready", WAIT).expect("consumer ready");
+    node
+}
+
+#[test]
+fn only_holders_of_the_domain_key_see_each_other_and_exchange_samples() {
+    let domain = TestDomain::new();
+    let key = new_key(&domain, "domain.key");
+    let other = new_key(&domain, "other.key");
+    let start = |name: &str, key: Option<&Path>| {
+        let env: Vec<(&str, &Path)> = key.map(|k| ("NDDS_KEY_FILE", k)).into_iter().collect();
+        DaemonProcess::start_with_env(&domain, name, &env)
+    };
+    let a = start("a", Some(&key));
+    let _b = start("b", Some(&key));
+    let _c = start("c", Some(&other));
+    let d = start("d", None);
+
+    let producer = ClientProcess::test_node_with_env(
+        &domain.socket("a"),
+        &["produce", "--topic", TOPIC, "--rate", "100"],
+        &[("NDDS_KEY_FILE", key.as_path())],
+    );
+    producer.event("ready", WAIT).expect("producer ready");
+    let inside = consumer(&domain, "b", Some(&key));
+    let wrong_key = consumer(&domain, "c", Some(&other));
+    let no_key = consumer(&domain, "d", None);
+
+    // The holders of the key: samples in order, across two daemons.
+    let mut last = 0;
+    for _ in 0..20 {
+        let sample = inside
+            .event("sample", WAIT)
+            .expect("samples inside the sealed domain");
+        let seq = sample["seq"].as_u64().expect("seq");
+        assert!(seq > last, "in order");
+        last = seq;
+    }
+    // The others: nothing, and their daemons list no producer.
+    assert!(wrong_key.event("sample", Duration::from_secs(2)).is_none());
+    assert!(no_key.event("sample", Duration::from_millis(100)).is_none());
+    for daemon in ["c", "d"] {
+        assert_eq!(
+            producers(&domain, daemon),
+            0,
+            "daemon {daemon} learnt of the producer"
+        );
+    }
+    assert_eq!(producers(&domain, "b"), 1);
+    // Each side says what it hears, once, naming where from.
+    let said = |daemon: &DaemonProcess, what: &str| {
+        wait_until(WAIT, || daemon.log_text().contains(what)).is_some()
+    };
+    assert!(
+        said(&a, "unsealed discovery traffic arrives"),
+        "{}",
+        a.log_text()
+    );
+    assert!(
+        said(
+            &d,
+            "sealed discovery traffic arrives and this daemon has no domain key"
+        ),
+        "{}",
+        d.log_text()
+    );
+}
+
+/// How many producers of [`TOPIC`] the daemon called `daemon` lists.
+fn producers(domain: &TestDomain, daemon: &str) -> usize {
+    let out = domain.ndds(daemon, &["topics", "--json"], WAIT);
+    assert_eq!(out.code, Some(0), "ndds topics at {daemon}: {}", out.stderr);
+    let listing: serde_json::Value = serde_json::from_str(&out.stdout).expect("JSON");
+    listing["topics"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|t| t["name"] == TOPIC)
+        .map(|t| t["producers"].as_array().map_or(0, Vec::len))
+        .sum()
+}

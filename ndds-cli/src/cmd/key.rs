@@ -1,0 +1,120 @@
+//! `ndds key`: domain key files — a new one, and the steps of a rotation.
+
+use std::path::PathBuf;
+
+use ndds_daemon::keys;
+
+use crate::outln;
+
+/// Options of `ndds key`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    action: Action,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Action {
+    /// Write a new domain key file (mode 0600; never over an existing file). Copy it to
+    /// every host of the domain and give it to daemons and programs with --key-file or
+    /// NDDS_KEY_FILE.
+    New {
+        /// Where to write it.
+        file: PathBuf,
+    },
+    /// Show a key file's epochs and which one is sealed with (never the keys).
+    Show {
+        /// The key file.
+        file: PathBuf,
+    },
+    /// Rotation, step 1: add a new key (accepted, not yet sealed with). Copy the file to
+    /// every host and restart their daemons and programs.
+    Rotate {
+        /// The key file.
+        file: PathBuf,
+    },
+    /// Rotation, step 2: seal with EPOCH from now on (once every host accepts it).
+    Use {
+        /// The key file.
+        file: PathBuf,
+        /// The epoch to seal with.
+        epoch: u32,
+    },
+    /// Rotation, step 3: stop accepting EPOCH (once no host seals with it).
+    Retire {
+        /// The key file.
+        file: PathBuf,
+        /// The epoch to refuse from now on.
+        epoch: u32,
+    },
+}
+
+/// Runs `ndds key`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    match &args.action {
+        Action::New { file } => {
+            keys::create(file)?;
+            outln!(
+                "wrote a new domain key to {} (mode 0600): copy it to every host of the domain, \
+                 then start daemons with --key-file {0} and programs with NDDS_KEY_FILE={0}",
+                file.display()
+            )?;
+        }
+        Action::Show { file } => {
+            let keyring = keys::load(file)?;
+            let epochs: Vec<String> = keyring.epochs().map(|e| e.to_string()).collect();
+            outln!(
+                "{}: epochs accepted {}, sealing with epoch {}",
+                file.display(),
+                epochs.join(", "),
+                keyring.send_epoch()
+            )?;
+        }
+        Action::Rotate { file } => {
+            let mut keyring = keys::load(file)?;
+            let epoch = keyring
+                .epochs()
+                .max()
+                .unwrap_or(0)
+                .checked_add(1)
+                .ok_or_else(|| {
+                    anyhow::anyhow!("{}: no epoch after {}", file.display(), u32::MAX)
+                })?;
+            keyring.add(epoch, keys::random_key()?);
+            keys::save(file, &keyring)?;
+            outln!(
+                "added epoch {epoch} to {} (accepted, not yet sealed with): copy the file to \
+                 every host and restart them, then run `ndds key use {0} {epoch}`",
+                file.display()
+            )?;
+        }
+        Action::Use { file, epoch } => {
+            let mut keyring = keys::load(file)?;
+            if !keyring.set_send(*epoch) {
+                anyhow::bail!("{} holds no key of epoch {epoch}", file.display());
+            }
+            keys::save(file, &keyring)?;
+            outln!(
+                "{} now seals with epoch {epoch}: copy it to every host and restart them, then \
+                 retire the old epoch with `ndds key retire`",
+                file.display()
+            )?;
+        }
+        Action::Retire { file, epoch } => {
+            let mut keyring = keys::load(file)?;
+            if !keyring.retire(*epoch) {
+                anyhow::bail!(
+                    "{} cannot retire epoch {epoch}: it is not there, or it is the one sealed \
+                     with (run `ndds key use` with another epoch first)",
+                    file.display()
+                );
+            }
+            keys::save(file, &keyring)?;
+            outln!(
+                "{} no longer accepts epoch {epoch}: copy it to every host and restart them",
+                file.display()
+            )?;
+        }
+    }
+    Ok(())
+}

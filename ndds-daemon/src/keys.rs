@@ -1,0 +1,179 @@
+//! Domain key files: reading one (refusing one that others may read), and writing a new one.
+//!
+//! The format is [`ndds_core::seal::Keyring`]'s; the file must be the owner's alone (mode
+//! 0600 or stricter), as an SSH private key must.
+
+use std::io::Write as _;
+use std::os::unix::fs::{OpenOptionsExt as _, PermissionsExt as _};
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+use ndds_core::seal::{DomainKey, KeyFileError, Keyring, SealMode, SealSetup};
+
+/// A key file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyError {
+    /// The file could not be read or written.
+    #[error("key file {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// Group or others may read or write it.
+    #[error(
+        "key file {path} is accessible to other users (mode {mode:03o}); run `chmod 600 {path}`"
+    )]
+    Exposed {
+        /// The file.
+        path: PathBuf,
+        /// Its permission bits.
+        mode: u32,
+    },
+    /// Its content is not a key file.
+    #[error("key file {path}: {source}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with the line.
+        source: KeyFileError,
+    },
+    /// A new key file would replace an existing one.
+    #[error("{path} exists; a new key would lock its hosts out (remove it first)")]
+    Exists {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+/// Reads the key file at `path`.
+pub fn load(path: &Path) -> Result<Keyring, KeyError> {
+    let io = |source| KeyError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let metadata = std::fs::metadata(path).map_err(io)?;
+    let mode = metadata.permissions().mode() & 0o777;
+    if mode & 0o077 != 0 {
+        return Err(KeyError::Exposed {
+            path: path.to_owned(),
+            mode,
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
+    Keyring::parse(&text).map_err(|source| KeyError::Format {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Writes a new key file at `path` (mode 0600, never over an existing file) holding one
+/// 256-bit key of epoch 1 from the operating system's random source.
+pub fn create(path: &Path) -> Result<Keyring, KeyError> {
+    let io = |source| KeyError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let keyring = Keyring::new(1, random_key().map_err(io)?);
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)
+        .map_err(|source| match source.kind() {
+            std::io::ErrorKind::AlreadyExists => KeyError::Exists {
+                path: path.to_owned(),
+            },
+            _ => io(source),
+        })?;
+    file.write_all(keyring.to_file_text().as_bytes())
+        .and_then(|()| file.sync_all())
+        .map_err(io)?;
+    Ok(keyring)
+}
+
+/// Replaces the key file at `path` with `keyring` (a rotation step): written to a private
+/// temporary file beside it, then renamed over it, so a reader sees the old or the new file,
+/// never half of one.
+pub fn save(path: &Path, keyring: &Keyring) -> Result<(), KeyError> {
+    let io = |source| KeyError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(".new");
+    let temporary = PathBuf::from(temporary);
+    let _ = std::fs::remove_file(&temporary);
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&temporary)
+        .map_err(io)?;
+    file.write_all(keyring.to_file_text().as_bytes())
+        .and_then(|()| file.sync_all())
+        .and_then(|()| std::fs::rename(&temporary, path))
+        .map_err(io)
+}
+
+/// A new random key (from the operating system's random source).
+pub fn random_key() -> Result<DomainKey, std::io::Error> {
+    let mut bytes = [0u8; 32];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut random| std::io::Read::read_exact(&mut random, &mut bytes))?;
+    let key = DomainKey::from_bytes(bytes);
+    bytes.fill(0);
+    Ok(key)
+}
+
+/// How a daemon or participant seals with `keyring`: `mode`, a session from the wall clock
+/// (microseconds: it grows from one start to the next), integrity-only datagrams accepted.
+pub fn setup(keyring: Keyring, mode: SealMode) -> SealSetup {
+    let session = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(1, |since| {
+            u64::try_from(since.as_micros()).unwrap_or(u64::MAX)
+        });
+    SealSetup {
+        keyring,
+        mode,
+        session,
+        require_encryption: false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_new_key_file_is_private_loads_and_is_never_overwritten() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("domain.key");
+        let made = create(&path).unwrap();
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o600);
+        assert_eq!(load(&path).unwrap(), made);
+        assert!(matches!(create(&path), Err(KeyError::Exists { .. })));
+        assert_eq!(load(&path).unwrap(), made, "unchanged");
+        let other = create(&dir.path().join("other.key")).unwrap();
+        assert_ne!(other, made, "keys come from the random source");
+    }
+
+    #[test]
+    fn an_exposed_or_broken_key_file_is_refused_saying_what_to_do() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("domain.key");
+        create(&path).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(err.to_string().contains("chmod 600"), "{err}");
+        std::fs::write(&path, "ndds-key v1\nkey 1 00\n").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(err.to_string().contains("line 2"), "{err}");
+        let err = load(&dir.path().join("missing.key")).unwrap_err();
+        assert!(matches!(err, KeyError::Io { .. }), "{err}");
+    }
+}
