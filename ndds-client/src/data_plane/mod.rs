@@ -190,7 +190,10 @@ pub(crate) struct DataPlane {
 /// also those the others queue meanwhile, while they go on. So datagrams leave in the order
 /// the core made them (a best-effort consumer drops a sample that overtook a later one as old
 /// data, and a reliable one asks again for what seems missing), no thread waits for another's
-/// system calls, and the core is never held across one.
+/// system calls, and the core is never held across one. The price: datagrams queued behind
+/// another thread's send leave when that thread gets to them, so a high-priority writer that
+/// shares a CPU with a lower-priority writer of the same participant can see its datagrams
+/// wait until the other runs again (give such writers participants of their own).
 #[derive(Debug)]
 struct Outgoing {
     queue: VecDeque<Transmit>,

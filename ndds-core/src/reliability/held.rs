@@ -9,6 +9,10 @@
 
 use std::collections::VecDeque;
 
+/// Most slots the ring spans: a guard against a caller that breaks the window's bound, so
+/// that one far-off seq cannot make it allocate without limit.
+pub(crate) const MAX_SPAN: u64 = 1 << 20;
+
 /// Samples by seq; slot 0 (seq `start`) is always held while any is.
 #[derive(Debug)]
 pub(crate) struct Held<S> {
@@ -50,8 +54,17 @@ impl<S> Held<S> {
         (self.count > 0).then_some(self.start)
     }
 
-    /// Holds `sample` as `seq`; false (and `sample` dropped) if `seq` was held already.
+    /// Holds `sample` as `seq`; false (and `sample` dropped) if `seq` was held already, or
+    /// if holding it would span more than [`MAX_SPAN`] slots (the reader's window keeps far
+    /// below it; a sample refused here is simply missing, and asked for again).
     pub(crate) fn insert(&mut self, seq: u64, sample: S) -> bool {
+        if self.count > 0 {
+            let low = seq.min(self.start);
+            let high = seq.max(self.start + self.slots.len() as u64 - 1);
+            if high - low >= MAX_SPAN {
+                return false;
+            }
+        }
         if self.count == 0 {
             self.slots.clear();
             self.start = seq;
@@ -183,6 +196,16 @@ mod tests {
             assert_eq!(held.contains(seq), model.contains_key(&seq));
             assert!(held.slots.len() <= 64 + 8, "{}", held.slots.len());
         }
+    }
+
+    #[test]
+    fn a_seq_too_far_from_the_held_ones_is_refused() {
+        let mut held = Held::default();
+        assert!(held.insert(10, 1u8));
+        assert!(!held.insert(10 + super::MAX_SPAN, 2));
+        assert!(held.insert(9 + super::MAX_SPAN, 3), "just inside");
+        assert_eq!(held.len(), 2);
+        assert!(held.slots.len() as u64 <= super::MAX_SPAN);
     }
 
     #[test]
