@@ -4,6 +4,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Condvar, Mutex};
+use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
 
 use ndds_core::types::{TypeDescription, fingerprint_hex};
@@ -30,6 +31,9 @@ pub(crate) struct Peers {
     pub(crate) fingerprint: u64,
     maps: Mutex<Maps>,
     changed: Condvar,
+    /// Async waiters for a change (see [`Peers::poll_matched`]), woken after the maps' lock
+    /// is released.
+    wakers: Mutex<Vec<Waker>>,
 }
 
 impl Peers {
@@ -40,6 +44,7 @@ impl Peers {
             type_desc,
             maps: Mutex::default(),
             changed: Condvar::new(),
+            wakers: Mutex::default(),
         }
     }
 
@@ -51,6 +56,31 @@ impl Peers {
         maps.stale.remove(&remote.guid);
         maps.matched.insert(remote.guid, remote);
         self.apply(&maps, apply);
+        drop(maps);
+        self.wake_async();
+    }
+
+    /// Wakes the async waiters (the maps' lock released).
+    fn wake_async(&self) {
+        let wakers = std::mem::take(&mut *lock(&self.wakers));
+        for waker in wakers {
+            waker.wake();
+        }
+    }
+
+    /// Ready once at least `count` endpoints are matched; otherwise `cx` is woken at the next
+    /// change of the matches.
+    pub(crate) fn poll_matched(&self, count: usize, cx: &mut Context<'_>) -> Poll<()> {
+        let maps = lock(&self.maps);
+        if maps.matched.len() >= count {
+            return Poll::Ready(());
+        }
+        // Registered while the maps are held: a change made after this look wakes it.
+        let mut wakers = lock(&self.wakers);
+        if !wakers.iter().any(|w| w.will_wake(cx.waker())) {
+            wakers.push(cx.waker().clone());
+        }
+        Poll::Pending
     }
 
     fn apply(&self, maps: &Maps, apply: impl FnOnce(Matched<'_>)) {
@@ -80,6 +110,8 @@ impl Peers {
         maps.matched.remove(&remote.guid);
         maps.incompatible.insert(remote.guid, remote);
         self.changed.notify_all();
+        drop(maps);
+        self.wake_async();
     }
 
     /// Forgets a peer; `apply` as in [`Peers::matched`]. Returns whether it was matched (not
@@ -89,6 +121,8 @@ impl Peers {
         maps.incompatible.remove(remote);
         let was_matched = maps.matched.remove(remote).is_some();
         self.apply(&maps, apply);
+        drop(maps);
+        self.wake_async();
         was_matched
     }
 
@@ -111,6 +145,8 @@ impl Peers {
         if !stale.is_empty() {
             self.apply(&maps, apply);
         }
+        drop(maps);
+        self.wake_async();
         stale.into_iter().collect()
     }
 
@@ -143,5 +179,68 @@ impl Peers {
                 .unwrap_or_else(|poison| poison.into_inner().0);
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::task::{Wake, Waker};
+
+    use ndds_core::wire::{ConsumerQosWire, EndpointQos, Locator};
+
+    use super::*;
+
+    struct Counting(AtomicUsize);
+
+    impl Wake for Counting {
+        fn wake(self: Arc<Self>) {
+            self.0.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+
+    fn consumer(entity: u32, type_desc: &TypeDescription) -> EndpointInfo {
+        EndpointInfo {
+            guid: Guid {
+                participant: 9,
+                entity,
+            },
+            topic: "t".into(),
+            type_desc: type_desc.clone(),
+            fingerprint: type_desc.fingerprint(),
+            qos: EndpointQos::Consumer(ConsumerQosWire::default()),
+            locator: Locator::UNSPECIFIED,
+            pid: 1,
+            process: "p".into(),
+        }
+    }
+
+    #[test]
+    fn an_async_waiter_for_matches_is_woken_by_the_match_not_by_a_timer() {
+        let type_desc = TypeDescription::of::<u32>();
+        let peers = Peers::new("t", type_desc.clone());
+        let counter = Arc::new(Counting(AtomicUsize::new(0)));
+        let waker = Waker::from(Arc::clone(&counter));
+        let mut cx = Context::from_waker(&waker);
+        assert!(peers.poll_matched(1, &mut cx).is_pending());
+        assert!(peers.poll_matched(1, &mut cx).is_pending());
+        assert_eq!(
+            counter.0.load(Ordering::SeqCst),
+            0,
+            "nothing wakes it meanwhile"
+        );
+        peers.matched(consumer(1, &type_desc), |_| {});
+        assert_eq!(
+            counter.0.load(Ordering::SeqCst),
+            1,
+            "woken once by the match"
+        );
+        assert!(peers.poll_matched(1, &mut cx).is_ready());
+        // Waiting for two: woken by the next change too (here, the one match going away).
+        assert!(peers.poll_matched(2, &mut cx).is_pending());
+        peers.unmatched(&consumer(1, &type_desc).guid, |_| {});
+        assert_eq!(counter.0.load(Ordering::SeqCst), 2);
+        assert!(peers.poll_matched(2, &mut cx).is_pending());
     }
 }

@@ -275,8 +275,7 @@ pub(crate) async fn next_sample<T: serde::de::DeserializeOwned>(
 }
 
 /// Whether `producer` has a matched consumer by `at`. Inside [`block_on`] it waits on the
-/// producer's own match condition; on another executor it looks again after 1, 2, 4, ... up
-/// to 50 ms (no match event reaches a producer's owner yet: see docs/ports.md).
+/// producer's match condition; on another executor it sleeps until the match (or `at`).
 pub(crate) async fn matched_by(producer: &Producer<impl Sized>, at: Option<Instant>) -> bool {
     if producer.wait_for_consumers(1, Duration::ZERO) {
         return true;
@@ -287,19 +286,9 @@ pub(crate) async fn matched_by(producer: &Producer<impl Sized>, at: Option<Insta
         });
         return producer.wait_for_consumers(1, left);
     }
-    let mut pause = Duration::from_millis(1);
-    loop {
-        let now = Instant::now();
-        if at.is_some_and(|at| now >= at) {
-            return producer.wait_for_consumers(1, Duration::ZERO);
-        }
-        let wake = at.map_or(now + pause, |at| at.min(now + pause));
-        sleep_until(Some(wake)).await;
-        if producer.wait_for_consumers(1, Duration::ZERO) {
-            return true;
-        }
-        pause = (pause * 2).min(Duration::from_millis(50));
-    }
+    timeout_at(at, producer.consumers_matched(1))
+        .await
+        .is_some()
 }
 
 #[cfg(test)]

@@ -247,6 +247,12 @@ impl RawProducer {
         self.state.peers.wait_matched(count, timeout)
     }
 
+    /// Ready once at least `count` consumers are matched (the async form of
+    /// [`RawProducer::wait_for_consumers`], without a timeout: race it with one).
+    pub(crate) fn consumers_matched(&self, count: usize) -> impl Future<Output = ()> + '_ {
+        std::future::poll_fn(move |cx| self.state.peers.poll_matched(count, cx))
+    }
+
     /// Number of samples written so far.
     pub fn written(&self) -> u64 {
         self.state.plane.written(self.state.entity)
