@@ -339,6 +339,13 @@ impl Engine {
             }
             return Some(bytes);
         };
+        if !seal::is_sealed(bytes)
+            && let Err(reason) = wire::Header::parse(bytes)
+        {
+            // Not ndds traffic at all: counted as in an open domain.
+            self.stats.dropped[reason.index()] += 1;
+            return None;
+        }
         scratch.clear();
         scratch.extend_from_slice(bytes);
         let opened = opener.open(now, scratch);

@@ -490,6 +490,13 @@ impl ParticipantCore {
             }
             return Some(datagram);
         };
+        if !seal::is_sealed(&datagram)
+            && let Err(reason) = wire::Header::parse(&datagram)
+        {
+            // Not ndds traffic at all: counted as in an open domain.
+            self.stats.dropped[reason.index()] += 1;
+            return None;
+        }
         let mut buffer = bytes::BytesMut::from(&datagram[..]);
         let len = match opener.open(now, &mut buffer) {
             Ok(plain) => plain.len(),

@@ -155,12 +155,19 @@ impl OpenError {
     }
 }
 
-/// True if `datagram` carries the sealed flag (a receiver without a key drops it and says
-/// that the domain is sealed).
+/// True if `datagram` is a sealed ndds datagram of this protocol version: a whole header
+/// with the magic, the version, the sealed flag and a known message kind (a receiver without
+/// a key drops it and says that the domain is sealed; anything else is judged by the plain
+/// header's checks, as junk is).
 pub fn is_sealed(datagram: &[u8]) -> bool {
-    datagram
-        .get(KIND_BYTE)
-        .is_some_and(|kind| kind & SEALED != 0)
+    let Some(head) = datagram.get(..HEADER_LEN) else {
+        return false;
+    };
+    let kind = head[KIND_BYTE];
+    head[..4] == crate::wire::MAGIC
+        && head[4] == crate::wire::PROTOCOL_VERSION
+        && kind & SEALED != 0
+        && crate::wire::MessageKind::from_u8(kind & !(SEALED | CLEAR)).is_some()
 }
 
 /// The per-sender cipher of one session.

@@ -236,3 +236,21 @@ proptest! {
         prop_assert_eq!(opener.senders(), 0);
     }
 }
+
+#[test]
+fn only_ndds_datagrams_with_the_flag_and_a_known_kind_count_as_sealed() {
+    let mut sealer = Sealer::new(&ring(1, 9), DOMAIN, 42, 1, SealMode::Encrypt);
+    let genuine = sealed(&mut sealer, 42, b"x");
+    assert!(is_sealed(&genuine));
+    // Junk with the flag bit set where the kind would be is junk, not a sealed datagram.
+    let mut junk = genuine.clone();
+    junk[0] = b'X';
+    assert!(!is_sealed(&junk));
+    let mut unknown_kind = plain(42, b"x");
+    unknown_kind[5] = 0x80 | 0x3f;
+    assert!(!is_sealed(&unknown_kind));
+    let mut other_version = genuine.clone();
+    other_version[4] = 99;
+    assert!(!is_sealed(&other_version));
+    assert!(!is_sealed(&genuine[..15]));
+}
