@@ -759,3 +759,47 @@ fn a_near_datagram_sized_endpoint_and_pending_withdrawals_still_refresh() {
     assert!(net.knows(1, wide.guid));
     assert!(bulk.iter().all(|g| !net.knows(1, *g)));
 }
+
+#[test]
+fn forged_nodes_announcing_an_hour_long_lease_are_forgotten_within_a_minute() {
+    // 500 Solicits from made-up nodes, each asking to be remembered for an hour: they are
+    // kept for MAX_LEASE (60 s) at most, so a flood of them cannot hold the node table.
+    use ndds_core::discovery::engine::MAX_LEASE;
+    use ndds_core::wire::{Locator, Message, NodeInfo, Solicit};
+    let mut net = network(21, 2, PERIOD, LEASE);
+    for forged in 0..500u64 {
+        let node = NodeInfo {
+            hostname: "forged".into(),
+            pid: 1,
+            unicast: Locator {
+                addr: [10, 9, 0, 1],
+                port: 9000 + forged as u16,
+            },
+            lease_ms: 3_600_000,
+            announce_period_ms: 1000,
+            version: "0".into(),
+        };
+        let mut datagram = Vec::new();
+        ndds_core::wire::encode(
+            simnet::DOMAIN,
+            0xf000 + forged,
+            &Message::Solicit(Solicit { node }),
+            &mut datagram,
+        )
+        .unwrap();
+        net.inject(1, locator(0), &datagram);
+    }
+    assert_eq!(
+        net.engine(1).nodes().count(),
+        501,
+        "the genuine node and the forged ones"
+    );
+    net.run_for(MAX_LEASE + MS * 10);
+    assert_eq!(MAX_LEASE, Duration::from_secs(60));
+    assert_eq!(
+        net.engine(1).nodes().count(),
+        1,
+        "only the genuine node is left"
+    );
+    assert!(net.knows_node(1, net.engine(0).node_id()));
+}

@@ -142,8 +142,8 @@ pub enum ConfigError {
         /// Configured period.
         period: Duration,
     },
-    /// The lease is longer than other nodes accept (`MAX_LEASE`, one hour).
-    #[error("lease {0:?} is too long (at most one hour)")]
+    /// The lease is longer than other nodes accept (`MAX_LEASE`, 60 s).
+    #[error("lease {0:?} is too long (at most 60 s)")]
     LeaseTooLong(Duration),
     /// Jitter outside `0.0..0.5`.
     #[error("period jitter {0} must be in 0.0..0.5")]

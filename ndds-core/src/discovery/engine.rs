@@ -47,7 +47,7 @@ pub const MAX_REMOTE_ENDPOINTS: usize = 262_144;
 /// Most answers to solicitations waiting for their jitter delay.
 pub const MAX_PENDING_REPLIES: usize = 1024;
 /// Longest lease accepted from a remote node; longer ones are shortened to this.
-pub const MAX_LEASE: Duration = Duration::from_secs(3600);
+pub const MAX_LEASE: Duration = Duration::from_secs(60);
 /// Withdrawn guids carried per announcement datagram.
 const WITHDRAWN_PER_DATAGRAM: usize = 1024;
 
