@@ -50,6 +50,10 @@ pub enum ConnectError {
     /// A setting (environment variable or builder value) is invalid.
     #[error("invalid setting: {0}")]
     Setting(String),
+    /// The domain's key file (`NDDS_KEY_FILE` or [`crate::ParticipantBuilder::key_file`])
+    /// cannot be used: unreadable, readable by others, or not a key file.
+    #[error(transparent)]
+    KeyFile(#[from] ndds_daemon::keys::KeyError),
     /// A helper thread could not be started.
     #[error("cannot start a participant thread: {0}")]
     Thread(std::io::Error),

@@ -190,10 +190,7 @@ impl ParticipantBuilder {
             .key_file
             .or_else(|| env("NDDS_KEY_FILE").map(PathBuf::from))
         {
-            Some(path) => Some(
-                ndds_daemon::keys::load(&path)
-                    .map_err(|err| ConnectError::Setting(err.to_string()))?,
-            ),
+            Some(path) => Some(ndds_daemon::keys::load(&path)?),
             None => None,
         };
         let seal_mode = if self.integrity_only {
