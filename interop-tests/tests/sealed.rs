@@ -96,6 +96,25 @@ fn only_holders_of_the_domain_key_see_each_other_and_exchange_samples() {
         "{}",
         d.log_text()
     );
+    // And counts it, by reason, in what `ndds nodes` shows.
+    let counter = |daemon: &str, name: &str| {
+        let graph = domain.tool(daemon).graph().expect("graph");
+        graph
+            .counters
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or_else(|| panic!("no counter {name}"), |(_, v)| *v)
+    };
+    assert!(counter("a", "seal_opened") > 0);
+    assert!(
+        counter("a", "seal_dropped_bad_tag") > 0,
+        "c's datagrams at a"
+    );
+    assert!(
+        counter("a", "seal_dropped_not_sealed") > 0,
+        "d's datagrams at a"
+    );
+    assert!(counter("d", "sealed_without_key") > 0, "a's datagrams at d");
 }
 
 /// How many producers of [`TOPIC`] the daemon called `daemon` lists.

@@ -15,6 +15,7 @@ use ndds_core::ipc::{
     ClientMessage, ClientSummary, DaemonMessage, EndpointDecl, EndpointSummary, Graph, Hello,
     IPC_VERSION, NodeSummary, PeerSummary, Role, Welcome,
 };
+use ndds_core::seal::OpenError;
 use ndds_core::wire::{DropReason, EndpointInfo, Guid, Locator};
 use tokio::net::UdpSocket;
 
@@ -535,6 +536,16 @@ impl Driver {
         ] {
             out.push((name.to_owned(), value.load(Ordering::Relaxed)));
         }
+        // A sealed domain's (all 0 in an open one but `sealed_without_key`).
+        out.push(("sealed_without_key".to_owned(), stats.sealed_without_key));
+        out.push(("seal_opened".to_owned(), stats.seal.opened));
+        for reason in OpenError::ALL {
+            out.push((
+                format!("seal_dropped_{}", reason.name()),
+                stats.seal.dropped(reason),
+            ));
+        }
+        out.push(("unsealable".to_owned(), stats.unsealable));
         out
     }
 }
