@@ -8,7 +8,7 @@ use std::os::unix::fs::{OpenOptionsExt as _, PermissionsExt as _};
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use ndds_core::seal::{DomainKey, KeyFileError, Keyring, SealMode, SealSetup};
+use ndds_core::seal::{Cipher, DomainKey, KeyFileError, Keyring, SealMode, SealSetup};
 
 /// A key file that cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -69,13 +69,13 @@ pub fn load(path: &Path) -> Result<Keyring, KeyError> {
 }
 
 /// Writes a new key file at `path` (mode 0600, never over an existing file) holding one
-/// 256-bit key of epoch 1 from the operating system's random source.
-pub fn create(path: &Path) -> Result<Keyring, KeyError> {
+/// 256-bit key of epoch 1 from the operating system's random source, for `cipher`.
+pub fn create(path: &Path, cipher: Cipher) -> Result<Keyring, KeyError> {
     let io = |source| KeyError::Io {
         path: path.to_owned(),
         source,
     };
-    let keyring = Keyring::new(1, random_key().map_err(io)?);
+    let keyring = Keyring::new(1, random_key().map_err(io)?).with_cipher(cipher);
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -151,13 +151,16 @@ mod tests {
     fn a_new_key_file_is_private_loads_and_is_never_overwritten() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("domain.key");
-        let made = create(&path).unwrap();
+        let made = create(&path, Cipher::default()).unwrap();
         let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, 0o600);
         assert_eq!(load(&path).unwrap(), made);
-        assert!(matches!(create(&path), Err(KeyError::Exists { .. })));
+        assert!(matches!(
+            create(&path, Cipher::default()),
+            Err(KeyError::Exists { .. })
+        ));
         assert_eq!(load(&path).unwrap(), made, "unchanged");
-        let other = create(&dir.path().join("other.key")).unwrap();
+        let other = create(&dir.path().join("other.key"), Cipher::Aes256Gcm).unwrap();
         assert_ne!(other, made, "keys come from the random source");
     }
 
@@ -165,7 +168,7 @@ mod tests {
     fn an_exposed_or_broken_key_file_is_refused_saying_what_to_do() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("domain.key");
-        create(&path).unwrap();
+        create(&path, Cipher::default()).unwrap();
         std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
         let err = load(&path).unwrap_err();
         assert!(err.to_string().contains("chmod 600"), "{err}");

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use ndds_core::seal::Cipher;
 use ndds_daemon::keys;
 
 use crate::outln;
@@ -21,6 +22,10 @@ enum Action {
     New {
         /// Where to write it.
         file: PathBuf,
+        /// The domain's cipher: chacha20-poly1305 (any processor) or aes-256-gcm (several
+        /// times faster on processors with AES instructions; see docs/security.md).
+        #[arg(long, default_value = "chacha20-poly1305", value_parser = parse_cipher)]
+        cipher: Cipher,
     },
     /// Show a key file's epochs and which one is sealed with (never the keys).
     Show {
@@ -52,8 +57,8 @@ enum Action {
 /// Runs `ndds key`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     match &args.action {
-        Action::New { file } => {
-            keys::create(file)?;
+        Action::New { file, cipher } => {
+            keys::create(file, *cipher)?;
             outln!(
                 "wrote a new domain key to {} (mode 0600): copy it to every host of the domain, \
                  then start daemons with --key-file {0} and programs with NDDS_KEY_FILE={0}",
@@ -64,8 +69,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let keyring = keys::load(file)?;
             let epochs: Vec<String> = keyring.epochs().map(|e| e.to_string()).collect();
             outln!(
-                "{}: epochs accepted {}, sealing with epoch {}",
+                "{}: cipher {}, epochs accepted {}, sealing with epoch {}",
                 file.display(),
+                keyring.cipher().name(),
                 epochs.join(", "),
                 keyring.send_epoch()
             )?;
@@ -117,4 +123,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+fn parse_cipher(text: &str) -> Result<Cipher, String> {
+    Cipher::from_name(text).ok_or_else(|| {
+        let names: Vec<&str> = Cipher::ALL.iter().map(|c| c.name()).collect();
+        format!("unknown cipher `{text}` (one of: {})", names.join(", "))
+    })
 }

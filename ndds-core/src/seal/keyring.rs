@@ -4,17 +4,22 @@
 //!
 //! ```text
 //! ndds-key v1
+//! cipher aes-256-gcm
 //! key 1 9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08
 //! key 2 60303ae22b998861bce3b28f33eec1be758a213c86c93c076dbe9f558c11c752
 //! send 2
 //! ```
 //!
 //! Every `key EPOCH HEX` (a 256-bit key in 64 hex digits) is accepted from other senders;
-//! `send EPOCH` names the one this host seals with (by default the highest epoch). Rotation
+//! `send EPOCH` names the one this host seals with (by default the highest epoch);
+//! `cipher NAME` the AEAD of the whole domain (`chacha20-poly1305`, the default, or
+//! `aes-256-gcm`: see [`Cipher`]). Rotation
 //! is three edits of every host's file: add the new key, then make it the one sent, then
 //! remove the old one; between the first and the last, both are accepted.
 
 use std::fmt;
+
+use super::Cipher;
 
 /// A 256-bit domain key. Its `Debug` shows no key material, and it is overwritten when
 /// dropped.
@@ -71,6 +76,7 @@ impl Drop for DomainKey {
 pub struct Keyring {
     keys: Vec<(u32, DomainKey)>,
     send: u32,
+    cipher: Cipher,
 }
 
 /// What is wrong with a key file, with its line (1-based).
@@ -82,8 +88,18 @@ pub enum KeyFileError {
         /// The line.
         line: usize,
     },
-    /// A line that is neither `key EPOCH HEX` nor `send EPOCH`.
-    #[error("line {line}: expected `key EPOCH HEX` or `send EPOCH`, found `{found}`")]
+    /// A cipher this version does not know.
+    #[error("line {line}: unknown cipher `{name}` (chacha20-poly1305 or aes-256-gcm)")]
+    UnknownCipher {
+        /// The line.
+        line: usize,
+        /// The name given.
+        name: String,
+    },
+    /// A line that is neither `key EPOCH HEX`, `send EPOCH` nor `cipher NAME`.
+    #[error(
+        "line {line}: expected `key EPOCH HEX`, `send EPOCH` or `cipher NAME`, found `{found}`"
+    )]
     Syntax {
         /// The line.
         line: usize,
@@ -123,7 +139,19 @@ impl Keyring {
         Keyring {
             keys: vec![(epoch, key)],
             send: epoch,
+            cipher: Cipher::default(),
         }
+    }
+
+    /// The same keys, sealing with `cipher`.
+    pub fn with_cipher(mut self, cipher: Cipher) -> Self {
+        self.cipher = cipher;
+        self
+    }
+
+    /// The domain's cipher.
+    pub fn cipher(&self) -> Cipher {
+        self.cipher
     }
 
     /// The key of `epoch`, if accepted.
@@ -185,6 +213,7 @@ impl Keyring {
         }
         let mut keys: Vec<(u32, DomainKey)> = Vec::new();
         let mut send = None;
+        let mut cipher = Cipher::default();
         for (line, content) in lines {
             let words: Vec<&str> = content.split_whitespace().collect();
             let syntax = || KeyFileError::Syntax {
@@ -202,6 +231,13 @@ impl Keyring {
                     keys.push((epoch, key));
                 }
                 ["send", epoch] => send = Some(epoch.parse::<u32>().map_err(|_| syntax())?),
+                ["cipher", name] => {
+                    cipher =
+                        Cipher::from_name(name).ok_or_else(|| KeyFileError::UnknownCipher {
+                            line,
+                            name: (*name).to_owned(),
+                        })?;
+                }
                 _ => return Err(syntax()),
             }
         }
@@ -214,7 +250,7 @@ impl Keyring {
         if !keys.iter().any(|(e, _)| *e == send) {
             return Err(KeyFileError::SendWithoutKey { epoch: send });
         }
-        Ok(Keyring { keys, send })
+        Ok(Keyring { keys, send, cipher })
     }
 
     /// The key file's text for this keyring.
@@ -223,6 +259,7 @@ impl Keyring {
             "# ndds domain key: every host of the domain holds the same file; keep it secret\n\
              # (mode 0600). See docs/security.md.\nndds-key v1\n",
         );
+        text.push_str(&format!("cipher {}\n", self.cipher.name()));
         for (epoch, key) in &self.keys {
             text.push_str(&format!("key {epoch} {}\n", key.to_hex()));
         }
@@ -294,6 +331,27 @@ mod tests {
         for (text, expected) in cases {
             assert_eq!(Keyring::parse(text), Err(expected), "{text}");
         }
+    }
+
+    #[test]
+    fn the_cipher_is_a_setting_of_the_file() {
+        let ring = Keyring::new(1, key(5)).with_cipher(Cipher::Aes256Gcm);
+        let text = ring.to_file_text();
+        assert!(text.contains("cipher aes-256-gcm"), "{text}");
+        assert_eq!(Keyring::parse(&text).unwrap().cipher(), Cipher::Aes256Gcm);
+        let plain = format!("ndds-key v1\nkey 1 {}\n", "11".repeat(32));
+        assert_eq!(
+            Keyring::parse(&plain).unwrap().cipher(),
+            Cipher::ChaCha20Poly1305
+        );
+        let unknown = format!("ndds-key v1\ncipher rot13\nkey 1 {}\n", "11".repeat(32));
+        assert_eq!(
+            Keyring::parse(&unknown),
+            Err(KeyFileError::UnknownCipher {
+                line: 2,
+                name: "rot13".into()
+            })
+        );
     }
 
     #[test]

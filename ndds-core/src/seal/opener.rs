@@ -2,13 +2,12 @@
 
 use std::time::{Duration, Instant};
 
-use chacha20poly1305::{AeadInOut, ChaCha20Poly1305, Tag};
 use foldhash::HashMap;
 
 use super::window::ReplayWindow;
 use super::{
-    CLEAR, KIND_BYTE, Keyring, MAX_SENDERS, OpenError, SEAL_HEAD_LEN, SEALED, SEALED_HEAD, TAG_LEN,
-    derive, nonce,
+    CLEAR, KIND_BYTE, Keyring, MAX_SENDERS, OpenError, SEAL_HEAD_LEN, SEALED, SEALED_HEAD,
+    SessionKey, TAG_LEN, Tag, derive,
 };
 use crate::wire::HEADER_LEN;
 
@@ -41,7 +40,7 @@ pub type Opened<'a> = &'a [u8];
 /// What a receiver remembers of one sender under one epoch.
 struct SenderState {
     session: u64,
-    cipher: ChaCha20Poly1305,
+    cipher: SessionKey,
     window: ReplayWindow,
     heard: Instant,
 }
@@ -164,7 +163,9 @@ impl Opener {
             }
         }
         // A new session's cipher is derived (and kept only if its tag verifies).
-        let derived = (!same_session).then(|| derive(key, self.domain, epoch, sender, session));
+        let cipher_kind = self.keyring.cipher();
+        let derived =
+            (!same_session).then(|| derive(key, cipher_kind, self.domain, epoch, sender, session));
         let cipher = match (&derived, self.senders.get(&(sender, epoch))) {
             (Some(cipher), _) => cipher,
             (None, Some(state)) => &state.cipher,
@@ -174,14 +175,15 @@ impl Opener {
         let body_end = datagram.len() - TAG_LEN;
         let (sealed, tag) = datagram.split_at_mut(body_end);
         let tag = Tag::try_from(&tag[..]).map_err(|_| OpenError::Truncated)?;
-        let nonce = nonce(counter);
         let verified = if clear {
-            cipher.decrypt_inout_detached(&nonce, sealed, (&mut [][..]).into(), &tag)
+            cipher.open(counter, sealed, &mut [], &tag)
         } else {
             let (aad, body) = sealed.split_at_mut(SEALED_HEAD);
-            cipher.decrypt_inout_detached(&nonce, aad, body.into(), &tag)
+            cipher.open(counter, aad, body, &tag)
         };
-        verified.map_err(|_| OpenError::BadTag)?;
+        if !verified {
+            return Err(OpenError::BadTag);
+        }
         match derived {
             None => {
                 if let Some(state) = self.senders.get_mut(&(sender, epoch)) {

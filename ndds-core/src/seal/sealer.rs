@@ -1,8 +1,6 @@
 //! Sealing what one sender sends.
 
-use chacha20poly1305::{AeadInOut, ChaCha20Poly1305};
-
-use super::{CLEAR, KIND_BYTE, Keyring, SEALED, SEALED_HEAD, SealMode, derive, nonce};
+use super::{CLEAR, Cipher, KIND_BYTE, Keyring, SEALED, SEALED_HEAD, SealMode, SessionKey, derive};
 use crate::wire::HEADER_LEN;
 
 /// Why a datagram was not sealed.
@@ -23,7 +21,8 @@ pub struct Sealer {
     session: u64,
     epoch: u32,
     mode: SealMode,
-    cipher: ChaCha20Poly1305,
+    cipher: Cipher,
+    key: SessionKey,
     counter: u64,
 }
 
@@ -35,6 +34,7 @@ impl std::fmt::Debug for Sealer {
             .field("session", &self.session)
             .field("epoch", &self.epoch)
             .field("mode", &self.mode)
+            .field("cipher", &self.cipher)
             .field("counter", &self.counter)
             .finish_non_exhaustive()
     }
@@ -51,17 +51,27 @@ impl Sealer {
             session,
             epoch,
             mode,
-            cipher: derive(keyring.send_key(), domain, epoch, sender, session),
+            cipher: keyring.cipher(),
+            key: derive(
+                keyring.send_key(),
+                keyring.cipher(),
+                domain,
+                epoch,
+                sender,
+                session,
+            ),
             counter: 0,
         }
     }
 
     /// Seals with `keyring`'s sending key from now on (after a rotation).
     pub fn rekey(&mut self, keyring: &Keyring) {
-        if keyring.send_epoch() != self.epoch {
+        if keyring.send_epoch() != self.epoch || keyring.cipher() != self.cipher {
             self.epoch = keyring.send_epoch();
-            self.cipher = derive(
+            self.cipher = keyring.cipher();
+            self.key = derive(
                 keyring.send_key(),
+                self.cipher,
                 self.domain,
                 self.epoch,
                 self.sender,
@@ -95,19 +105,15 @@ impl Sealer {
         head[4..12].copy_from_slice(&self.session.to_le_bytes());
         head[12..].copy_from_slice(&counter.to_le_bytes());
         datagram.splice(HEADER_LEN..HEADER_LEN, head);
-        let nonce = nonce(counter);
         let tag = match self.mode {
             SealMode::Encrypt => {
                 let (aad, body) = datagram.split_at_mut(SEALED_HEAD);
-                self.cipher.encrypt_inout_detached(&nonce, aad, body.into())
+                self.key.seal(counter, aad, body)
             }
-            SealMode::IntegrityOnly => {
-                self.cipher
-                    .encrypt_inout_detached(&nonce, datagram, (&mut [][..]).into())
-            }
+            SealMode::IntegrityOnly => self.key.seal(counter, datagram, &mut []),
         };
-        // Only lengths beyond ChaCha20's 256 GiB per message make this fail.
-        let tag = tag.map_err(|_| SealError::NotADatagram)?;
+        // Only messages of many GiB make this fail.
+        let tag = tag.ok_or(SealError::NotADatagram)?;
         datagram.extend_from_slice(&tag);
         Ok(())
     }
