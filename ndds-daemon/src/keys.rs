@@ -76,20 +76,12 @@ pub fn create(path: &Path, cipher: Cipher) -> Result<Keyring, KeyError> {
         source,
     };
     let keyring = Keyring::new(1, random_key().map_err(io)?).with_cipher(cipher);
-    let mut file = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o600)
-        .open(path)
-        .map_err(|source| match source.kind() {
-            std::io::ErrorKind::AlreadyExists => KeyError::Exists {
-                path: path.to_owned(),
-            },
-            _ => io(source),
-        })?;
-    file.write_all(keyring.to_file_text().as_bytes())
-        .and_then(|()| file.sync_all())
-        .map_err(io)?;
+    write_new(path, &keyring).map_err(|source| match source.kind() {
+        std::io::ErrorKind::AlreadyExists => KeyError::Exists {
+            path: path.to_owned(),
+        },
+        _ => io(source),
+    })?;
     Ok(keyring)
 }
 
@@ -105,16 +97,21 @@ pub fn save(path: &Path, keyring: &Keyring) -> Result<(), KeyError> {
     temporary.push(".new");
     let temporary = PathBuf::from(temporary);
     let _ = std::fs::remove_file(&temporary);
+    write_new(&temporary, keyring)
+        .and_then(|()| std::fs::rename(&temporary, path))
+        .map_err(io)
+}
+
+/// Writes `keyring` to a file that must not exist yet, readable by its owner only, and
+/// flushes it to the disk.
+fn write_new(path: &Path, keyring: &Keyring) -> std::io::Result<()> {
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
         .mode(0o600)
-        .open(&temporary)
-        .map_err(io)?;
-    file.write_all(keyring.to_file_text().as_bytes())
-        .and_then(|()| file.sync_all())
-        .and_then(|()| std::fs::rename(&temporary, path))
-        .map_err(io)
+        .open(path)?;
+    file.write_all(keyring.to_file_text().as_bytes())?;
+    file.sync_all()
 }
 
 /// A new random key (from the operating system's random source).

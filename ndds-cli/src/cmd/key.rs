@@ -77,17 +77,18 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             )?;
         }
         Action::Rotate { file } => {
-            let mut keyring = keys::load(file)?;
-            let epoch = keyring
-                .epochs()
-                .max()
-                .unwrap_or(0)
-                .checked_add(1)
-                .ok_or_else(|| {
-                    anyhow::anyhow!("{}: no epoch after {}", file.display(), u32::MAX)
-                })?;
-            keyring.add(epoch, keys::random_key()?);
-            keys::save(file, &keyring)?;
+            let epoch = edit(file, |keyring| {
+                let epoch = keyring
+                    .epochs()
+                    .max()
+                    .unwrap_or(0)
+                    .checked_add(1)
+                    .ok_or_else(|| {
+                        anyhow::anyhow!("{}: no epoch after {}", file.display(), u32::MAX)
+                    })?;
+                keyring.add(epoch, keys::random_key()?);
+                Ok(epoch)
+            })?;
             outln!(
                 "added epoch {epoch} to {} (accepted, not yet sealed with): copy the file to \
                  every host and restart them, then run `ndds key use {0} {epoch}`",
@@ -95,11 +96,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             )?;
         }
         Action::Use { file, epoch } => {
-            let mut keyring = keys::load(file)?;
-            if !keyring.set_send(*epoch) {
-                anyhow::bail!("{} holds no key of epoch {epoch}", file.display());
-            }
-            keys::save(file, &keyring)?;
+            edit(file, |keyring| {
+                anyhow::ensure!(
+                    keyring.set_send(*epoch),
+                    "{} holds no key of epoch {epoch}",
+                    file.display()
+                );
+                Ok(())
+            })?;
             outln!(
                 "{} now seals with epoch {epoch}: copy it to every host and restart them, then \
                  retire the old epoch with `ndds key retire`",
@@ -107,15 +111,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             )?;
         }
         Action::Retire { file, epoch } => {
-            let mut keyring = keys::load(file)?;
-            if !keyring.retire(*epoch) {
-                anyhow::bail!(
+            edit(file, |keyring| {
+                anyhow::ensure!(
+                    keyring.retire(*epoch),
                     "{} cannot retire epoch {epoch}: it is not there, or it is the one sealed \
                      with (run `ndds key use` with another epoch first)",
                     file.display()
                 );
-            }
-            keys::save(file, &keyring)?;
+                Ok(())
+            })?;
             outln!(
                 "{} no longer accepts epoch {epoch}: copy it to every host and restart them",
                 file.display()
@@ -123,6 +127,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Reads the key file, applies `change`, and writes the file back (only if `change` succeeded).
+fn edit<T>(
+    file: &std::path::Path,
+    change: impl FnOnce(&mut ndds_core::seal::Keyring) -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    let mut keyring = keys::load(file)?;
+    let done = change(&mut keyring)?;
+    keys::save(file, &keyring)?;
+    Ok(done)
 }
 
 fn parse_cipher(text: &str) -> Result<Cipher, String> {

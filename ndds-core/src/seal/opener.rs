@@ -162,15 +162,18 @@ impl Opener {
                 return Err(OpenError::StaleSession);
             }
         }
-        // A new session's cipher is derived (and kept only if its tag verifies).
-        let cipher_kind = self.keyring.cipher();
-        let derived =
-            (!same_session).then(|| derive(key, cipher_kind, self.domain, epoch, sender, session));
-        let cipher = match (&derived, self.senders.get(&(sender, epoch))) {
-            (Some(cipher), _) => cipher,
-            (None, Some(state)) => &state.cipher,
-            // Unreachable: same_session implies a state.
-            (None, None) => return Err(OpenError::StaleSession),
+        // The session's key, or a new session's, derived (and kept only if its tag verifies).
+        let mut derived = None;
+        let cipher: &SessionKey = match known.filter(|_| same_session) {
+            Some(state) => &state.cipher,
+            None => derived.insert(derive(
+                key,
+                self.keyring.cipher(),
+                self.domain,
+                epoch,
+                sender,
+                session,
+            )),
         };
         let body_end = datagram.len() - TAG_LEN;
         let (sealed, tag) = datagram.split_at_mut(body_end);
