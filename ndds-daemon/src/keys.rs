@@ -14,12 +14,12 @@ use ndds_core::seal::{Cipher, DomainKey, KeyFileError, Keyring, SealMode, SealSe
 #[derive(Debug, thiserror::Error)]
 pub enum KeyError {
     /// The file could not be read or written.
-    #[error("key file {path}: {source}")]
+    #[error("key file {path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The IO error.
-        source: std::io::Error,
+        /// The IO error (in the message, so not also a `source`).
+        error: std::io::Error,
     },
     /// Group or others may read or write it.
     #[error(
@@ -32,12 +32,12 @@ pub enum KeyError {
         mode: u32,
     },
     /// Its content is not a key file.
-    #[error("key file {path}: {source}")]
+    #[error("key file {path}: {error}")]
     Format {
         /// The file.
         path: PathBuf,
-        /// What is wrong, with the line.
-        source: KeyFileError,
+        /// What is wrong, with the line (in the message, so not also a `source`).
+        error: KeyFileError,
     },
     /// A new key file would replace an existing one.
     #[error("{path} exists; a new key would lock its hosts out (remove it first)")]
@@ -49,9 +49,9 @@ pub enum KeyError {
 
 /// Reads the key file at `path`.
 pub fn load(path: &Path) -> Result<Keyring, KeyError> {
-    let io = |source| KeyError::Io {
+    let io = |error| KeyError::Io {
         path: path.to_owned(),
-        source,
+        error,
     };
     let metadata = std::fs::metadata(path).map_err(io)?;
     let mode = metadata.permissions().mode() & 0o777;
@@ -62,18 +62,18 @@ pub fn load(path: &Path) -> Result<Keyring, KeyError> {
         });
     }
     let text = std::fs::read_to_string(path).map_err(io)?;
-    Keyring::parse(&text).map_err(|source| KeyError::Format {
+    Keyring::parse(&text).map_err(|error| KeyError::Format {
         path: path.to_owned(),
-        source,
+        error,
     })
 }
 
 /// Writes a new key file at `path` (mode 0600, never over an existing file) holding one
 /// 256-bit key of epoch 1 from the operating system's random source, for `cipher`.
 pub fn create(path: &Path, cipher: Cipher) -> Result<Keyring, KeyError> {
-    let io = |source| KeyError::Io {
+    let io = |error| KeyError::Io {
         path: path.to_owned(),
-        source,
+        error,
     };
     let keyring = Keyring::new(1, random_key().map_err(io)?).with_cipher(cipher);
     write_new(path, &keyring).map_err(|source| match source.kind() {
@@ -89,9 +89,9 @@ pub fn create(path: &Path, cipher: Cipher) -> Result<Keyring, KeyError> {
 /// temporary file beside it, then renamed over it, so a reader sees the old or the new file,
 /// never half of one.
 pub fn save(path: &Path, keyring: &Keyring) -> Result<(), KeyError> {
-    let io = |source| KeyError::Io {
+    let io = |error| KeyError::Io {
         path: path.to_owned(),
-        source,
+        error,
     };
     let mut temporary = path.as_os_str().to_owned();
     temporary.push(".new");
