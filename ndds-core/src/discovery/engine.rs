@@ -30,7 +30,7 @@ use super::config::{ConfigError, DiscoveryConfig};
 use super::event::{Destination, Event, LossReason, Transmit};
 use super::fanout::{Fanout, Via};
 use super::table::{Entry, Origin, Table};
-use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, SealSetup, Sealer};
+use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
     NodeInfo, Solicit, Withdraw,
@@ -324,8 +324,13 @@ impl Engine {
         bytes: &'a [u8],
         scratch: &'a mut Vec<u8>,
     ) -> Option<&'a [u8]> {
-        let Some((_, opener)) = &mut self.seal else {
-            if seal::is_sealed(bytes) {
+        match seal::route(bytes, self.seal.is_some()) {
+            Route::Plain => return Some(bytes),
+            Route::Junk(reason) => {
+                self.stats.dropped[reason.index()] += 1;
+                return None;
+            }
+            Route::SealedWithoutKey => {
                 self.stats.sealed_without_key += 1;
                 if !std::mem::replace(&mut self.warned.1, true) {
                     tracing::warn!(
@@ -337,15 +342,9 @@ impl Engine {
                 }
                 return None;
             }
-            return Some(bytes);
-        };
-        if !seal::is_sealed(bytes)
-            && let Err(reason) = wire::Header::parse(bytes)
-        {
-            // Not ndds traffic at all: counted as in an open domain.
-            self.stats.dropped[reason.index()] += 1;
-            return None;
+            Route::Open => {}
         }
+        let (_, opener) = self.seal.as_mut()?;
         scratch.clear();
         scratch.extend_from_slice(bytes);
         let opened = opener.open(now, scratch);

@@ -50,7 +50,9 @@ use self::transmit::Transmits;
 use crate::admission::{AdmissionStats, Verdict};
 use crate::arbitration::Notification;
 pub use crate::seal::SealSetup;
-use crate::seal::{self, Keyring, OVERHEAD, OpenError, OpenStats, Opener, SEAL_HEAD_LEN, Sealer};
+use crate::seal::{
+    self, Keyring, OVERHEAD, OpenError, OpenStats, Opener, Route, SEAL_HEAD_LEN, Sealer,
+};
 use crate::wire::data::FLAG_RELIABLE;
 use crate::wire::{
     self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MAX_DATAGRAM,
@@ -476,8 +478,13 @@ impl ParticipantCore {
     /// shared), as it came otherwise; `None`, counted (and said once in the log, naming the
     /// sender's address), when it must be dropped.
     fn unseal(&mut self, now: Instant, from: SocketAddrV4, datagram: Bytes) -> Option<Bytes> {
-        let Some(opener) = &mut self.opener else {
-            if seal::is_sealed(&datagram) {
+        match seal::route(&datagram, self.opener.is_some()) {
+            Route::Plain => return Some(datagram),
+            Route::Junk(reason) => {
+                self.stats.dropped[reason.index()] += 1;
+                return None;
+            }
+            Route::SealedWithoutKey => {
                 self.stats.sealed_without_key += 1;
                 if !std::mem::replace(&mut self.warned.1, true) {
                     tracing::warn!(
@@ -488,15 +495,9 @@ impl ParticipantCore {
                 }
                 return None;
             }
-            return Some(datagram);
-        };
-        if !seal::is_sealed(&datagram)
-            && let Err(reason) = wire::Header::parse(&datagram)
-        {
-            // Not ndds traffic at all: counted as in an open domain.
-            self.stats.dropped[reason.index()] += 1;
-            return None;
+            Route::Open => {}
         }
+        let opener = self.opener.as_mut()?;
         let mut buffer = bytes::BytesMut::from(&datagram[..]);
         let len = match opener.open(now, &mut buffer) {
             Ok(plain) => plain.len(),

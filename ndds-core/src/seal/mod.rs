@@ -244,6 +244,34 @@ impl SessionKey {
     }
 }
 
+/// What a receiver does with an arriving datagram, before anything parses its body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Route {
+    /// Handle it as it is (no key here, and it is not sealed).
+    Plain,
+    /// Open it with the [`Opener`] (a key here; it counts what it refuses, unsealed ndds
+    /// traffic as [`OpenError::NotSealed`]).
+    Open,
+    /// Drop it as `sealed_without_key`: sealed, and no key here.
+    SealedWithoutKey,
+    /// Drop it for this reason of the plain header: not ndds traffic at all, key or not.
+    Junk(crate::wire::DropReason),
+}
+
+/// Where `datagram` goes at a receiver that holds a key (`keyed`) or not. Without a key,
+/// anything not sealed is [`Route::Plain`], and its header checks come later as usual.
+pub fn route(datagram: &[u8], keyed: bool) -> Route {
+    match (keyed, is_sealed(datagram)) {
+        (false, false) => Route::Plain,
+        (false, true) => Route::SealedWithoutKey,
+        (true, true) => Route::Open,
+        (true, false) => match crate::wire::Header::parse(datagram) {
+            Ok(_) => Route::Open,
+            Err(reason) => Route::Junk(reason),
+        },
+    }
+}
+
 /// The key of one sender's session.
 fn derive(
     key: &DomainKey,
