@@ -405,7 +405,7 @@ fn domain_table_matches_the_mapping() {
         "multicast group",
         "discovery port",
         "unicast port",
-        "unix socket",
+        "socket name",
     ];
     if let Some(table) = single_table(&doc, &mut problems, &columns) {
         for row in &table.rows {
@@ -422,7 +422,7 @@ fn domain_table_matches_the_mapping() {
                 domain::multicast_group(id).to_string(),
                 domain::discovery_port(id).to_string(),
                 domain::unicast_port(id).to_string(),
-                domain::default_socket_path(id).display().to_string(),
+                domain::socket_name(id),
             ];
             let written: Vec<String> = (0..expected.len()).map(|i| row.plain(i)).collect();
             if written != expected {

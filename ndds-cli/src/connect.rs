@@ -11,7 +11,8 @@ pub struct DaemonArgs {
     /// Domain id (0-232) [env: NDDS_DOMAIN] [default: 0].
     #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(0..=232))]
     pub domain: Option<u16>,
-    /// Daemon socket path [env: NDDS_SOCKET] [default: /tmp/ndds-DOMAIN.sock].
+    /// Daemon socket path [env: NDDS_SOCKET] [default: ndds-DOMAIN.sock in $XDG_RUNTIME_DIR/ndds,
+    /// else /run/ndds, else $TMPDIR/ndds-UID].
     #[arg(long, global = true)]
     pub socket: Option<PathBuf>,
     /// The domain's key file, in a sealed domain [env: NDDS_KEY_FILE].

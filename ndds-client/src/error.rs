@@ -54,6 +54,10 @@ pub enum ConnectError {
     /// cannot be used: unreadable, readable by others, or not a key file.
     #[error(transparent)]
     KeyFile(#[from] ndds_daemon::keys::KeyError),
+    /// The socket is not safe to use: the daemon at it runs as another user (not root), so
+    /// it may be a squatter's.
+    #[error(transparent)]
+    Socket(#[from] ndds_daemon::local::LocalError),
     /// A helper thread could not be started.
     #[error("cannot start a participant thread: {0}")]
     Thread(std::io::Error),

@@ -177,7 +177,7 @@ impl ParticipantBuilder {
             (Some(config), _, _) => config.socket.clone(),
             (None, Some(path), _) => path,
             (None, None, Some(path)) => PathBuf::from(path),
-            (None, None, None) => domain::default_socket_path(domain),
+            (None, None, None) => ndds_daemon::local::locate(domain),
         };
         let embedded = match (self.embedded, env("NDDS_EMBEDDED")) {
             (Some(policy), _) => policy,

@@ -17,6 +17,7 @@ use ndds_core::ipc::{
 };
 
 use ndds_daemon::DaemonConfig;
+use ndds_daemon::local;
 
 use crate::error::{ConnectError, DeclareError, QueryError};
 use crate::sync::lock;
@@ -52,8 +53,15 @@ pub(crate) fn read_frame(stream: &mut impl Read) -> io::Result<Option<DaemonMess
             format!("frame of {len} bytes exceeds {MAX_FRAME}"),
         ));
     }
-    let mut body = vec![0u8; len];
-    stream.read_exact(&mut body)?;
+    // The buffer grows with the bytes that arrive, not with the length the prefix claims.
+    let mut body = Vec::new();
+    let read = stream.take(len as u64).read_to_end(&mut body)?;
+    if read < len {
+        return Err(io::Error::new(
+            io::ErrorKind::UnexpectedEof,
+            format!("the daemon closed the connection {read} bytes into a {len}-byte frame"),
+        ));
+    }
     ipc::decode_body(&body)
         .map(Some)
         .map_err(|err| io::Error::new(io::ErrorKind::InvalidData, err))
@@ -69,6 +77,9 @@ pub(crate) fn handshake(path: &Path, hello: Hello) -> Result<(UnixStream, Welcom
         path: path.to_owned(),
         reason,
     };
+    // Before a byte is sent: a squatter must not even learn our Hello.
+    let daemon = local::peer_cred(&stream).map_err(|e| failed(e.to_string()))?;
+    local::check_daemon(path, daemon)?;
     stream
         .set_read_timeout(Some(ANSWER_TIMEOUT))
         .map_err(|e| failed(e.to_string()))?;

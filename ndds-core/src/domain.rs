@@ -1,11 +1,11 @@
-//! How a domain id maps to discovery addresses and the local socket path.
+//! How a domain id maps to discovery addresses and the local socket's name.
 //!
 //! | what | value for domain `d` (0 ≤ d ≤ 232) |
 //! |---|---|
 //! | discovery multicast group | `239.255.76.d` |
 //! | discovery UDP port (multicast) | `7600 + d` |
 //! | unicast discovery port | `7850 + d` |
-//! | daemon Unix socket | `/tmp/ndds-d.sock` |
+//! | daemon Unix socket name | `ndds-d.sock` (in the directory `ndds_daemon::local` picks) |
 //!
 //! Every value can be overridden (daemon flags and config file, `NDDS_SOCKET`); these are only
 //! the defaults that let daemons and clients of one domain find each other with no set-up.
@@ -14,7 +14,6 @@
 //! falls back to any free port, and peers then learn that port from its announcements.
 
 use std::net::Ipv4Addr;
-use std::path::PathBuf;
 
 /// Largest valid domain id.
 pub const MAX_DOMAIN: u16 = 232;
@@ -54,9 +53,11 @@ pub fn unicast_port(domain: u16) -> u16 {
     UNICAST_BASE_PORT + domain.min(MAX_DOMAIN)
 }
 
-/// The default path of the daemon's Unix socket for a domain.
-pub fn default_socket_path(domain: u16) -> PathBuf {
-    PathBuf::from(format!("/tmp/ndds-{domain}.sock"))
+/// The file name of a domain's daemon socket. Which directory holds it (the user's runtime
+/// directory, `/run/ndds`, or a private one) is the drivers' choice, as it depends on who runs
+/// them.
+pub fn socket_name(domain: u16) -> String {
+    format!("ndds-{}.sock", domain.min(MAX_DOMAIN))
 }
 
 #[cfg(test)]
@@ -72,7 +73,7 @@ mod tests {
         assert_eq!(unicast_port(0), 7850);
         assert_eq!(unicast_port(232), 8082);
         assert!(discovery_port(MAX_DOMAIN) < unicast_port(0));
-        assert_eq!(default_socket_path(3), PathBuf::from("/tmp/ndds-3.sock"));
+        assert_eq!(socket_name(3), "ndds-3.sock");
         assert_eq!(check(232), Ok(232));
         assert_eq!(check(233), Err(DomainError(233)));
         assert_eq!(check(70_000), Err(DomainError(70_000)));

@@ -4,8 +4,10 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
-use ndds_core::discovery::engine::{MAX_ENDPOINTS_PER_NODE, MAX_REMOTE_ENDPOINTS};
-use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Via};
+use ndds_core::discovery::engine::{
+    MAX_ENDPOINTS_PER_NODE, MAX_NODES, MAX_REMOTE_BYTES, MAX_REMOTE_ENDPOINTS,
+};
+use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event, Origin, Via};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     self, Announce, DropReason, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo,
@@ -136,7 +138,7 @@ fn endpoint(participant: u64) -> EndpointInfo {
 }
 
 #[test]
-fn remote_endpoints_are_capped_per_node_and_in_all() {
+fn remote_endpoints_are_bounded_per_node_and_in_all() {
     let now = Instant::now();
     let mut engine = engine(now);
     let nodes = MAX_REMOTE_ENDPOINTS / MAX_ENDPOINTS_PER_NODE + 2;
@@ -159,17 +161,119 @@ fn remote_endpoints_are_capped_per_node_and_in_all() {
             });
             engine.handle_datagram(now, from, Via::Multicast, &datagram(1000 + node, &announce));
         }
+        assert!(engine.endpoints().count() <= MAX_REMOTE_ENDPOINTS);
+        assert!(engine.remote_bytes() <= MAX_REMOTE_BYTES);
     }
-    assert_eq!(engine.endpoints().count(), MAX_REMOTE_ENDPOINTS);
-    let announced = nodes * (MAX_ENDPOINTS_PER_NODE + 1);
-    assert_eq!(
-        engine.stats().invalid_endpoints,
-        (announced - MAX_REMOTE_ENDPOINTS) as u64
-    );
+    // One source: its oldest nodes made room for its newest, which holds its whole share
+    // (and not one more).
+    let newest = engine
+        .endpoints()
+        .filter(|e| e.origin == Origin::Remote(1000 + nodes as u64 - 1))
+        .count();
+    assert_eq!(newest, MAX_ENDPOINTS_PER_NODE);
+    assert!(engine.stats().evicted_nodes > 0);
+    assert!(engine.stats().invalid_endpoints >= nodes as u64);
     // Decay still works at this size: everything is forgotten after the lease.
     engine.handle_timeout(now + Duration::from_secs(6));
     assert_eq!(engine.endpoints().count(), 0);
     assert_eq!(engine.nodes().count(), 0);
+    assert_eq!(engine.remote_bytes(), 0);
+}
+
+/// The issue's flood: 5000 forged nodes with one-hour leases and 300 000 endpoints, all on the
+/// topic a local consumer reads, from one address. A genuine node known before keeps its
+/// endpoints, a genuine node arriving after is matched at once, the tables stay within their
+/// bounds, and the flood costs linear work (quadratic matching would not finish).
+#[test]
+fn a_flood_of_forged_nodes_cannot_keep_genuine_nodes_out() {
+    let now = Instant::now();
+    let mut engine = engine(now);
+    let topic = "arm/joints";
+    let on_topic = |participant: u64, kind: EndpointQos| {
+        let mut info = endpoint(participant);
+        info.topic = topic.into();
+        info.qos = kind;
+        info
+    };
+    let mut consumer = on_topic(1, EndpointQos::Consumer(Default::default()));
+    consumer.guid.participant = 0xC0FFEE;
+    engine.add_local(consumer.clone()).unwrap();
+    let genuine = |engine: &mut Engine, host: u8, id: u64| {
+        let unicast = locator(host, 7600);
+        let announce = Message::Announce(Announce {
+            node: node_info(unicast),
+            endpoints: vec![on_topic(id, EndpointQos::Producer(Default::default()))],
+            withdrawn: vec![],
+        });
+        let from = SocketAddr::V4(unicast.into());
+        engine.handle_datagram(now, from, Via::Multicast, &datagram(id, &announce));
+    };
+    genuine(&mut engine, 2, 0xA);
+    while engine.poll_event().is_some() {}
+
+    let started = Instant::now();
+    let attacker = locator(66, 7600);
+    let from = SocketAddr::V4(attacker.into());
+    let mut forged_endpoint = 1_000_000u64;
+    for node in 0..5000u64 {
+        let mut info = node_info(attacker);
+        info.lease_ms = 3_600_000;
+        let endpoints = (0..60)
+            .map(|_| {
+                forged_endpoint += 1;
+                on_topic(forged_endpoint, EndpointQos::Producer(Default::default()))
+            })
+            .collect();
+        let announce = Message::Announce(Announce {
+            node: info,
+            endpoints,
+            withdrawn: vec![],
+        });
+        engine.handle_datagram(
+            now,
+            from,
+            Via::Multicast,
+            &datagram(0xF000_0000 + node, &announce),
+        );
+        while engine.poll_event().is_some() {}
+    }
+    let flood = started.elapsed();
+    assert!(engine.nodes().count() <= MAX_NODES);
+    assert!(engine.endpoints().count() <= MAX_REMOTE_ENDPOINTS + 1);
+    assert!(engine.remote_bytes() <= MAX_REMOTE_BYTES);
+    assert!(engine.stats().evicted_nodes > 0, "{:?}", engine.stats());
+    let known = |engine: &Engine, id: u64| {
+        engine
+            .endpoint(&Guid {
+                participant: id,
+                entity: 1,
+            })
+            .is_some()
+    };
+    assert!(
+        known(&engine, 0xA),
+        "the genuine node known before the flood was evicted"
+    );
+
+    genuine(&mut engine, 3, 0xB);
+    let matched: Vec<_> = std::iter::from_fn(|| engine.poll_event()).collect();
+    assert!(
+        matched
+            .iter()
+            .any(|e| matches!(e, Event::Matched { local, remote }
+            if *local == consumer.guid && remote.guid.participant == 0xB)),
+        "the genuine newcomer is matched at once"
+    );
+    assert!(known(&engine, 0xA) && known(&engine, 0xB));
+    eprintln!(
+        "flood of 5000 nodes / 300000 endpoints: {:?}, {} nodes and {} endpoints kept, {} bytes \
+         accounted, {} nodes evicted",
+        flood,
+        engine.nodes().count(),
+        engine.endpoints().count(),
+        engine.remote_bytes(),
+        engine.stats().evicted_nodes
+    );
 }
 
 #[test]

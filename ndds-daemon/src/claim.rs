@@ -19,16 +19,23 @@
 //!
 //! The claim is made before any UDP socket is opened, so a second daemon is refused before it
 //! touches (or logs about) the discovery ports.
+//!
+//! Files of another user are never used, probed or removed: a lock file or socket at the path
+//! that belongs to someone else is a squatter's, refused with its owner named
+//! ([`crate::local::LocalError::Squatted`]). The socket is bound under a temporary name, given
+//! its mode (0660) and group, then renamed into place, so it is never reachable with the
+//! umask's permissions.
 
 use std::fs::File;
 use std::io::{Read as _, Seek as _, Write as _};
 use std::os::fd::AsRawFd as _;
-use std::os::unix::fs::{FileTypeExt as _, MetadataExt as _};
+use std::os::unix::fs::{FileTypeExt as _, MetadataExt as _, OpenOptionsExt as _};
 use std::path::{Path, PathBuf};
 
 use tokio::net::UnixListener;
 
 use crate::daemon::DaemonError;
+use crate::local;
 
 /// The socket path, owned by this daemon until dropped; dropping it removes the socket file
 /// (if it is still the one bound here) and releases the lock.
@@ -41,16 +48,25 @@ pub struct SocketClaim {
 }
 
 impl SocketClaim {
-    /// Claims `path` and binds a listener on it. Must be called inside a tokio runtime.
-    pub fn take(path: &Path) -> Result<(SocketClaim, UnixListener), DaemonError> {
+    /// Claims `path` and binds a listener on it, reachable by this user and `group`. Must be
+    /// called inside a tokio runtime.
+    pub fn take(
+        path: &Path,
+        group: Option<u32>,
+    ) -> Result<(SocketClaim, UnixListener), DaemonError> {
         let listen_err = |source| DaemonError::Listen {
             path: path.to_owned(),
             source,
         };
         if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent).map_err(listen_err)?;
+            // The default directories are the daemon's own; a chosen path's may be shared.
+            let private = parent == local::socket_dir() || parent == Path::new(local::SYSTEM_DIR);
+            local::prepare_dir(parent, group, private)?;
         }
         let lock = lock(path)?;
+        if let Ok(meta) = std::fs::symlink_metadata(path) {
+            local::owned_by_me(path, meta.uid())?;
+        }
         if std::os::unix::net::UnixStream::connect(path).is_ok() {
             return Err(DaemonError::AlreadyRunning {
                 path: path.to_owned(),
@@ -69,7 +85,7 @@ impl SocketClaim {
             }
             Err(_) => {}
         }
-        let listener = UnixListener::bind(path).map_err(listen_err)?;
+        let listener = bind(path, group)?;
         let inode = std::fs::metadata(path).ok().map(|m| m.ino());
         let claim = SocketClaim {
             path: path.to_owned(),
@@ -95,6 +111,31 @@ impl Drop for SocketClaim {
     }
 }
 
+/// Binds under a temporary name beside `path`, restricts the file, then renames it to `path`.
+fn bind(path: &Path, group: Option<u32>) -> Result<UnixListener, DaemonError> {
+    let mut name = path.as_os_str().to_owned();
+    name.push(format!(".{}.new", std::process::id()));
+    let fresh = PathBuf::from(name);
+    let _ = std::fs::remove_file(&fresh);
+    let listener = UnixListener::bind(&fresh).map_err(|source| DaemonError::Listen {
+        path: fresh.clone(),
+        source,
+    })?;
+    let placed = local::restrict_socket(&fresh, group)
+        .map_err(DaemonError::from)
+        .and_then(|()| {
+            std::fs::rename(&fresh, path).map_err(|source| DaemonError::Listen {
+                path: path.to_owned(),
+                source,
+            })
+        });
+    if let Err(err) = placed {
+        let _ = std::fs::remove_file(&fresh);
+        return Err(err);
+    }
+    Ok(listener)
+}
+
 /// The lock file of a socket path.
 pub fn lock_path(socket: &Path) -> PathBuf {
     let mut name = socket.as_os_str().to_owned();
@@ -115,8 +156,11 @@ fn lock(socket: &Path) -> Result<File, DaemonError> {
         .write(true)
         .create(true)
         .truncate(false)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW)
         .open(&path)
         .map_err(failed)?;
+    local::owned_by_me(&path, file.metadata().map_err(failed)?.uid())?;
     // SAFETY: flock on a file descriptor this function owns; no memory is shared.
     let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
     if locked != 0 {
@@ -147,8 +191,8 @@ mod tests {
     async fn a_held_claim_refuses_a_second_one_with_the_holder_pid() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("d.sock");
-        let (first, _listener) = SocketClaim::take(&path).unwrap();
-        match SocketClaim::take(&path) {
+        let (first, _listener) = SocketClaim::take(&path, None).unwrap();
+        match SocketClaim::take(&path, None) {
             Err(DaemonError::AlreadyRunning { pid, .. }) => {
                 assert_eq!(pid, Some(std::process::id()));
             }
@@ -156,7 +200,7 @@ mod tests {
         }
         drop(first);
         assert!(!path.exists(), "the socket goes with the claim");
-        let (_again, _listener) = SocketClaim::take(&path).expect("free again");
+        let (_again, _listener) = SocketClaim::take(&path, None).expect("free again");
     }
 
     #[tokio::test]
@@ -165,7 +209,7 @@ mod tests {
         let path = dir.path().join("d.sock");
         drop(std::os::unix::net::UnixListener::bind(&path).unwrap());
         assert!(path.exists());
-        let (_claim, _listener) = SocketClaim::take(&path).expect("stale file replaced");
+        let (_claim, _listener) = SocketClaim::take(&path, None).expect("stale file replaced");
         assert!(std::os::unix::net::UnixStream::connect(&path).is_ok());
     }
 }

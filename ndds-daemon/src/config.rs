@@ -6,7 +6,8 @@
 //! | setting | default |
 //! |---|---|
 //! | `domain` | 0 |
-//! | `socket` | `/tmp/ndds-<domain>.sock` |
+//! | `socket` | `ndds-<domain>.sock` in `$XDG_RUNTIME_DIR/ndds/`, `/run/ndds/` (root) or `$TMPDIR/ndds-<uid>/` ([`crate::local`]) |
+//! | `socket_group` | none: only the daemon's user may connect |
 //! | `interface` | `127.0.0.1` (loopback: this host only; name an interface to reach others) |
 //! | `multicast` | true |
 //! | `multicast_group` | `239.255.76.<domain>` |
@@ -40,9 +41,14 @@ pub struct ConfigFile {
     /// Domain id (0-232) [default: 0].
     #[cfg_attr(feature = "cli", arg(long, env = "NDDS_DOMAIN"))]
     pub domain: Option<u32>,
-    /// Unix socket path [default: /tmp/ndds-DOMAIN.sock].
+    /// Unix socket path [default: ndds-DOMAIN.sock in $XDG_RUNTIME_DIR/ndds, /run/ndds as
+    /// root, else $TMPDIR/ndds-UID].
     #[cfg_attr(feature = "cli", arg(long, env = "NDDS_SOCKET"))]
     pub socket: Option<PathBuf>,
+    /// A group whose members may connect to the socket too (mode 0660) [default: none, only
+    /// the daemon's user].
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub socket_group: Option<String>,
     /// Interface for discovery and data: an IPv4 address or interface name [default: 127.0.0.1].
     #[cfg_attr(feature = "cli", arg(long))]
     pub interface: Option<String>,
@@ -114,6 +120,7 @@ impl ConfigFile {
         ConfigFile {
             domain: self.domain.or(lower.domain),
             socket: self.socket.or(lower.socket),
+            socket_group: self.socket_group.or(lower.socket_group),
             interface: self.interface.or(lower.interface),
             multicast: self.multicast.or(lower.multicast),
             multicast_group: self.multicast_group.or(lower.multicast_group),
@@ -140,6 +147,9 @@ impl ConfigFile {
         let mut config = DaemonConfig::new(domain, interface);
         if let Some(socket) = self.socket {
             config.socket = socket;
+        }
+        if let Some(name) = self.socket_group.as_deref() {
+            config.socket_group = Some(crate::local::group(name)?);
         }
         if let Some(group) = self.multicast_group {
             if !group.is_multicast() {
@@ -180,6 +190,8 @@ pub struct DaemonConfig {
     pub domain: u16,
     /// Unix socket path clients connect to.
     pub socket: PathBuf,
+    /// Group id whose members may connect too (`None`: only the daemon's user).
+    pub socket_group: Option<u32>,
     /// Address of the interface used for discovery and data.
     pub interface: Ipv4Addr,
     /// Discovery multicast group.
@@ -218,7 +230,8 @@ impl DaemonConfig {
         );
         DaemonConfig {
             domain,
-            socket: domain::default_socket_path(domain),
+            socket: crate::local::default_socket(domain),
+            socket_group: None,
             interface,
             group: domain::multicast_group(domain),
             port: domain::discovery_port(domain),
@@ -285,6 +298,9 @@ pub enum ConfigError {
     /// The key file cannot be used.
     #[error(transparent)]
     Key(#[from] crate::keys::KeyError),
+    /// The socket group does not exist.
+    #[error(transparent)]
+    Local(#[from] crate::local::LocalError),
 }
 
 #[cfg(test)]
@@ -302,7 +318,10 @@ mod tests {
         assert_eq!(config.interface, Ipv4Addr::LOCALHOST);
         assert_eq!(config.port, 7605);
         assert_eq!(config.group, Ipv4Addr::new(239, 255, 76, 5));
-        assert_eq!(config.socket, PathBuf::from("/tmp/ndds-5.sock"));
+        assert_eq!(
+            config.socket,
+            crate::local::socket_dir().join("ndds-5.sock")
+        );
         assert_eq!(
             config.unicast_port, None,
             "the domain's default, with fallback"

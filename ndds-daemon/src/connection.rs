@@ -4,18 +4,24 @@
 //! the frames the driver queues for it. The first frame must be `Hello`; anything that does not
 //! decode ends the connection with a logged reason. The driver is told when the connection
 //! ends, whatever the cause, so the client's endpoints are withdrawn at once.
+//!
+//! Frames are read with [`FrameCodec`]: a length prefix over [`ipc::MAX_FRAME`] ends the
+//! connection, and a frame's buffer grows with the bytes that arrive, so a client that claims
+//! 16 MiB and sends 4 bytes holds 4 bytes of the daemon's memory, not 16 MiB.
 
+use bytes::{Buf as _, BufMut as _, Bytes, BytesMut};
 use futures_util::{SinkExt, StreamExt};
 use ndds_core::ipc::{self, ClientMessage, DaemonMessage};
 use tokio::net::UnixStream;
 use tokio::sync::mpsc;
-use tokio_util::codec::{FramedRead, FramedWrite, LengthDelimitedCodec};
+use tokio_util::codec::{Decoder, Encoder, FramedRead, FramedWrite};
 use tokio_util::sync::CancellationToken;
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use crate::driver::{ClientId, Counters, Input};
+use crate::local::PeerCred;
 
 /// Frames the driver may queue for one client before the client counts as not reading.
 pub const OUTBOX: usize = 4096;
@@ -23,12 +29,53 @@ pub const OUTBOX: usize = 4096;
 const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// The codec of the Unix-socket protocol: 4-byte big-endian length, then the body.
-pub fn codec() -> LengthDelimitedCodec {
-    LengthDelimitedCodec::builder()
-        .length_field_length(ipc::FRAME_PREFIX)
-        .big_endian()
-        .max_frame_length(ipc::MAX_FRAME)
-        .new_codec()
+///
+/// Unlike `tokio_util`'s `LengthDelimitedCodec`, decoding never reserves the length a prefix
+/// claims: the read buffer grows only as bytes arrive.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameCodec;
+
+impl Decoder for FrameCodec {
+    type Item = BytesMut;
+    type Error = std::io::Error;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<BytesMut>, Self::Error> {
+        let Some(prefix) = src.get(..ipc::FRAME_PREFIX) else {
+            return Ok(None);
+        };
+        let len = u32::from_be_bytes(prefix.try_into().expect("4-byte prefix")) as usize;
+        if len > ipc::MAX_FRAME {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "frame of {len} bytes exceeds the {} byte limit",
+                    ipc::MAX_FRAME
+                ),
+            ));
+        }
+        if src.len() < ipc::FRAME_PREFIX + len {
+            return Ok(None);
+        }
+        src.advance(ipc::FRAME_PREFIX);
+        Ok(Some(src.split_to(len)))
+    }
+}
+
+impl Encoder<Bytes> for FrameCodec {
+    type Error = std::io::Error;
+
+    fn encode(&mut self, body: Bytes, dst: &mut BytesMut) -> Result<(), Self::Error> {
+        let len = u32::try_from(body.len())
+            .ok()
+            .filter(|len| *len as usize <= ipc::MAX_FRAME)
+            .ok_or_else(|| {
+                std::io::Error::new(std::io::ErrorKind::InvalidInput, "frame too large")
+            })?;
+        dst.reserve(ipc::FRAME_PREFIX + body.len());
+        dst.put_u32(len);
+        dst.extend_from_slice(&body);
+        Ok(())
+    }
 }
 
 /// What the driver holds to talk to a connection.
@@ -44,19 +91,24 @@ pub struct ClientLink {
 pub async fn serve(
     stream: UnixStream,
     client: ClientId,
+    cred: PeerCred,
     inputs: mpsc::Sender<Input>,
     cancel: CancellationToken,
     counters: Arc<Counters>,
 ) {
     let (read_half, write_half) = stream.into_split();
-    let mut reader = FramedRead::new(read_half, codec());
-    let mut writer = FramedWrite::new(write_half, codec());
+    let mut reader = FramedRead::new(read_half, FrameCodec);
+    let mut writer = FramedWrite::new(write_half, FrameCodec);
     let (outbox, mut pending) = mpsc::channel(OUTBOX);
     let link = ClientLink {
         outbox,
         cancel: cancel.clone(),
     };
-    if inputs.send(Input::Opened { client, link }).await.is_err() {
+    if inputs
+        .send(Input::Opened { client, link, cred })
+        .await
+        .is_err()
+    {
         return;
     }
     let reason = loop {
@@ -115,12 +167,47 @@ pub async fn serve(
 }
 
 async fn write_frame(
-    writer: &mut FramedWrite<tokio::net::unix::OwnedWriteHalf, LengthDelimitedCodec>,
+    writer: &mut FramedWrite<tokio::net::unix::OwnedWriteHalf, FrameCodec>,
     message: &DaemonMessage,
 ) -> Result<(), String> {
     let body = ipc::encode_body(message).map_err(|err| format!("cannot encode: {err}"))?;
     writer
-        .send(bytes::Bytes::from(body))
+        .send(Bytes::from(body))
         .await
         .map_err(|err| format!("write failed: {err}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_claimed_length_reserves_nothing_until_bytes_arrive() {
+        let mut codec = FrameCodec;
+        let mut buf = BytesMut::new();
+        buf.extend_from_slice(&(ipc::MAX_FRAME as u32).to_be_bytes());
+        buf.extend_from_slice(b"abcd");
+        assert!(codec.decode(&mut buf).unwrap().is_none());
+        assert!(
+            buf.capacity() < 4096,
+            "capacity {} after a 16 MiB claim",
+            buf.capacity()
+        );
+    }
+
+    #[test]
+    fn frames_round_trip_and_oversized_claims_are_errors() {
+        let mut codec = FrameCodec;
+        let mut buf = BytesMut::new();
+        codec
+            .encode(Bytes::from_static(b"hello"), &mut buf)
+            .unwrap();
+        codec.encode(Bytes::from_static(b""), &mut buf).unwrap();
+        assert_eq!(&codec.decode(&mut buf).unwrap().unwrap()[..], b"hello");
+        assert_eq!(&codec.decode(&mut buf).unwrap().unwrap()[..], b"");
+        assert!(codec.decode(&mut buf).unwrap().is_none());
+        buf.extend_from_slice(&(ipc::MAX_FRAME as u32 + 1).to_be_bytes());
+        let err = codec.decode(&mut buf).unwrap_err();
+        assert_eq!(err.kind(), std::io::ErrorKind::InvalidData);
+    }
 }

@@ -22,6 +22,7 @@ use crate::claim::SocketClaim;
 use crate::config::DaemonConfig;
 use crate::connection;
 use crate::driver::{Counters, Driver, Input};
+use crate::local;
 use crate::peers::{self, Peer, PeerError};
 use crate::sockets::{self, DiscoverySockets, SocketError, UnicastPort};
 
@@ -64,6 +65,9 @@ pub enum DaemonError {
     /// A static peer could not be resolved or used.
     #[error(transparent)]
     Peer(#[from] PeerError),
+    /// The socket path or its directory is not safe to use (another user's, shared).
+    #[error(transparent)]
+    Local(#[from] crate::local::LocalError),
     /// The discovery settings are inconsistent (timers, too many peers).
     #[error(transparent)]
     Config(#[from] ndds_core::discovery::ConfigError),
@@ -85,7 +89,7 @@ impl Daemon {
     /// inside a tokio runtime.
     pub async fn bind(config: DaemonConfig) -> Result<Self, DaemonError> {
         // The socket first: a second daemon is refused before it opens (or logs about) ports.
-        let (claim, listener) = SocketClaim::take(&config.socket)?;
+        let (claim, listener) = SocketClaim::take(&config.socket, config.socket_group)?;
         let peers = peers::resolve(&config.peers, config.domain).await?;
         if config.interface.is_loopback() {
             for peer in peers.iter().filter(|p| p.locator.addr[0] != 127) {
@@ -284,6 +288,7 @@ async fn accept(
     tasks: TaskTracker,
 ) {
     let mut next_client = 1;
+    let slots = Arc::new(tokio::sync::Semaphore::new(local::MAX_CLIENTS));
     loop {
         let accepted = tokio::select! {
             () = stop.cancelled() => return,
@@ -291,16 +296,33 @@ async fn accept(
         };
         match accepted {
             Ok((stream, _)) => {
+                let Ok(slot) = slots.clone().try_acquire_owned() else {
+                    let refused = counters.connections_refused.fetch_add(1, Ordering::Relaxed);
+                    if refused.is_power_of_two() || refused == 0 {
+                        tracing::warn!(
+                            max = local::MAX_CLIENTS,
+                            refused = refused + 1,
+                            "too many local connections; closing new ones"
+                        );
+                    }
+                    continue;
+                };
+                let cred = match local::peer_cred(&stream) {
+                    Ok(cred) => cred,
+                    Err(err) => {
+                        counters.connections_refused.fetch_add(1, Ordering::Relaxed);
+                        tracing::warn!(%err, "cannot read a client's credentials; closing it");
+                        continue;
+                    }
+                };
                 let client = next_client;
                 next_client += 1;
                 let cancel = stop.child_token();
-                tasks.spawn(connection::serve(
-                    stream,
-                    client,
-                    inputs.clone(),
-                    cancel,
-                    counters.clone(),
-                ));
+                let (inputs, counters) = (inputs.clone(), counters.clone());
+                tasks.spawn(async move {
+                    connection::serve(stream, client, cred, inputs, cancel, counters).await;
+                    drop(slot);
+                });
             }
             Err(err) => {
                 tracing::warn!(%err, "accept failed");

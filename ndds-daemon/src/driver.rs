@@ -20,6 +20,7 @@ use ndds_core::wire::{DropReason, EndpointInfo, Guid, Locator};
 use tokio::net::UdpSocket;
 
 use crate::connection::ClientLink;
+use crate::local::PeerCred;
 use crate::peers::Peer;
 
 /// Daemon-local number of a connection.
@@ -43,6 +44,8 @@ pub enum Input {
         client: ClientId,
         /// How to reach it.
         link: ClientLink,
+        /// Who it is, from the kernel.
+        cred: PeerCred,
     },
     /// A connection sent a frame.
     Frame {
@@ -73,11 +76,14 @@ pub struct Counters {
     pub protocol_errors: AtomicU64,
     /// Datagrams the OS refused to send.
     pub send_errors: AtomicU64,
+    /// Connections closed at once because [`crate::local::MAX_CLIENTS`] were open.
+    pub connections_refused: AtomicU64,
 }
 
 #[derive(Debug)]
 struct Client {
     link: ClientLink,
+    cred: PeerCred,
     hello: Option<Hello>,
     entities: BTreeSet<u32>,
 }
@@ -132,11 +138,12 @@ impl Driver {
                 self.engine
                     .handle_datagram(Instant::now(), from, via, &bytes);
             }
-            Input::Opened { client, link } => {
+            Input::Opened { client, link, cred } => {
                 self.clients.insert(
                     client,
                     Client {
                         link,
+                        cred,
                         hello: None,
                         entities: BTreeSet::new(),
                     },
@@ -282,7 +289,18 @@ impl Driver {
             );
             return self.refuse(client, reason);
         }
-        tracing::info!(client, pid = hello.pid, name = hello.name, role = ?hello.role, "client connected");
+        // Who connected is the kernel's word; the pid in Hello is the client's own (it differs
+        // across pid namespaces) and only logged.
+        let cred = self.clients.get(&client).map(|c| c.cred);
+        tracing::info!(
+            client,
+            uid = cred.map(|c| c.uid),
+            pid = cred.map(|c| c.pid),
+            hello_pid = hello.pid,
+            name = hello.name,
+            role = ?hello.role,
+            "client connected"
+        );
         self.by_participant.insert(hello.participant, client);
         if let Some(entry) = self.clients.get_mut(&client) {
             entry.hello = Some(hello);
@@ -502,7 +520,8 @@ impl Driver {
                 let hello = c.hello.as_ref()?;
                 Some(ClientSummary {
                     participant: hello.participant,
-                    pid: hello.pid,
+                    pid: c.cred.pid,
+                    uid: c.cred.uid,
                     name: hello.name.clone(),
                     role: hello.role,
                     endpoints: c.entities.len() as u32,
@@ -522,6 +541,8 @@ impl Driver {
             ("bytes_received".to_owned(), stats.bytes_received),
             ("bytes_sent".to_owned(), stats.bytes_sent),
             ("invalid_endpoints".to_owned(), stats.invalid_endpoints),
+            ("evicted_nodes".to_owned(), stats.evicted_nodes),
+            ("refused_full".to_owned(), stats.refused_full),
         ];
         for reason in DropReason::ALL {
             out.push((format!("dropped_{}", reason.name()), stats.dropped(reason)));
@@ -533,6 +554,7 @@ impl Driver {
             ("slow_clients", &c.slow_clients),
             ("protocol_errors", &c.protocol_errors),
             ("send_errors", &c.send_errors),
+            ("connections_refused", &c.connections_refused),
         ] {
             out.push((name.to_owned(), value.load(Ordering::Relaxed)));
         }

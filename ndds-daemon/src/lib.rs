@@ -16,7 +16,8 @@
 //! - [`config`]: defaults, config file and their merge; [`iface`]: interface resolution;
 //!   [`peers`]: static unicast peers, parsed and resolved.
 //! - [`keys`]: domain key files (sealed domains).
-//! - [`claim`]: one daemon per socket path; [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
+//! - [`local`]: where the local socket lives, who may connect, who is at the other end;
+//!   [`claim`]: one daemon per socket path; [`daemon`]: bind, run, shutdown; [`driver`]: the task that owns the engine.
 //! - `cli`: the binary's command line, usable from other binaries too (feature `cli`, on by
 //!   default; the SDK turns it off, so a program embedding a daemon compiles neither clap nor
 //!   TOML).
@@ -32,6 +33,7 @@ pub mod driver;
 pub mod embed;
 pub mod iface;
 pub mod keys;
+pub mod local;
 pub mod peers;
 pub mod sockets;
 

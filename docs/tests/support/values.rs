@@ -8,7 +8,8 @@ use std::net::Ipv4Addr;
 use std::time::{Duration, Instant};
 
 use ndds_core::discovery::engine::{
-    MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES, MAX_REMOTE_ENDPOINTS,
+    MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES, MAX_REMOTE_BYTES,
+    MAX_REMOTE_ENDPOINTS, NODE_OVERHEAD,
 };
 use ndds_core::discovery::fanout::unicast_window;
 use ndds_core::discovery::{DiscoveryConfig, Engine, MAX_PEERS, MAX_TOPIC_LEN};
@@ -56,6 +57,8 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("MAX_NODES", MAX_NODES.to_string()),
         ("MAX_ENDPOINTS_PER_NODE", MAX_ENDPOINTS_PER_NODE.to_string()),
         ("MAX_REMOTE_ENDPOINTS", MAX_REMOTE_ENDPOINTS.to_string()),
+        ("MAX_REMOTE_BYTES", MAX_REMOTE_BYTES.to_string()),
+        ("NODE_OVERHEAD", NODE_OVERHEAD.to_string()),
         ("MAX_PENDING_REPLIES", MAX_PENDING_REPLIES.to_string()),
         ("MAX_LEASE", duration(MAX_LEASE)),
         ("MAX_PEERS", MAX_PEERS.to_string()),

@@ -22,14 +22,15 @@
 //! fan-out they need is judged at the instant of the latest input.
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::config::{ConfigError, DiscoveryConfig};
 use super::event::{Destination, Event, LossReason, Transmit};
 use super::fanout::{Fanout, Via};
-use super::table::{Entry, Origin, Table};
+use super::sources::Sources;
+use super::table::{Entry, Origin, Table, entry_cost};
 use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
@@ -38,12 +39,18 @@ use crate::wire::{
 
 /// Longest topic name accepted, in bytes.
 pub const MAX_TOPIC_LEN: usize = 256;
-/// Most remote nodes remembered; datagrams from further new nodes are dropped as invalid.
+/// Most remote nodes remembered; beyond it, nodes are evicted (see [`super::sources`]).
 pub const MAX_NODES: usize = 4096;
 /// Most endpoints remembered per remote node; further new ones are ignored and counted.
 pub const MAX_ENDPOINTS_PER_NODE: usize = 16_384;
-/// Most remote endpoints remembered in all; further new ones are ignored and counted.
+/// Most remote endpoints remembered in all; beyond it, nodes are evicted (see
+/// [`super::sources`]).
 pub const MAX_REMOTE_ENDPOINTS: usize = 262_144;
+/// Most bytes (estimated: [`super::table::entry_cost`], [`NODE_OVERHEAD`]) the remote nodes
+/// and their endpoints may hold; beyond it, nodes are evicted (see [`super::sources`]).
+pub const MAX_REMOTE_BYTES: usize = 48 << 20;
+/// Bytes a remote node's own entry is estimated to hold, beyond its host name and version.
+pub const NODE_OVERHEAD: usize = 512;
 /// Most answers to solicitations waiting for their jitter delay.
 pub const MAX_PENDING_REPLIES: usize = 1024;
 /// Longest lease accepted from a remote node; longer ones are shortened to this.
@@ -65,6 +72,10 @@ pub struct RemoteNode {
     pub last_multicast: Option<Instant>,
     /// When it is forgotten unless refreshed.
     pub expires: Instant,
+    /// The address it is charged to (the source address of its datagrams).
+    pub source: IpAddr,
+    /// Estimated bytes it holds here: its own entry and its endpoints.
+    pub charged: usize,
 }
 
 impl RemoteNode {
@@ -100,6 +111,11 @@ pub struct Stats {
     pub seal: OpenStats,
     /// Datagrams not sent because they could not be sealed or grew too large sealed.
     pub unsealable: u64,
+    /// Remote nodes evicted (with their endpoints) to make room in full tables.
+    pub evicted_nodes: u64,
+    /// New remote nodes or endpoints refused because the tables were full and their own
+    /// source was the busiest (nobody else's entries are evicted for it).
+    pub refused_full: u64,
 }
 
 impl Stats {
@@ -149,6 +165,8 @@ pub struct Engine {
     table: Table,
     nodes: HashMap<u64, RemoteNode>,
     node_expiry: BTreeSet<(Instant, u64)>,
+    /// What each source address holds, for eviction when the tables are full.
+    sources: Sources,
     withdrawn: VecDeque<(Guid, u8)>,
     solicits: VecDeque<Instant>,
     replies: Vec<(Instant, Locator)>,
@@ -191,6 +209,7 @@ impl Engine {
             table: Table::default(),
             nodes: HashMap::new(),
             node_expiry: BTreeSet::new(),
+            sources: Sources::default(),
             withdrawn: VecDeque::new(),
             solicits,
             replies: Vec::new(),
@@ -257,6 +276,11 @@ impl Engine {
     /// Counters.
     pub fn stats(&self) -> &Stats {
         &self.stats
+    }
+
+    /// Estimated bytes held by remote nodes and their endpoints (at most [`MAX_REMOTE_BYTES`]).
+    pub fn remote_bytes(&self) -> usize {
+        self.sources.total()
     }
 
     /// Known remote nodes.
@@ -448,40 +472,85 @@ impl Engine {
         info: NodeInfo,
     ) -> Result<bool, DropReason> {
         let lease = lease_of(&info);
-        let full = self.nodes.len() >= MAX_NODES;
         let by_multicast = (via == Via::Multicast).then_some(now);
-        match self.nodes.get_mut(&node) {
-            Some(known) => {
-                self.node_expiry.remove(&(known.expires, node));
-                known.info = info;
-                known.last_from = from;
-                known.last_seen = now;
-                known.last_multicast = by_multicast.or(known.last_multicast);
-                known.expires = now + lease;
-                self.node_expiry.insert((known.expires, node));
-                Ok(false)
+        if let Some(known) = self.nodes.get_mut(&node) {
+            self.node_expiry.remove(&(known.expires, node));
+            if known.source == from.ip() {
+                self.sources.heard(known.source, node, known.last_seen, now);
+            } else {
+                self.sources
+                    .remove(known.source, node, known.last_seen, known.charged);
+                self.sources.add(from.ip(), node, now, known.charged);
+                known.source = from.ip();
             }
-            None if full => {
-                tracing::warn!(limit = MAX_NODES, "too many nodes; ignoring a new one");
-                Err(DropReason::Invalid)
-            }
-            None => {
-                self.events.push_back(Event::NodeDiscovered {
-                    node,
-                    info: info.clone(),
-                });
-                self.nodes.insert(
-                    node,
-                    RemoteNode {
-                        info,
-                        last_from: from,
-                        last_seen: now,
-                        last_multicast: by_multicast,
-                        expires: now + lease,
-                    },
+            known.info = info;
+            known.last_from = from;
+            known.last_seen = now;
+            known.last_multicast = by_multicast.or(known.last_multicast);
+            known.expires = now + lease;
+            self.node_expiry.insert((known.expires, node));
+            self.recharge(node);
+            return Ok(false);
+        }
+        let cost = node_cost(&info);
+        if !self.make_room(cost, None, |engine| engine.nodes.len() >= MAX_NODES) {
+            return Err(DropReason::Invalid);
+        }
+        self.events.push_back(Event::NodeDiscovered {
+            node,
+            info: info.clone(),
+        });
+        self.nodes.insert(
+            node,
+            RemoteNode {
+                info,
+                last_from: from,
+                last_seen: now,
+                last_multicast: by_multicast,
+                expires: now + lease,
+                source: from.ip(),
+                charged: cost,
+            },
+        );
+        self.sources.add(from.ip(), node, now, cost);
+        self.node_expiry.insert((now + lease, node));
+        Ok(true)
+    }
+
+    /// Evicts nodes until `bytes` more fit and `full` no longer holds; false (counted) when
+    /// the busiest source holds only `keep`, so nothing may be evicted for it.
+    fn make_room(
+        &mut self,
+        bytes: usize,
+        keep: Option<u64>,
+        full: impl Fn(&Engine) -> bool,
+    ) -> bool {
+        while full(self) || self.sources.total() + bytes > MAX_REMOTE_BYTES {
+            let Some(victim) = self.sources.victim(keep) else {
+                self.stats.refused_full += 1;
+                return false;
+            };
+            if self.stats.evicted_nodes.is_power_of_two() || self.stats.evicted_nodes == 0 {
+                tracing::warn!(
+                    node = format_args!("{victim:016x}"),
+                    evicted = self.stats.evicted_nodes + 1,
+                    "discovery tables full; evicting the oldest node of the busiest source"
                 );
-                self.node_expiry.insert((now + lease, node));
-                Ok(true)
+            }
+            self.stats.evicted_nodes += 1;
+            self.forget_node(victim, LossReason::Evicted);
+        }
+        true
+    }
+
+    /// Brings a node's charge up to date with its endpoints.
+    fn recharge(&mut self, node: u64) {
+        let endpoints = self.table.bytes_of(Origin::Remote(node));
+        if let Some(known) = self.nodes.get_mut(&node) {
+            let now = node_cost(&known.info) + endpoints;
+            if now != known.charged {
+                self.sources.recharge(known.source, known.charged, now);
+                known.charged = now;
             }
         }
     }
@@ -490,8 +559,7 @@ impl Engine {
         let owner = self.table.get(&info.guid).map(|e| e.origin);
         // Nobody may announce one of our own endpoints, and no node more than its share.
         let over_cap = owner != Some(Origin::Remote(node))
-            && (self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE
-                || (owner.is_none() && self.table.count_remote() >= MAX_REMOTE_ENDPOINTS));
+            && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE;
         if owner == Some(Origin::Local) || over_cap {
             self.stats.invalid_endpoints += 1;
             return;
@@ -502,6 +570,10 @@ impl Engine {
             // without a flap.
             self.table
                 .move_to(&info.guid, Origin::Remote(node), expires);
+            self.recharge(node);
+            if let Some(Origin::Remote(previous)) = owner.filter(|o| *o != Origin::Remote(node)) {
+                self.recharge(previous);
+            }
             return;
         }
         if let Err(reason) = check_endpoint(&info) {
@@ -510,13 +582,25 @@ impl Engine {
             return;
         }
         let guid = info.guid;
-        self.table.remove(&guid, &mut self.events);
+        if let Some(Origin::Remote(previous)) = owner {
+            self.table.remove(&guid, &mut self.events);
+            self.recharge(previous);
+        }
+        let is_new = |engine: &Engine| {
+            engine.table.get(&guid).is_none() && engine.table.count_remote() >= MAX_REMOTE_ENDPOINTS
+        };
+        if !self.make_room(entry_cost(&info), Some(node), is_new) || !self.nodes.contains_key(&node)
+        {
+            self.stats.invalid_endpoints += 1;
+            return;
+        }
         let entry = Entry {
             info,
             origin: Origin::Remote(node),
             expires: Some(expires),
         };
         self.table.insert(entry, &mut self.events);
+        self.recharge(node);
     }
 
     fn remove_remote(&mut self, node: u64, guid: &Guid) {
@@ -526,6 +610,7 @@ impl Engine {
             .is_some_and(|e| e.origin == Origin::Remote(node))
         {
             self.table.remove(guid, &mut self.events);
+            self.recharge(node);
         }
     }
 
@@ -535,6 +620,8 @@ impl Engine {
         }
         if let Some(known) = self.nodes.remove(&node) {
             self.node_expiry.remove(&(known.expires, node));
+            self.sources
+                .remove(known.source, node, known.last_seen, known.charged);
             self.events.push_back(Event::NodeLost { node, reason });
         }
     }
@@ -660,7 +747,11 @@ impl Engine {
             self.forget_node(node, LossReason::Expired);
         }
         for guid in self.table.expired(now) {
-            self.table.remove(&guid, &mut self.events);
+            if let Some(entry) = self.table.remove(&guid, &mut self.events)
+                && let Origin::Remote(node) = entry.origin
+            {
+                self.recharge(node);
+            }
         }
     }
 
@@ -865,4 +956,9 @@ fn check_endpoint(info: &EndpointInfo) -> Result<(), LocalError> {
         });
     }
     Ok(())
+}
+
+/// The estimated bytes a remote node's own entry holds.
+fn node_cost(info: &NodeInfo) -> usize {
+    NODE_OVERHEAD + info.hostname.len() + info.version.len()
 }

@@ -53,6 +53,8 @@ pub enum LossReason {
     Expired,
     /// It said `Bye`.
     Bye,
+    /// The discovery tables were full and it was the oldest node of the busiest source.
+    Evicted,
 }
 
 /// Where a datagram produced by the engine must go.

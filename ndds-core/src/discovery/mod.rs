@@ -2,12 +2,14 @@
 //! withdraw on close, decay remote entries, and match producers with consumers.
 //!
 //! See [`engine`] for the call order and behaviour, [`fanout`] for where datagrams go
-//! (multicast group, static peers, unicast-only nodes), [`table`] for the matching rules.
+//! (multicast group, static peers, unicast-only nodes), [`table`] for the matching rules,
+//! [`sources`] for how full tables are made room in.
 
 pub mod config;
 pub mod engine;
 pub mod event;
 pub mod fanout;
+pub mod sources;
 pub mod table;
 
 pub use config::{ConfigError, DiscoveryConfig, MAX_PEERS};

@@ -3,8 +3,15 @@
 //!
 //! Matching: a producer and a consumer match when their topic names are equal, their type
 //! fingerprints are equal, and the producer offers reliability if the consumer requests it;
-//! otherwise, on one topic, they are *incompatible* (see [`incompatibility`]). Events are produced only for the local side of a pair; a pair of two local
-//! endpoints produces an event for each.
+//! otherwise, on one topic, they are *incompatible* (see [`incompatibility`]). Events are
+//! produced only for the local side of a pair; a pair of two local endpoints produces an event
+//! for each.
+//!
+//! Cost: each side of a topic keeps its local and remote endpoints apart, so adding or removing
+//! a remote endpoint visits only the local endpoints of the opposite side: a burst of `n`
+//! remote endpoints on one topic costs `n` times the (few) local ones, never `n²`. The table
+//! also keeps the estimated bytes each owner's entries hold ([`entry_cost`]), for the engine's
+//! memory bound.
 
 use std::collections::{BTreeSet, HashMap};
 use std::time::Instant;
@@ -57,22 +64,64 @@ pub struct Entry {
     pub expires: Option<Instant>,
 }
 
+/// Bytes an entry is estimated to hold beyond its encoded size: the entry, its keys in the
+/// indexes, and the allocations of its strings and layout.
+const ENTRY_OVERHEAD: usize = 512;
+
+/// The estimated memory held by an entry of `info`: twice its encoded size (decoded strings
+/// and layout nodes are larger than their bytes on the wire) plus the indexes' share.
+pub fn entry_cost(info: &EndpointInfo) -> usize {
+    let size = postcard::ser_flavors::Size::default();
+    let encoded = postcard::serialize_with_flavor(info, size).unwrap_or(crate::wire::MAX_DATAGRAM);
+    ENTRY_OVERHEAD + 2 * encoded
+}
+
+/// One side (producers or consumers) of a topic: local and remote endpoints apart.
+#[derive(Debug, Default)]
+struct Side {
+    local: BTreeSet<Guid>,
+    remote: BTreeSet<Guid>,
+}
+
+impl Side {
+    fn of(&mut self, origin: Origin) -> &mut BTreeSet<Guid> {
+        match origin {
+            Origin::Local => &mut self.local,
+            Origin::Remote(_) => &mut self.remote,
+        }
+    }
+
+    /// The endpoints an endpoint of `origin` pairs with on this side: all of them for a local
+    /// one, the local ones for a remote one (a remote pair concerns no client here).
+    fn partners(&self, origin: Origin) -> impl Iterator<Item = &Guid> {
+        let remote = match origin {
+            Origin::Local => Some(&self.remote),
+            Origin::Remote(_) => None,
+        };
+        self.local.iter().chain(remote.into_iter().flatten())
+    }
+
+    fn is_empty(&self) -> bool {
+        self.local.is_empty() && self.remote.is_empty()
+    }
+}
+
 /// The endpoints of one topic, by kind, so matching visits only the opposite kind.
 #[derive(Debug, Default)]
 struct TopicEntry {
-    producers: BTreeSet<Guid>,
-    consumers: BTreeSet<Guid>,
+    producers: Side,
+    consumers: Side,
 }
 
 impl TopicEntry {
-    fn side(&mut self, kind: EndpointKind) -> &mut BTreeSet<Guid> {
+    fn side(&mut self, kind: EndpointKind) -> &mut Side {
         match kind {
             EndpointKind::Producer => &mut self.producers,
             EndpointKind::Consumer => &mut self.consumers,
         }
     }
 
-    fn opposite(&self, kind: EndpointKind) -> &BTreeSet<Guid> {
+    fn opposite(&self, kind: EndpointKind) -> &Side {
         match kind {
             EndpointKind::Producer => &self.consumers,
             EndpointKind::Consumer => &self.producers,
@@ -92,6 +141,8 @@ pub struct Table {
     by_topic: HashMap<String, TopicEntry>,
     by_origin: HashMap<Origin, BTreeSet<Guid>>,
     by_expiry: BTreeSet<(Instant, Guid)>,
+    /// Estimated bytes held by each owner's entries ([`entry_cost`]).
+    bytes: HashMap<Origin, usize>,
 }
 
 impl Table {
@@ -102,13 +153,28 @@ impl Table {
 
     /// Gives an existing entry its (possibly new) owner and expiry, without match events: the
     /// endpoint itself did not change.
+    /// Moving between a local and a remote owner is not a move: remove and insert instead.
     pub fn move_to(&mut self, guid: &Guid, origin: Origin, expires: Instant) {
-        if let Some(entry) = self.entries.get_mut(guid) {
-            unindex(&mut self.by_origin, &mut self.by_expiry, entry);
-            entry.origin = origin;
-            entry.expires = Some(expires);
-            index(&mut self.by_origin, &mut self.by_expiry, entry);
-        }
+        let Some(entry) = self.entries.get_mut(guid) else {
+            return;
+        };
+        debug_assert_eq!(
+            entry.origin == Origin::Local,
+            origin == Origin::Local,
+            "an entry changes between local and remote only by removal"
+        );
+        let cost = entry_cost(&entry.info);
+        unindex(&mut self.by_origin, &mut self.by_expiry, entry);
+        uncharge(&mut self.bytes, entry.origin, cost);
+        entry.origin = origin;
+        entry.expires = Some(expires);
+        index(&mut self.by_origin, &mut self.by_expiry, entry);
+        *self.bytes.entry(origin).or_default() += cost;
+    }
+
+    /// Estimated bytes held by the entries of `origin`.
+    pub fn bytes_of(&self, origin: Origin) -> usize {
+        self.bytes.get(&origin).copied().unwrap_or(0)
     }
 
     /// All entries.
@@ -132,7 +198,7 @@ impl Table {
         let guid = entry.info.guid;
         let kind = entry.info.kind();
         let topic = self.by_topic.entry(entry.info.topic.clone()).or_default();
-        for other_guid in topic.opposite(kind) {
+        for other_guid in topic.opposite(kind).partners(entry.origin) {
             let Some(other) = self.entries.get(other_guid) else {
                 continue;
             };
@@ -143,8 +209,9 @@ impl Table {
                 events.extend([pair_event(&other.info, &entry.info)]);
             }
         }
-        topic.side(kind).insert(guid);
+        topic.side(kind).of(entry.origin).insert(guid);
         index(&mut self.by_origin, &mut self.by_expiry, &entry);
+        *self.bytes.entry(entry.origin).or_default() += entry_cost(&entry.info);
         self.entries.insert(guid, entry);
     }
 
@@ -153,10 +220,11 @@ impl Table {
     pub fn remove(&mut self, guid: &Guid, events: &mut impl Extend<Event>) -> Option<Entry> {
         let entry = self.entries.remove(guid)?;
         unindex(&mut self.by_origin, &mut self.by_expiry, &entry);
+        uncharge(&mut self.bytes, entry.origin, entry_cost(&entry.info));
         let kind = entry.info.kind();
         if let Some(topic) = self.by_topic.get_mut(&entry.info.topic) {
-            topic.side(kind).remove(guid);
-            for other_guid in topic.opposite(kind) {
+            topic.side(kind).of(entry.origin).remove(guid);
+            for other_guid in topic.opposite(kind).partners(entry.origin) {
                 let Some(other) = self.entries.get(other_guid) else {
                     continue;
                 };
@@ -224,6 +292,15 @@ fn index(
         .insert(entry.info.guid);
     if let Some(at) = entry.expires {
         by_expiry.insert((at, entry.info.guid));
+    }
+}
+
+fn uncharge(bytes: &mut HashMap<Origin, usize>, origin: Origin, cost: usize) {
+    if let Some(held) = bytes.get_mut(&origin) {
+        *held = held.saturating_sub(cost);
+        if *held == 0 {
+            bytes.remove(&origin);
+        }
     }
 }
 

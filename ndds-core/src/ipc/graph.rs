@@ -63,8 +63,10 @@ pub struct PeerSummary {
 pub struct ClientSummary {
     /// Participant id.
     pub participant: u64,
-    /// Process id.
+    /// Process id, as the daemon's kernel saw it (`SO_PEERCRED`), not as the client said.
     pub pid: u32,
+    /// User id, from the kernel.
+    pub uid: u32,
     /// Process name.
     pub name: String,
     /// Client or tool.
