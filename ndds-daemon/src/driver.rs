@@ -4,11 +4,12 @@
 //! timer) is handled here in order, then the engine's transmits are sent and its events routed
 //! to the clients that own the local endpoints they name.
 
+use std::collections::VecDeque;
 use std::collections::{BTreeSet, HashMap, HashSet};
 use std::net::{SocketAddr, SocketAddrV4};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ndds_core::discovery::{Destination, Engine, Event, Origin, Transmit, Via};
 use ndds_core::ipc::{
@@ -18,6 +19,7 @@ use ndds_core::ipc::{
 use ndds_core::seal::OpenError;
 use ndds_core::wire::{DropReason, EndpointInfo, Guid, Locator};
 use tokio::net::UdpSocket;
+use tokio::sync::mpsc;
 
 use crate::connection::ClientLink;
 use crate::local::PeerCred;
@@ -80,10 +82,37 @@ pub struct Counters {
     pub connections_refused: AtomicU64,
 }
 
+/// What waits for a client whose outbox is full: its answers in order, then the pairs whose
+/// state changed, coalesced (a pair is sent once, in its state at the time of sending), so a
+/// burst larger than the outbox costs a few bytes per pair and never disconnects a client
+/// that reads.
+#[derive(Debug, Default)]
+struct Backlog {
+    answers: VecDeque<DaemonMessage>,
+    /// (local entity, remote endpoint) of the changed pairs.
+    pairs: BTreeSet<(u32, Guid)>,
+    /// Since when nothing could be sent (reset by every frame that goes out).
+    stalled_since: Option<Instant>,
+}
+
+impl Backlog {
+    fn is_empty(&self) -> bool {
+        self.answers.is_empty() && self.pairs.is_empty()
+    }
+}
+
+/// Answers a client may leave unread beyond its outbox before it counts as not reading.
+pub const MAX_BACKLOG_ANSWERS: usize = 1024;
+/// How long a client may read nothing while frames wait before it is disconnected.
+pub const SLOW_CLIENT: Duration = Duration::from_secs(10);
+/// How often a backlog is retried.
+const BACKLOG_RETRY: Duration = Duration::from_millis(10);
+
 #[derive(Debug)]
 struct Client {
     link: ClientLink,
     cred: PeerCred,
+    backlog: Backlog,
     hello: Option<Hello>,
     entities: BTreeSet<u32>,
 }
@@ -98,6 +127,7 @@ pub struct Driver {
     clients: HashMap<ClientId, Client>,
     by_participant: HashMap<u64, ClientId>,
     counters: Arc<Counters>,
+    slow_client: Duration,
 }
 
 impl Driver {
@@ -118,12 +148,23 @@ impl Driver {
             clients: HashMap::new(),
             by_participant: HashMap::new(),
             counters,
+            slow_client: SLOW_CLIENT,
         }
     }
 
-    /// When the engine's timer must fire next.
+    /// How long a client may read nothing while frames wait for it ([`SLOW_CLIENT`]).
+    pub fn set_slow_client(&mut self, after: Duration) {
+        self.slow_client = after;
+    }
+
+    /// When the engine's timer must fire next, or a client's backlog be retried.
     pub fn deadline(&self) -> Option<Instant> {
-        self.engine.poll_timeout()
+        let engine = self.engine.poll_timeout();
+        if self.clients.values().any(|c| !c.backlog.is_empty()) {
+            let retry = Instant::now() + BACKLOG_RETRY;
+            return Some(engine.map_or(retry, |at| at.min(retry)));
+        }
+        engine
     }
 
     /// Runs the engine's due timers.
@@ -144,6 +185,7 @@ impl Driver {
                     Client {
                         link,
                         cred,
+                        backlog: Backlog::default(),
                         hello: None,
                         entities: BTreeSet::new(),
                     },
@@ -172,7 +214,7 @@ impl Driver {
                 idle = false;
                 self.route(event);
             }
-            if idle {
+            if idle && self.drain_backlogs() {
                 return;
             }
         }
@@ -238,20 +280,102 @@ impl Driver {
     }
 
     fn send(&mut self, client: ClientId, message: DaemonMessage) {
+        let Some(entry) = self.clients.get_mut(&client) else {
+            return;
+        };
+        let message = if entry.backlog.is_empty() {
+            match entry.link.outbox.try_send(message) {
+                Ok(()) => return,
+                // The connection already ended (a client that just exited); its `Closed` input
+                // is on its way and cleans up. Nothing to report.
+                Err(mpsc::error::TrySendError::Closed(_)) => return,
+                Err(mpsc::error::TrySendError::Full(message)) => {
+                    entry.backlog.stalled_since = Some(Instant::now());
+                    message
+                }
+            }
+        } else {
+            message
+        };
+        // Behind what already waits, to keep the order.
+        match message {
+            DaemonMessage::Matched { local, remote }
+            | DaemonMessage::Incompatible { local, remote } => {
+                entry.backlog.pairs.insert((local, remote.guid));
+            }
+            DaemonMessage::Unmatched { local, remote } => {
+                entry.backlog.pairs.insert((local, remote));
+            }
+            answer if entry.backlog.answers.len() < MAX_BACKLOG_ANSWERS => {
+                entry.backlog.answers.push_back(answer);
+            }
+            _ => self.drop_slow(client),
+        }
+    }
+
+    fn drop_slow(&mut self, client: ClientId) {
+        self.counters.slow_clients.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!(client, "client is not reading its socket; disconnecting it");
+        if let Some(entry) = self.clients.get(&client) {
+            entry.link.cancel.cancel();
+        }
+        self.on_closed(client, "not reading");
+    }
+
+    /// Sends what waits in the clients' backlogs, as far as their outboxes take it; drops a
+    /// client that read nothing for [`SLOW_CLIENT`]. True when nothing new happened in the
+    /// engine (dropping a client withdraws its endpoints, which the caller must flush).
+    fn drain_backlogs(&mut self) -> bool {
+        let waiting: Vec<ClientId> = self
+            .clients
+            .iter()
+            .filter(|(_, c)| !c.backlog.is_empty())
+            .map(|(id, _)| *id)
+            .collect();
+        let mut quiet = true;
+        for client in waiting {
+            self.drain(client);
+            let now = Instant::now();
+            let stalled = self
+                .clients
+                .get(&client)
+                .and_then(|c| c.backlog.stalled_since);
+            if stalled.is_some_and(|since| now.duration_since(since) >= self.slow_client) {
+                self.drop_slow(client);
+                quiet = false;
+            }
+        }
+        quiet
+    }
+
+    fn drain(&mut self, client: ClientId) {
         let Some(entry) = self.clients.get(&client) else {
             return;
         };
-        match entry.link.outbox.try_send(message) {
-            Ok(()) => {}
-            // The connection already ended (a client that just exited); its `Closed` input is
-            // on its way and cleans up. Nothing to report.
-            Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => {}
-            Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => {
-                self.counters.slow_clients.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(client, "client is not reading its socket; disconnecting it");
-                entry.link.cancel.cancel();
-                self.on_closed(client, "not reading");
-            }
+        let Some(participant) = entry.hello.as_ref().map(|h| h.participant) else {
+            return;
+        };
+        loop {
+            let Some(entry) = self.clients.get_mut(&client) else {
+                return;
+            };
+            let Ok(permit) = entry.link.outbox.try_reserve() else {
+                return;
+            };
+            let message = if let Some(answer) = entry.backlog.answers.pop_front() {
+                answer
+            } else if let Some((entity, remote)) = entry.backlog.pairs.pop_first() {
+                let local = Guid {
+                    participant,
+                    entity,
+                };
+                pair_now(&self.engine, local, remote)
+            } else {
+                entry.backlog.stalled_since = None;
+                return;
+            };
+            permit.send(message);
+            entry.backlog.stalled_since = Some(Instant::now());
         }
     }
 
@@ -575,4 +699,29 @@ impl Driver {
 /// A node or participant id as tools print it.
 pub fn hex(id: u64) -> String {
     format!("{id:016x}")
+}
+
+/// The message that tells the owner of `local` the current state of its pair with `remote`.
+fn pair_now(engine: &Engine, local: Guid, remote: Guid) -> DaemonMessage {
+    let local_info = engine.endpoint(&local).map(|e| &e.info);
+    let remote_info = engine.endpoint(&remote).map(|e| &e.info);
+    match (local_info, remote_info) {
+        (Some(l), Some(r)) if l.topic == r.topic && l.kind() != r.kind() => {
+            if ndds_core::discovery::incompatibility(l, r).is_none() {
+                DaemonMessage::Matched {
+                    local: local.entity,
+                    remote: r.clone(),
+                }
+            } else {
+                DaemonMessage::Incompatible {
+                    local: local.entity,
+                    remote: r.clone(),
+                }
+            }
+        }
+        _ => DaemonMessage::Unmatched {
+            local: local.entity,
+            remote,
+        },
+    }
 }

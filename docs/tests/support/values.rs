@@ -82,6 +82,11 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("FRAME_PREFIX", ipc::FRAME_PREFIX.to_string()),
         ("MAX_FRAME", ipc::MAX_FRAME.to_string()),
         ("OUTBOX", ndds_daemon::connection::OUTBOX.to_string()),
+        (
+            "MAX_BACKLOG_ANSWERS",
+            ndds_daemon::driver::MAX_BACKLOG_ANSWERS.to_string(),
+        ),
+        ("SLOW_CLIENT", duration(ndds_daemon::driver::SLOW_CLIENT)),
         ("interface", daemon.interface.to_string()),
         ("unicast_port", unicast_port_default(&daemon)),
         ("multicast", daemon.multicast.to_string()),

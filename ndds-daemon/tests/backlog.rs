@@ -1,0 +1,242 @@
+//! A burst of match events larger than a client's outbox: the client that reads is never
+//! disconnected and ends with the current state of every pair; one that reads nothing is
+//! dropped after the slow-client time.
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use ndds_core::discovery::{DiscoveryConfig, Engine, Via};
+use ndds_core::ipc::{ClientMessage, DaemonMessage, EndpointDecl, Hello, IPC_VERSION, Role};
+use ndds_core::types::TypeDescription;
+use ndds_core::wire::{
+    self, Announce, ConsumerQosWire, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo,
+    ProducerQosWire, Withdraw,
+};
+use ndds_daemon::connection::ClientLink;
+use ndds_daemon::driver::{Counters, Driver, Input};
+use ndds_daemon::local::PeerCred;
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+
+const TOPIC: &str = "arm/joints";
+const PARTICIPANT: u64 = 0x77;
+const REMOTE: Locator = Locator {
+    addr: [127, 0, 0, 9],
+    port: 7999,
+};
+/// The outbox of the test client: far smaller than the burst.
+const OUTBOX: usize = 8;
+const BURST: u64 = 500;
+
+fn producer(participant: u64) -> EndpointInfo {
+    let type_desc = TypeDescription::of::<f64>();
+    EndpointInfo {
+        guid: Guid {
+            participant,
+            entity: 1,
+        },
+        topic: TOPIC.into(),
+        fingerprint: type_desc.fingerprint(),
+        type_desc,
+        qos: EndpointQos::Producer(ProducerQosWire::default()),
+        locator: REMOTE,
+        pid: 9,
+        process: "remote".into(),
+    }
+}
+
+fn datagram(message: &Message) -> Vec<u8> {
+    let mut out = Vec::new();
+    wire::encode(0, 0xBEEF, message, &mut out).unwrap();
+    out
+}
+
+async fn setup() -> (
+    Driver,
+    mpsc::Receiver<DaemonMessage>,
+    CancellationToken,
+    Arc<Counters>,
+) {
+    let socket = tokio::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0))
+        .await
+        .unwrap();
+    let port = socket.local_addr().unwrap().port();
+    let config = DiscoveryConfig::new(
+        0,
+        Locator {
+            addr: [127, 0, 0, 1],
+            port,
+        },
+    );
+    let engine = Engine::new(config, Instant::now()).unwrap();
+    let counters = Arc::new(Counters::default());
+    // No group: nothing is sent off this host.
+    let mut driver = Driver::new(engine, Arc::new(socket), None, Vec::new(), counters.clone());
+    let (outbox, inbox) = mpsc::channel(OUTBOX);
+    let cancel = CancellationToken::new();
+    let cred = PeerCred {
+        uid: 0,
+        gid: 0,
+        pid: std::process::id(),
+    };
+    driver.on_input(Input::Opened {
+        client: 1,
+        link: ClientLink {
+            outbox,
+            cancel: cancel.clone(),
+        },
+        cred,
+    });
+    let hello = Hello {
+        ipc_version: IPC_VERSION,
+        participant: PARTICIPANT,
+        pid: std::process::id(),
+        name: "backlog-test".into(),
+        role: Role::Client,
+    };
+    driver.on_input(Input::Frame {
+        client: 1,
+        message: ClientMessage::Hello(hello),
+    });
+    let type_desc = TypeDescription::of::<f64>();
+    let decl = EndpointDecl {
+        entity: 5,
+        topic: TOPIC.into(),
+        fingerprint: type_desc.fingerprint(),
+        type_desc,
+        qos: EndpointQos::Consumer(ConsumerQosWire::default()),
+        locator: Locator {
+            addr: [127, 0, 0, 1],
+            port: 9,
+        },
+    };
+    driver.on_input(Input::Frame {
+        client: 1,
+        message: ClientMessage::Declare(decl),
+    });
+    driver.flush().await;
+    (driver, inbox, cancel, counters)
+}
+
+fn announce_burst(driver: &mut Driver) {
+    let node = NodeInfo {
+        hostname: "remote".into(),
+        pid: 9,
+        unicast: REMOTE,
+        lease_ms: 30_000,
+        announce_period_ms: 1000,
+        version: String::new(),
+    };
+    let endpoints: Vec<EndpointInfo> = (1..=BURST).map(|p| producer(0x1000 + p)).collect();
+    for chunk in endpoints.chunks(100) {
+        let announce = Message::Announce(Announce {
+            node: node.clone(),
+            endpoints: chunk.to_vec(),
+            withdrawn: vec![],
+        });
+        driver.on_input(Input::Datagram {
+            from: SocketAddr::V4(REMOTE.into()),
+            via: Via::Unicast,
+            bytes: datagram(&announce),
+        });
+    }
+}
+
+#[tokio::test]
+async fn a_burst_larger_than_the_outbox_reaches_a_client_that_reads() {
+    let (mut driver, mut inbox, cancel, counters) = setup().await;
+    assert!(matches!(
+        inbox.recv().await,
+        Some(DaemonMessage::Welcome(_))
+    ));
+    assert!(matches!(
+        inbox.recv().await,
+        Some(DaemonMessage::Declared {
+            entity: 5,
+            result: Ok(())
+        })
+    ));
+    announce_burst(&mut driver);
+    driver.flush().await;
+    // While the burst waits, 100 of its producers are withdrawn again.
+    let gone: Vec<Guid> = (1..=100).map(|p| producer(0x1000 + p).guid).collect();
+    driver.on_input(Input::Datagram {
+        from: SocketAddr::V4(REMOTE.into()),
+        via: Via::Unicast,
+        bytes: datagram(&Message::Withdraw(Withdraw {
+            endpoints: gone.clone(),
+        })),
+    });
+    driver.flush().await;
+    assert!(
+        !cancel.is_cancelled(),
+        "the client was dropped by the burst"
+    );
+
+    let mut matched = std::collections::BTreeMap::new();
+    let mut frames = 0;
+    loop {
+        while let Ok(message) = inbox.try_recv() {
+            frames += 1;
+            match message {
+                DaemonMessage::Matched { local: 5, remote } => {
+                    matched.insert(remote.guid, true);
+                }
+                DaemonMessage::Unmatched { local: 5, remote } => {
+                    matched.insert(remote, false);
+                }
+                other => panic!("unexpected {other:?}"),
+            }
+        }
+        driver.flush().await;
+        if inbox.is_empty() {
+            break;
+        }
+    }
+    let now_matched: Vec<&Guid> = matched
+        .iter()
+        .filter(|(_, m)| **m)
+        .map(|(g, _)| g)
+        .collect();
+    assert_eq!(now_matched.len(), (BURST - 100) as usize);
+    assert!(gone.iter().all(|g| matched.get(g) != Some(&true)));
+    // Coalesced: no more frames than the outbox held plus one per pair.
+    assert!(frames <= OUTBOX + BURST as usize, "{frames} frames");
+    assert!(!cancel.is_cancelled());
+    assert_eq!(
+        counters
+            .slow_clients
+            .load(std::sync::atomic::Ordering::Relaxed),
+        0
+    );
+}
+
+#[tokio::test]
+async fn a_client_that_reads_nothing_is_dropped_after_the_slow_client_time() {
+    let (mut driver, _inbox, cancel, counters) = setup().await;
+    driver.set_slow_client(Duration::from_millis(50));
+    announce_burst(&mut driver);
+    driver.flush().await;
+    assert!(!cancel.is_cancelled(), "not yet: it may still read");
+    tokio::time::sleep(Duration::from_millis(80)).await;
+    driver.flush().await;
+    assert!(
+        cancel.is_cancelled(),
+        "dropped once it read nothing for the slow-client time"
+    );
+    assert_eq!(
+        counters
+            .slow_clients
+            .load(std::sync::atomic::Ordering::Relaxed),
+        1
+    );
+    // Its consumer is withdrawn: the graph has no local endpoint left.
+    assert!(
+        driver
+            .graph()
+            .endpoints
+            .iter()
+            .all(|e| e.node != driver.graph().local.node)
+    );
+}
