@@ -15,6 +15,10 @@ use ndds_core::ipc::{
     self, ClientMessage, DaemonMessage, EndpointDecl, FRAME_PREFIX, Graph, Hello, MAX_FRAME,
     Welcome,
 };
+use ndds_core::wire::Guid;
+
+/// One page of the daemon's graph and the guid to continue after.
+type GraphPage = (Graph, Option<Guid>);
 
 use ndds_daemon::DaemonConfig;
 use ndds_daemon::local;
@@ -118,7 +122,8 @@ pub(crate) struct Session {
     hello: Hello,
     writer: Mutex<UnixStream>,
     declares: Mutex<HashMap<u32, SyncSender<Result<(), String>>>>,
-    queries: Mutex<HashMap<u32, SyncSender<Graph>>>,
+    /// Pages of the graph asked for, with the guid to continue after.
+    queries: Mutex<HashMap<u32, SyncSender<GraphPage>>>,
     next_request: AtomicU32,
     open: AtomicBool,
     /// Set once the participant is being dropped: no more reconnecting.
@@ -225,17 +230,33 @@ impl Session {
         }
     }
 
-    /// Asks for the daemon's graph.
+    /// Asks for the daemon's graph, page by page; endpoints sorted by topic, then guid.
     pub(crate) fn query_graph(&self) -> Result<Graph, QueryError> {
+        let (mut graph, mut next) = self.query_graph_page(None)?;
+        while let Some(after) = next {
+            let (page, more) = self.query_graph_page(Some(after))?;
+            graph.endpoints.extend(page.endpoints);
+            next = more.filter(|more| *more > after);
+        }
+        graph.endpoints.sort_by(|a, b| {
+            (a.info.topic.as_str(), a.info.guid).cmp(&(b.info.topic.as_str(), b.info.guid))
+        });
+        Ok(graph)
+    }
+
+    fn query_graph_page(&self, after: Option<Guid>) -> Result<GraphPage, QueryError> {
         let request = self.next_request.fetch_add(1, Ordering::Relaxed);
         let (tx, rx) = sync_channel(1);
         lock(&self.queries).insert(request, tx);
-        if self.send(&ClientMessage::QueryGraph { request }).is_err() {
+        if self
+            .send(&ClientMessage::QueryGraph { request, after })
+            .is_err()
+        {
             lock(&self.queries).remove(&request);
             return Err(QueryError::Disconnected);
         }
         match self.wait(&rx, || lock(&self.queries).remove(&request)) {
-            Some(graph) => Ok(graph),
+            Some(page) => Ok(page),
             None if self.is_open() => Err(QueryError::Timeout),
             None => Err(QueryError::Disconnected),
         }
@@ -260,9 +281,13 @@ impl Session {
                 }
                 None
             }
-            DaemonMessage::Graph { request, graph } => {
+            DaemonMessage::Graph {
+                request,
+                graph,
+                next,
+            } => {
                 if let Some(tx) = lock(&self.queries).remove(&request) {
-                    let _ = tx.try_send(graph);
+                    let _ = tx.try_send((graph, next));
                 }
                 None
             }

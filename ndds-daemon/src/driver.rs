@@ -101,6 +101,10 @@ impl Backlog {
     }
 }
 
+/// Most endpoints in one page of the graph (`QueryGraph`).
+pub const GRAPH_PAGE: usize = 1024;
+/// Estimated bytes of endpoints after which a page of the graph ends.
+pub const GRAPH_PAGE_BYTES: usize = 2 << 20;
 /// Answers a client may leave unread beyond its outbox before it counts as not reading.
 pub const MAX_BACKLOG_ANSWERS: usize = 1024;
 /// How long a client may read nothing while frames wait before it is disconnected.
@@ -391,9 +395,16 @@ impl Driver {
             _ if !has_session => self.refuse(client, "the first frame must be Hello".into()),
             ClientMessage::Declare(decl) => self.on_declare(client, decl),
             ClientMessage::Undeclare { entity } => self.on_undeclare(client, entity),
-            ClientMessage::QueryGraph { request } => {
-                let graph = self.graph();
-                self.send(client, DaemonMessage::Graph { request, graph });
+            ClientMessage::QueryGraph { request, after } => {
+                let (graph, next) = self.graph_page(after);
+                self.send(
+                    client,
+                    DaemonMessage::Graph {
+                        request,
+                        graph,
+                        next,
+                    },
+                );
             }
         }
     }
@@ -540,8 +551,24 @@ impl Driver {
         self.engine.remove_locals(&guids);
     }
 
-    /// The daemon's current view, as `ndds topics` and `ndds nodes` show it.
+    /// The daemon's current view, as `ndds topics` and `ndds nodes` show it, whole.
     pub fn graph(&self) -> Graph {
+        let (mut graph, mut next) = self.graph_page(None);
+        while let Some(after) = next {
+            let (page, more) = self.graph_page(Some(after));
+            graph.endpoints.extend(page.endpoints);
+            next = more;
+        }
+        graph.endpoints.sort_by(|a, b| {
+            (a.info.topic.as_str(), a.info.guid).cmp(&(b.info.topic.as_str(), b.info.guid))
+        });
+        graph
+    }
+
+    /// One page of the view: everything but the endpoints, and the endpoints with guids after
+    /// `after`, in guid order, at most [`GRAPH_PAGE`] of them or [`GRAPH_PAGE_BYTES`] (at
+    /// least one); with the guid to continue after, if more remain.
+    pub fn graph_page(&self, after: Option<Guid>) -> (Graph, Option<Guid>) {
         let now = Instant::now();
         let millis_until = |t: Instant| t.saturating_duration_since(now).as_millis() as u64;
         let millis_since = |t: Instant| now.saturating_duration_since(t).as_millis() as u64;
@@ -595,9 +622,25 @@ impl Driver {
                     .unwrap_or_default(),
             ),
         };
-        let mut endpoints: Vec<EndpointSummary> = self
+        let mut page: Vec<&ndds_core::discovery::Entry> = self
             .engine
             .endpoints()
+            .filter(|entry| after.is_none_or(|after| entry.info.guid > after))
+            .collect();
+        page.sort_unstable_by_key(|entry| entry.info.guid);
+        let mut bytes = 0;
+        let mut taken = 0;
+        for entry in &page {
+            if taken == GRAPH_PAGE || (taken > 0 && bytes >= GRAPH_PAGE_BYTES) {
+                break;
+            }
+            bytes += ndds_core::discovery::table::entry_cost(&entry.info);
+            taken += 1;
+        }
+        let next = (taken < page.len()).then(|| page[taken - 1].info.guid);
+        page.truncate(taken);
+        let endpoints: Vec<EndpointSummary> = page
+            .into_iter()
             .map(|entry| {
                 let (node, hostname) = hostname_of(entry.origin);
                 EndpointSummary {
@@ -608,16 +651,14 @@ impl Driver {
                 }
             })
             .collect();
-        endpoints.sort_by(|a, b| {
-            (a.info.topic.as_str(), a.info.guid).cmp(&(b.info.topic.as_str(), b.info.guid))
-        });
-        Graph {
+        let graph = Graph {
             local,
             nodes,
             clients: self.client_summaries(),
             endpoints,
             counters: self.counters(),
-        }
+        };
+        (graph, next)
     }
 
     /// The configured peers, each with the node currently known at its locator.

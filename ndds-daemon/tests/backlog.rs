@@ -1,6 +1,6 @@
 //! A burst of match events larger than a client's outbox: the client that reads is never
 //! disconnected and ends with the current state of every pair; one that reads nothing is
-//! dropped after the slow-client time.
+//! dropped after the slow-client time. And the graph of a large table, answered in pages.
 
 use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::Arc;
@@ -14,7 +14,7 @@ use ndds_core::wire::{
     ProducerQosWire, Withdraw,
 };
 use ndds_daemon::connection::ClientLink;
-use ndds_daemon::driver::{Counters, Driver, Input};
+use ndds_daemon::driver::{Counters, Driver, GRAPH_PAGE, Input};
 use ndds_daemon::local::PeerCred;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
@@ -120,6 +120,10 @@ async fn setup() -> (
 }
 
 fn announce_burst(driver: &mut Driver) {
+    announce(driver, BURST);
+}
+
+fn announce(driver: &mut Driver, count: u64) {
     let node = NodeInfo {
         hostname: "remote".into(),
         pid: 9,
@@ -128,7 +132,7 @@ fn announce_burst(driver: &mut Driver) {
         announce_period_ms: 1000,
         version: String::new(),
     };
-    let endpoints: Vec<EndpointInfo> = (1..=BURST).map(|p| producer(0x1000 + p)).collect();
+    let endpoints: Vec<EndpointInfo> = (1..=count).map(|p| producer(0x1000 + p)).collect();
     for chunk in endpoints.chunks(100) {
         let announce = Message::Announce(Announce {
             node: node.clone(),
@@ -239,4 +243,40 @@ async fn a_client_that_reads_nothing_is_dropped_after_the_slow_client_time() {
             .iter()
             .all(|e| e.node != driver.graph().local.node)
     );
+}
+
+#[tokio::test]
+async fn the_graph_of_a_large_table_comes_in_bounded_pages() {
+    let (mut driver, _inbox, _cancel, _counters) = setup().await;
+    let remote = 2 * GRAPH_PAGE as u64 + 300;
+    announce(&mut driver, remote);
+    driver.flush().await;
+    let mut seen = Vec::new();
+    let mut after = None;
+    let mut pages = 0;
+    loop {
+        let (page, next) = driver.graph_page(after);
+        pages += 1;
+        assert!(!page.endpoints.is_empty() && page.endpoints.len() <= GRAPH_PAGE);
+        let frame = ndds_core::ipc::encode_body(&DaemonMessage::Graph {
+            request: 1,
+            graph: page.clone(),
+            next,
+        })
+        .expect("every page fits a frame");
+        assert!(frame.len() < ndds_core::ipc::MAX_FRAME);
+        seen.extend(page.endpoints.iter().map(|e| e.info.guid));
+        match next {
+            Some(last) => {
+                assert_eq!(Some(&last), seen.last());
+                after = Some(last);
+            }
+            None => break,
+        }
+    }
+    // The remote producers and the local consumer, each once, in guid order.
+    assert_eq!(pages, 3);
+    assert_eq!(seen.len() as u64, remote + 1);
+    assert!(seen.windows(2).all(|w| w[0] < w[1]));
+    assert_eq!(driver.graph().endpoints.len() as u64, remote + 1);
 }

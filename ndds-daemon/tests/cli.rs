@@ -134,7 +134,11 @@ fn frames_queued_behind_a_refusal_open_no_session() {
     // A query before Hello is refused; the Hello written right behind it must not count.
     let mut stream = connect(&socket);
     stream.set_read_timeout(Some(WAIT)).unwrap();
-    let mut bytes = ipc::encode_frame(&ClientMessage::QueryGraph { request: 1 }).unwrap();
+    let mut bytes = ipc::encode_frame(&ClientMessage::QueryGraph {
+        request: 1,
+        after: None,
+    })
+    .unwrap();
     bytes.extend(hello(77));
     stream.write_all(&bytes).unwrap();
     assert!(matches!(

@@ -82,6 +82,11 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("FRAME_PREFIX", ipc::FRAME_PREFIX.to_string()),
         ("MAX_FRAME", ipc::MAX_FRAME.to_string()),
         ("OUTBOX", ndds_daemon::connection::OUTBOX.to_string()),
+        ("GRAPH_PAGE", ndds_daemon::driver::GRAPH_PAGE.to_string()),
+        (
+            "GRAPH_PAGE_BYTES",
+            ndds_daemon::driver::GRAPH_PAGE_BYTES.to_string(),
+        ),
         (
             "MAX_BACKLOG_ANSWERS",
             ndds_daemon::driver::MAX_BACKLOG_ANSWERS.to_string(),

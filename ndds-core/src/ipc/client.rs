@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::types::TypeDescription;
-use crate::wire::{EndpointQos, Locator};
+use crate::wire::{EndpointQos, Guid, Locator};
 
 /// What kind of program is connecting.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -58,9 +58,12 @@ pub enum ClientMessage {
         /// Its entity number.
         entity: u32,
     },
-    /// Asks for a [`super::Graph`]; answered by [`super::DaemonMessage::Graph`].
+    /// Asks for one page of the daemon's [`super::Graph`]; answered by
+    /// [`super::DaemonMessage::Graph`].
     QueryGraph {
         /// Echoed in the answer.
         request: u32,
+        /// The page: endpoints with guids after this one (`None`: the first page).
+        after: Option<Guid>,
     },
 }

@@ -62,11 +62,13 @@ pub enum DaemonMessage {
         /// The endpoint that went away.
         remote: Guid,
     },
-    /// Answer to `QueryGraph`.
+    /// Answer to `QueryGraph`: one page of the daemon's view.
     Graph {
         /// The request number.
         request: u32,
-        /// The daemon's view of the domain.
+        /// The daemon's view of the domain, with the page's endpoints only (in guid order).
         graph: Graph,
+        /// The guid to ask the next page after; `None` on the last page.
+        next: Option<Guid>,
     },
 }

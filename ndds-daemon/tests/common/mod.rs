@@ -131,12 +131,19 @@ pub fn graph(socket: &Path) -> Graph {
         .write_all(&ipc::encode_frame(&hello).unwrap())
         .unwrap();
     assert!(matches!(read_frame(&mut stream), DaemonMessage::Welcome(_)));
-    let query = ClientMessage::QueryGraph { request: 1 };
+    let query = ClientMessage::QueryGraph {
+        request: 1,
+        after: None,
+    };
     stream
         .write_all(&ipc::encode_frame(&query).unwrap())
         .unwrap();
     match read_frame(&mut stream) {
-        DaemonMessage::Graph { request: 1, graph } => graph,
+        DaemonMessage::Graph {
+            request: 1,
+            graph,
+            next: None,
+        } => graph,
         other => panic!("unexpected answer {other:?}"),
     }
 }
