@@ -48,7 +48,7 @@ pub const MAX_ENDPOINTS_PER_NODE: usize = 16_384;
 pub const MAX_REMOTE_ENDPOINTS: usize = 262_144;
 /// Most bytes (estimated: [`super::table::entry_cost`], [`NODE_OVERHEAD`]) the remote nodes
 /// and their endpoints may hold; beyond it, nodes are evicted (see [`super::sources`]).
-pub const MAX_REMOTE_BYTES: usize = 48 << 20;
+pub const MAX_REMOTE_BYTES: usize = 32 << 20;
 /// Bytes a remote node's own entry is estimated to hold, beyond its host name and version.
 pub const NODE_OVERHEAD: usize = 512;
 /// Most answers to solicitations waiting for their jitter delay.
