@@ -336,7 +336,13 @@ fn ipc_seeds(corpus: &mut Corpus) {
             }),
         ),
         ("undeclare", ClientMessage::Undeclare { entity: 1 }),
-        ("query", ClientMessage::QueryGraph { request: 9 }),
+        (
+            "query",
+            ClientMessage::QueryGraph {
+                request: 9,
+                after: None,
+            },
+        ),
     ];
     for (name, message) in client {
         add(
