@@ -94,9 +94,10 @@ run() {
 }
 
 replay() {
-    local target
+    local target chosen=("$@")
+    [[ ${#chosen[@]} -gt 0 ]] || mapfile -t chosen < <(targets)
     (cd "$fuzz_dir" && cargo build --release --locked --bins --target-dir target/replay)
-    for target in "${@:-$(targets)}"; do
+    for target in "${chosen[@]}"; do
         local inputs=("$fuzz_dir/corpus/$target")
         [[ -d $fuzz_dir/crashes/$target ]] && inputs+=("$fuzz_dir/crashes/$target")
         "$fuzz_dir/target/replay/release/$target" "${inputs[@]}" | tail -n 1 | sed "s/^/$target: /"
@@ -138,7 +139,7 @@ case ${1:-} in
         minimize "$2"
         ;;
     *)
-        sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac
