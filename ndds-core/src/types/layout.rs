@@ -185,9 +185,23 @@ pub enum LayoutError {
     /// Enum variant indices are not strictly increasing.
     #[error("enum {0:?} has variants out of order or repeated")]
     UnsortedVariants(String),
+    /// Two fields of one struct, or two variants of one enum, share a name.
+    #[error("{container:?} has two fields or variants named {name:?}")]
+    DuplicateName {
+        /// The struct or enum.
+        container: String,
+        /// The repeated name.
+        name: String,
+    },
     /// The layout expands to more than [`MAX_EXPANDED_FORMATS`] formats.
     #[error("layout expands to {0} formats (limit {MAX_EXPANDED_FORMATS})")]
     TooLarge(u64),
+}
+
+/// The first name that repeats an earlier one.
+fn duplicate<'a>(mut names: impl Iterator<Item = &'a str>) -> Option<&'a str> {
+    let mut seen = std::collections::HashSet::new();
+    names.find(|name| !seen.insert(*name))
 }
 
 impl Format {
@@ -291,8 +305,19 @@ impl TypeLayout {
                 })
             }
         };
-        let fields_ok = |fields: &[Field]| fields.iter().try_for_each(|f| in_range(&f.format));
         for (i, container) in self.containers.iter().enumerate() {
+            // Field and variant names are keys of the JSON tools show: two alike would lose one.
+            let unique = |duplicate: Option<&str>| match duplicate {
+                Some(name) => Err(LayoutError::DuplicateName {
+                    container: container.name.clone(),
+                    name: name.to_owned(),
+                }),
+                None => Ok(()),
+            };
+            let fields_ok = |fields: &[Field]| {
+                unique(duplicate(fields.iter().map(|f| f.name.as_str())))?;
+                fields.iter().try_for_each(|f| in_range(&f.format))
+            };
             if i > 0 && self.containers[i - 1].name >= container.name {
                 return Err(LayoutError::UnsortedContainers(container.name.clone()));
             }
@@ -302,6 +327,7 @@ impl TypeLayout {
                 ContainerShape::TupleStruct(items) => items.iter().try_for_each(in_range)?,
                 ContainerShape::Struct(fields) => fields_ok(fields)?,
                 ContainerShape::Enum(variants) => {
+                    unique(duplicate(variants.iter().map(|v| v.name.as_str())))?;
                     for (j, variant) in variants.iter().enumerate() {
                         if j > 0 && variants[j - 1].index >= variant.index {
                             return Err(LayoutError::UnsortedVariants(container.name.clone()));
@@ -340,6 +366,46 @@ mod tests {
             root,
             containers: vec![],
         }
+    }
+
+    /// Found by the `dynamic_json` fuzz target: two fields named alike decode to JSON with one
+    /// key, which cannot encode back (`fuzz/corpus/dynamic_json/duplicate_field_names`).
+    #[test]
+    fn repeated_field_or_variant_names_are_rejected() {
+        let field = |name: &str| Field {
+            name: name.into(),
+            format: 0,
+        };
+        let with = |shape| TypeLayout {
+            formats: vec![Format::F64, Format::Named(0)],
+            root: 1,
+            containers: vec![Container {
+                name: "Pose".into(),
+                shape,
+            }],
+        };
+        let twice = with(ContainerShape::Struct(vec![
+            field("x"),
+            field("y"),
+            field("x"),
+        ]));
+        assert!(matches!(
+            twice.validate(),
+            Err(LayoutError::DuplicateName { ref name, .. }) if name == "x"
+        ));
+        with(ContainerShape::Struct(vec![field("x"), field("y")]))
+            .validate()
+            .unwrap();
+        let variant = |index, name: &str| Variant {
+            index,
+            name: name.into(),
+            shape: VariantShape::Unit,
+        };
+        let variants = with(ContainerShape::Enum(vec![variant(0, "A"), variant(1, "A")]));
+        assert!(matches!(
+            variants.validate(),
+            Err(LayoutError::DuplicateName { .. })
+        ));
     }
 
     #[test]
