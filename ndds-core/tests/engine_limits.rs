@@ -120,7 +120,8 @@ fn a_node_heard_by_unicast_gets_copies_only_at_its_own_source_address() {
     assert!(!destinations.contains(&Destination::Unicast(victim)));
 }
 
-fn endpoint(participant: u64) -> EndpointInfo {
+/// An endpoint of a client on `host` (10.0.0.host).
+fn endpoint(participant: u64, host: u8) -> EndpointInfo {
     let type_desc = TypeDescription::of::<u8>();
     EndpointInfo {
         guid: Guid {
@@ -131,7 +132,7 @@ fn endpoint(participant: u64) -> EndpointInfo {
         fingerprint: type_desc.fingerprint(),
         type_desc,
         qos: EndpointQos::Producer(ProducerQosWire::default()),
-        locator: locator(9, 9),
+        locator: locator(host, 9),
         pid: 1,
         process: "p".into(),
     }
@@ -150,7 +151,7 @@ fn remote_endpoints_are_bounded_per_node_and_in_all() {
         let all: Vec<EndpointInfo> = (0..=MAX_ENDPOINTS_PER_NODE)
             .map(|_| {
                 next += 1;
-                endpoint(next)
+                endpoint(next, 100)
             })
             .collect();
         for chunk in all.chunks(600) {
@@ -189,20 +190,24 @@ fn a_flood_of_forged_nodes_cannot_keep_genuine_nodes_out() {
     let now = Instant::now();
     let mut engine = engine(now);
     let topic = "arm/joints";
-    let on_topic = |participant: u64, kind: EndpointQos| {
-        let mut info = endpoint(participant);
+    let on_topic = |participant: u64, host: u8, kind: EndpointQos| {
+        let mut info = endpoint(participant, host);
         info.topic = topic.into();
         info.qos = kind;
         info
     };
-    let mut consumer = on_topic(1, EndpointQos::Consumer(Default::default()));
+    let mut consumer = on_topic(1, 1, EndpointQos::Consumer(Default::default()));
     consumer.guid.participant = 0xC0FFEE;
     engine.add_local(consumer.clone()).unwrap();
     let genuine = |engine: &mut Engine, host: u8, id: u64| {
         let unicast = locator(host, 7600);
         let announce = Message::Announce(Announce {
             node: node_info(unicast),
-            endpoints: vec![on_topic(id, EndpointQos::Producer(Default::default()))],
+            endpoints: vec![on_topic(
+                id,
+                host,
+                EndpointQos::Producer(Default::default()),
+            )],
             withdrawn: vec![],
         });
         let from = SocketAddr::V4(unicast.into());
@@ -221,7 +226,11 @@ fn a_flood_of_forged_nodes_cannot_keep_genuine_nodes_out() {
         let endpoints = (0..60)
             .map(|_| {
                 forged_endpoint += 1;
-                on_topic(forged_endpoint, EndpointQos::Producer(Default::default()))
+                on_topic(
+                    forged_endpoint,
+                    66,
+                    EndpointQos::Producer(Default::default()),
+                )
             })
             .collect();
         let announce = Message::Announce(Announce {
@@ -293,4 +302,77 @@ fn two_nodes_with_one_id_cannot_see_each_other_and_say_so() {
     assert_eq!(b.node_id(), 42);
     assert!(b.stats().dropped(DropReason::Own) >= 1);
     assert_eq!(b.nodes().count(), 0);
+}
+
+/// Node ids travel in clear, so the engine believes a known node only from its own address:
+/// a `Bye`, a `Withdraw` or a short-lease `Announce` naming it from elsewhere is dropped as
+/// `spoofed`; an endpoint is believed only on its announcing node's host; and another node
+/// cannot change or take over an endpoint.
+#[test]
+fn forgeries_naming_a_known_node_or_its_endpoints_are_not_believed() {
+    let now = Instant::now();
+    let mut engine = engine(now);
+    let genuine = locator(2, 7600);
+    let genuine_from = SocketAddr::V4(genuine.into());
+    let attacker_from = SocketAddr::V4(locator(66, 7600).into());
+    let announce = |node: NodeInfo, endpoints: Vec<EndpointInfo>| {
+        Message::Announce(Announce {
+            node,
+            endpoints,
+            withdrawn: vec![],
+        })
+    };
+    let ours = endpoint(0xA, 2);
+    let first = announce(node_info(genuine), vec![ours.clone()]);
+    engine.handle_datagram(now, genuine_from, Via::Multicast, &datagram(7, &first));
+    assert!(engine.endpoint(&ours.guid).is_some());
+
+    let mut short = node_info(genuine);
+    short.lease_ms = 2;
+    short.announce_period_ms = 1;
+    let forgeries = [
+        datagram(7, &Message::Bye(wire::Bye)),
+        datagram(
+            7,
+            &Message::Withdraw(wire::Withdraw {
+                endpoints: vec![ours.guid],
+            }),
+        ),
+        datagram(7, &announce(short, vec![])),
+    ];
+    for forged in &forgeries {
+        engine.handle_datagram(now, attacker_from, Via::Unicast, forged);
+    }
+    assert_eq!(engine.stats().dropped(DropReason::Spoofed), 3);
+    engine.handle_timeout(now + Duration::from_millis(100));
+    assert!(engine.endpoint(&ours.guid).is_some(), "the endpoint survived");
+    assert!(engine.nodes().any(|(id, _)| id == 7), "the node survived");
+
+    // The attacker's own node: an endpoint located elsewhere, a changed copy of the genuine
+    // endpoint, and an identical copy (a takeover) are all refused.
+    let mut elsewhere = endpoint(0xB, 2);
+    elsewhere.guid.participant = 0xB;
+    let mut changed = ours.clone();
+    changed.locator = locator(66, 9);
+    let invalid_before = engine.stats().invalid_endpoints;
+    let attack = announce(
+        node_info(locator(66, 7600)),
+        vec![elsewhere.clone(), changed, ours.clone()],
+    );
+    engine.handle_datagram(now, attacker_from, Via::Unicast, &datagram(66, &attack));
+    assert_eq!(engine.stats().invalid_endpoints - invalid_before, 3);
+    assert!(engine.endpoint(&elsewhere.guid).is_none());
+    assert_eq!(
+        engine.endpoint(&ours.guid).map(|e| (e.origin, e.info.locator)),
+        Some((Origin::Remote(7), ours.locator))
+    );
+
+    // The genuine node's own Bye is believed.
+    engine.handle_datagram(
+        now,
+        genuine_from,
+        Via::Unicast,
+        &datagram(7, &Message::Bye(wire::Bye)),
+    );
+    assert!(engine.endpoint(&ours.guid).is_none());
 }

@@ -403,6 +403,16 @@ impl Engine {
             self.check_id_clash(from);
             return Err(DropReason::Own);
         }
+        // Node ids travel in clear: a known node speaks only from its own address, so nobody
+        // else can say its `Bye`, withdraw its endpoints or shorten its lease. (A node whose
+        // address changes is heard again once its old entry has expired.)
+        if self
+            .nodes
+            .get(&header.sender)
+            .is_some_and(|known| known.last_from != from)
+        {
+            return Err(DropReason::Spoofed);
+        }
         match message {
             Message::Solicit(solicit) => {
                 check_node(&solicit.node)?;
@@ -443,7 +453,7 @@ impl Engine {
             self.remove_remote(node, guid);
         }
         for info in announce.endpoints {
-            self.upsert_remote(node, now + lease, info);
+            self.upsert_remote(node, from.ip(), now + lease, info);
         }
         Ok(())
     }
@@ -555,8 +565,24 @@ impl Engine {
         }
     }
 
-    fn upsert_remote(&mut self, node: u64, expires: Instant, info: EndpointInfo) {
+    fn upsert_remote(&mut self, node: u64, source: IpAddr, expires: Instant, info: EndpointInfo) {
+        // A node's clients live on its host: an endpoint whose locator is elsewhere would turn
+        // its matches into a stream of data aimed at someone else.
+        if IpAddr::from(info.locator.addr) != source {
+            self.stats.invalid_endpoints += 1;
+            tracing::debug!(guid = %info.guid, locator = %info.locator, %source, "ignored endpoint located off its node's host");
+            return;
+        }
         let owner = self.table.get(&info.guid).map(|e| e.origin);
+        // Another node's endpoint changes only by that node; moving it here (a client whose
+        // daemon restarted) needs the very same declaration, from the same host.
+        if let Some(Origin::Remote(other)) = owner
+            && other != node
+            && self.table.get(&info.guid).is_some_and(|e| e.info != info)
+        {
+            self.stats.invalid_endpoints += 1;
+            return;
+        }
         // Nobody may announce one of our own endpoints, and no node more than its share.
         let over_cap = owner != Some(Origin::Remote(node))
             && self.table.count_owned(Origin::Remote(node)) >= MAX_ENDPOINTS_PER_NODE;

@@ -66,11 +66,14 @@ pub enum DropReason {
     /// after `close`.
     #[error("message kind not handled by this receiver")]
     Unexpected,
+    /// A discovery message naming a known node, from another address than that node's.
+    #[error("names a known node but comes from another address")]
+    Spoofed,
 }
 
 impl DropReason {
     /// Every reason, for counter tables.
-    pub const ALL: [DropReason; 9] = [
+    pub const ALL: [DropReason; 10] = [
         DropReason::Truncated,
         DropReason::ForeignMagic,
         DropReason::UnsupportedVersion,
@@ -80,6 +83,7 @@ impl DropReason {
         DropReason::Invalid,
         DropReason::Own,
         DropReason::Unexpected,
+        DropReason::Spoofed,
     ];
 
     /// Stable snake-case name used as a counter key.
@@ -94,6 +98,7 @@ impl DropReason {
             DropReason::Invalid => "invalid",
             DropReason::Own => "own",
             DropReason::Unexpected => "unexpected",
+            DropReason::Spoofed => "spoofed",
         }
     }
 

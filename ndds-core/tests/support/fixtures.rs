@@ -56,7 +56,14 @@ pub fn endpoint<T: Serialize + DeserializeOwned>(
         fingerprint: type_desc.fingerprint(),
         type_desc,
         qos,
-        locator: locator(200),
+        // On the host of the node the guid belongs to (a node announces only its own host's
+        // endpoints).
+        locator: locator(
+            usize::try_from(guid.participant.wrapping_sub(0xC0DE_0000))
+                .ok()
+                .filter(|n| *n < 200)
+                .unwrap_or(200),
+        ),
         pid: 4242,
         process: "simnet".to_owned(),
     }
