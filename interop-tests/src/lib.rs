@@ -68,6 +68,9 @@ pub struct TestDomain {
     /// Discovery multicast group.
     pub group: Ipv4Addr,
     dir: tempfile::TempDir,
+    /// The domain's key file, in a sealed domain: daemons get `--key-file`, clients
+    /// `NDDS_KEY_FILE`.
+    pub key: Option<PathBuf>,
 }
 
 impl TestDomain {
@@ -79,7 +82,18 @@ impl TestDomain {
             port: rng.u16(20_000..60_000),
             group: Ipv4Addr::new(239, 255, rng.u8(100..=254), rng.u8(1..=254)),
             dir: tempfile::tempdir().expect("temporary directory"),
+            key: None,
         }
+    }
+
+    /// A new isolated domain sealed with a new key (ChaCha20-Poly1305).
+    pub fn sealed() -> Self {
+        let mut domain = Self::new();
+        let key = domain.path("domain.key");
+        ndds_daemon::keys::create(&key, ndds_core::seal::Cipher::default())
+            .expect("a new key file");
+        domain.key = Some(key);
+        domain
     }
 
     /// The socket path of the daemon called `name`.
@@ -99,7 +113,11 @@ impl TestDomain {
 
     /// The flags that put a daemon in this domain, bound to `interface`, with the test timers.
     pub fn daemon_args_on(&self, name: &str, interface: Ipv4Addr) -> Vec<String> {
-        vec![
+        let key = self
+            .key
+            .iter()
+            .flat_map(|path| ["--key-file".into(), path.display().to_string()]);
+        let mut args: Vec<String> = vec![
             "--domain".into(),
             self.domain.to_string(),
             "--socket".into(),
@@ -114,7 +132,9 @@ impl TestDomain {
             PERIOD.as_millis().to_string(),
             "--lease-ms".into(),
             LEASE.as_millis().to_string(),
-        ]
+        ];
+        args.extend(key);
+        args
     }
 
     /// Starts a daemon called `name` on loopback and waits until it accepts clients.

@@ -266,6 +266,18 @@ impl ClientProcess {
         Self::spawn(host.exec(binary("ndds-test-node")), socket, args)
     }
 
+    /// As [`test_node_on`](Self::test_node_on), with `env` in its environment.
+    pub fn test_node_on_with_env(
+        host: &Host,
+        socket: &Path,
+        args: &[&str],
+        env: &[(&str, &Path)],
+    ) -> Self {
+        let mut command = host.exec(binary("ndds-test-node"));
+        command.envs(env.iter().map(|(k, v)| (*k, *v)));
+        Self::spawn(command, socket, args)
+    }
+
     fn spawn(mut command: Command, socket: &Path, args: &[&str]) -> Self {
         let mut child = command
             .args(args)

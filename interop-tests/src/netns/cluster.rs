@@ -30,7 +30,12 @@ impl Cluster {
     /// A daemon on each host of `network` (which may already have faults in force), as
     /// [`new`](Self::new) does.
     pub fn start(network: Network) -> Self {
-        let domain = TestDomain::new();
+        Self::start_in(network, TestDomain::new())
+    }
+
+    /// A daemon on each host of `network` in `domain` (for example a sealed one:
+    /// [`TestDomain::sealed`]; its clients then get the key too).
+    pub fn start_in(network: Network, domain: TestDomain) -> Self {
         let daemons: Vec<DaemonProcess> = network
             .hosts()
             .iter()
@@ -124,7 +129,10 @@ impl Cluster {
 
     /// Starts `ndds-test-node ARGS` on host `index`, a client of that host's daemon.
     pub fn test_node(&self, index: usize, args: &[&str]) -> ClientProcess {
-        self.host(index).test_node(&self.socket(index), args)
+        let env: Vec<(&str, &std::path::Path)> = (self.domain.key.iter())
+            .map(|key| ("NDDS_KEY_FILE", key.as_path()))
+            .collect();
+        ClientProcess::test_node_on_with_env(self.host(index), &self.socket(index), args, &env)
     }
 
     /// Runs `ndds ARGS` on host `index` against its daemon.
