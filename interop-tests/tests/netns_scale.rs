@@ -205,3 +205,51 @@ fn twenty_hosts_with_ten_topics_each_converge_and_discovery_traffic_stays_small(
     }
     eprintln!("whole test: {:?}", started.elapsed());
 }
+
+/// Starts 20 daemons in `domain` and a client of ten producers on each; returns how long after
+/// the last client was ready every daemon saw all 200 endpoints (`None` if one never did).
+fn converge_in(domain: interop_tests::TestDomain) -> Option<Duration> {
+    let cluster = Cluster::start_in(Network::new(HOSTS), domain);
+    let nodes: Vec<ClientProcess> = (0..HOSTS)
+        .map(|host| {
+            let topic = format!("{PREFIX}h{host}");
+            let args = [
+                "produce", "--topic", &topic, "--topics", "10", "--rate", "0",
+            ];
+            cluster.test_node(host, &args)
+        })
+        .collect();
+    for (host, node) in nodes.iter().enumerate() {
+        assert!(
+            node.event("ready", WAIT).is_some(),
+            "node on host {host} ready"
+        );
+    }
+    let last_ready = Instant::now();
+    let times = convergence(&cluster, last_ready, WAIT);
+    if times.iter().any(Option::is_none) {
+        return None;
+    }
+    times.into_iter().flatten().max()
+}
+
+/// The same convergence in an open and in a sealed domain, one after the other: sealing every
+/// discovery datagram must not slow discovery down (the figures go to docs/benchmarks.md).
+#[test]
+fn twenty_hosts_converge_in_a_sealed_domain_as_in_an_open_one() {
+    if support::skipped() {
+        return;
+    }
+    let _turn = exclusive();
+    let open = converge_in(interop_tests::TestDomain::new());
+    let sealed = converge_in(interop_tests::TestDomain::sealed());
+    eprintln!(
+        "{HOSTS} hosts x {TOPICS} endpoints: every daemon sees all endpoints {open:?} (open) \
+         and {sealed:?} (sealed) after the last client was ready"
+    );
+    assert!(open.is_some(), "the open domain converged");
+    assert!(
+        sealed.is_some_and(|t| t <= PERIOD * 10),
+        "the sealed domain converged within ten refresh periods: {sealed:?}"
+    );
+}
