@@ -345,7 +345,10 @@ fn forgeries_naming_a_known_node_or_its_endpoints_are_not_believed() {
     }
     assert_eq!(engine.stats().dropped(DropReason::Spoofed), 3);
     engine.handle_timeout(now + Duration::from_millis(100));
-    assert!(engine.endpoint(&ours.guid).is_some(), "the endpoint survived");
+    assert!(
+        engine.endpoint(&ours.guid).is_some(),
+        "the endpoint survived"
+    );
     assert!(engine.nodes().any(|(id, _)| id == 7), "the node survived");
 
     // The attacker's own node: an endpoint located elsewhere, a changed copy of the genuine
@@ -363,7 +366,9 @@ fn forgeries_naming_a_known_node_or_its_endpoints_are_not_believed() {
     assert_eq!(engine.stats().invalid_endpoints - invalid_before, 3);
     assert!(engine.endpoint(&elsewhere.guid).is_none());
     assert_eq!(
-        engine.endpoint(&ours.guid).map(|e| (e.origin, e.info.locator)),
+        engine
+            .endpoint(&ours.guid)
+            .map(|e| (e.origin, e.info.locator)),
         Some((Origin::Remote(7), ours.locator))
     );
 
