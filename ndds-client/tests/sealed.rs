@@ -43,6 +43,13 @@ fn key_holders_exchange_samples_and_a_participant_without_the_key_reads_nothing(
     assert!(outside.recv_timeout(Duration::from_millis(500)).is_err());
     assert!(outsider.stats().received > 0, "the datagrams reached it");
     assert_eq!(outside.stats().received, 0, "and none was read as a sample");
+    // Each side counts what it could and could not open.
+    let (outsider_stats, reader_stats) = (outsider.stats(), reader_side.stats());
+    assert!(outsider_stats.sealed_without_key > 0, "{outsider_stats:?}");
+    assert_eq!(outsider_stats.seal_opened, 0);
+    assert!(reader_stats.seal_opened >= 20, "{reader_stats:?}");
+    assert_eq!(reader_stats.seal_dropped("bad_tag"), 0);
+    assert!(writer_side.stats().unsealable == 0);
 }
 
 #[test]

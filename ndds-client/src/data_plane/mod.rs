@@ -32,6 +32,7 @@ use ndds_core::participant::{
     ConsumerCounters, ConsumerSpec, CoreConfig, Event, MatchedConsumer, ParticipantCore,
     ProducerSpec, SealSetup, Transmit, WriteRefused,
 };
+use ndds_core::seal::OpenError;
 use ndds_core::wire::{DropReason, Guid, Locator};
 
 pub use socket::{DEFAULT_MAX_SAMPLE, Limits};
@@ -107,9 +108,26 @@ pub struct ParticipantStats {
     pub sent: u64,
     /// Datagrams the operating system refused to send.
     pub send_errors: u64,
+    /// Sealed datagrams that arrived while this participant holds no domain key.
+    pub sealed_without_key: u64,
+    /// Sealed datagrams opened (a domain with a key).
+    pub seal_opened: u64,
+    /// Datagrams that did not open, by reason name (see `OpenError::name`): not sealed, bad
+    /// tag, replayed, unknown epoch, ...
+    pub seal_dropped: Vec<(&'static str, u64)>,
+    /// Datagrams not sent because they could not be sealed.
+    pub unsealable: u64,
 }
 
 impl ParticipantStats {
+    /// The count of datagrams that did not open for one reason name (`"bad_tag"`, ...).
+    pub fn seal_dropped(&self, reason: &str) -> u64 {
+        self.seal_dropped
+            .iter()
+            .find(|(name, _)| *name == reason)
+            .map_or(0, |(_, count)| *count)
+    }
+
     /// The drop count for one reason name (`"malformed"`, `"other_domain"`, ...).
     pub fn dropped(&self, reason: &str) -> u64 {
         self.dropped
@@ -447,6 +465,13 @@ impl DataPlane {
                 .collect(),
             sent: self.sent.load(Ordering::Relaxed),
             send_errors: self.send_errors.load(Ordering::Relaxed),
+            sealed_without_key: stats.sealed_without_key,
+            seal_opened: stats.seal.opened,
+            seal_dropped: OpenError::ALL
+                .iter()
+                .map(|reason| (reason.name(), stats.seal.dropped(*reason)))
+                .collect(),
+            unsealable: stats.unsealable,
         }
     }
 
