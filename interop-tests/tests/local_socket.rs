@@ -17,6 +17,14 @@ use std::time::Duration;
 use interop_tests::{TestDomain, binary, process, wait_until};
 use ndds_client::{ConnectError, EmbeddedPolicy, Participant};
 
+/// The tests of this file take turns: one copies the daemon binary while another could fork,
+/// and a child holding the copy's open file makes running it fail ("text file busy").
+static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn turn() -> std::sync::MutexGuard<'static, ()> {
+    TURN.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// The unprivileged user who squats.
 const SQUATTER: u32 = 65534;
 /// Another unprivileged user, whose daemon finds its directory squatted.
@@ -84,6 +92,7 @@ fn spawn(mut command: Command) -> Running {
 
 #[test]
 fn the_default_socket_is_private_and_the_daemon_knows_its_clients_from_the_kernel() {
+    let _turn = turn();
     let domain = TestDomain::new();
     let runtime = domain.path("runtime");
     fs::create_dir(&runtime).unwrap();
@@ -128,6 +137,7 @@ fn a_squatted_socket_path_is_refused_by_daemon_and_clients() {
     if support::skipped() {
         return;
     }
+    let _turn = turn();
     let domain = TestDomain::new();
     let shared = Shared::new();
     let path = shared.path("robot.sock");
@@ -206,6 +216,7 @@ fn a_squatted_private_directory_is_refused() {
     if support::skipped() {
         return;
     }
+    let _turn = turn();
     let domain = TestDomain::new();
     let shared = Shared::new();
     // The victim's default directory, made first by the squatter.

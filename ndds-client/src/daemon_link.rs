@@ -10,6 +10,7 @@
 //! policy allows embedding starts an embedded daemon itself and declares again there, so the
 //! domain keeps a daemon (and `ndds topics` keeps working) while any such participant lives.
 
+use std::io::BufReader;
 use std::os::unix::net::UnixStream;
 use std::time::{Duration, Instant};
 
@@ -19,11 +20,13 @@ use ndds_daemon::DaemonConfig;
 
 use crate::embedded::{self, Ensured};
 use crate::error::ConnectError;
-use crate::local_endpoints::LocalEndpoints;
+use crate::local_endpoints::{Changed, LocalEndpoints};
 use crate::session::{self, Session};
 
 /// How long a new daemon has to report the matches of the old one before they are dropped.
 pub const RECONNECT_GRACE: Duration = Duration::from_secs(3);
+/// Bytes of frames read at once from the daemon (a burst's match events are applied together).
+const FRAMES_AT_HAND: usize = 64 * 1024;
 /// First and longest pause between reconnection attempts.
 const RETRY_FIRST: Duration = Duration::from_millis(50);
 const RETRY_MAX: Duration = Duration::from_millis(500);
@@ -58,25 +61,32 @@ pub(crate) fn run(mut reader: UnixStream, session: &Session, endpoints: &LocalEn
 
 /// Reads frames until the connection ends; sweeps stale matches when their time comes.
 fn read_until_lost(
-    reader: &mut UnixStream,
+    stream: &mut UnixStream,
     session: &Session,
     endpoints: &LocalEndpoints,
     sweep_at: &mut Option<Instant>,
 ) {
+    // Frames that arrived together are applied together: match events are recorded as they
+    // are read and applied once the frames at hand are done.
+    let mut reader = BufReader::with_capacity(FRAMES_AT_HAND, &*stream);
+    let mut changed = Changed::new();
     loop {
+        if reader.buffer().is_empty() {
+            endpoints.publish(&mut changed);
+        }
         let timeout = sweep_at.map(|at| {
             at.saturating_duration_since(Instant::now())
                 .max(Duration::from_millis(1))
         });
-        let _ = reader.set_read_timeout(timeout);
-        match session::read_frame(reader) {
+        let _ = reader.get_ref().set_read_timeout(timeout);
+        match session::read_frame(&mut reader) {
             Ok(Some(DaemonMessage::Refused { reason })) => {
                 tracing::error!(%reason, "the daemon ended the session");
-                return;
+                break;
             }
             Ok(Some(message)) => {
                 if let Some(event) = session.complete(message) {
-                    endpoints.route(event);
+                    endpoints.route(event, &mut changed);
                 }
             }
             Err(err)
@@ -87,19 +97,21 @@ fn read_until_lost(
             Ok(None) | Err(_) if session.is_ending() => return,
             Ok(None) => {
                 tracing::warn!(socket = %session.path().display(), "the daemon closed the session; samples keep flowing to known peers; reconnecting");
-                return;
+                break;
             }
             Err(err) => {
                 tracing::warn!(%err, "lost the daemon session; samples keep flowing to known peers; reconnecting");
-                return;
+                break;
             }
         }
         if sweep_at.is_some_and(|at| Instant::now() >= at) {
             *sweep_at = None;
+            endpoints.publish(&mut changed);
             let swept = endpoints.sweep_stale();
             tracing::info!(swept, "matches the new daemon did not confirm were dropped");
         }
     }
+    endpoints.publish(&mut changed);
 }
 
 /// Tries to reach a daemon again until one answers or the participant ends. A participant

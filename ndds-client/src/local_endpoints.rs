@@ -15,6 +15,9 @@ use crate::matches::{Matched, Peers};
 use crate::producer::ProducerState;
 use crate::sync::{read, write};
 
+/// Endpoints whose matched set changed since it was last applied, by entity.
+pub(crate) type Changed = HashMap<u32, Endpoint>;
+
 /// A local endpoint's state.
 #[derive(Debug, Clone)]
 pub(crate) enum Endpoint {
@@ -100,8 +103,19 @@ impl LocalEndpoints {
         swept
     }
 
-    /// Applies one match event of the daemon.
-    pub(crate) fn route(&self, message: DaemonMessage) {
+    /// Applies the matched sets of the endpoints in `changed` (emptied).
+    pub(crate) fn publish(&self, changed: &mut Changed) {
+        for (_, endpoint) in changed.drain() {
+            for writer in endpoint.peers().publish(|all| endpoint.on_change(all)) {
+                endpoint.lost(writer);
+            }
+        }
+    }
+
+    /// Records one match event of the daemon; the endpoint's data plane learns the new
+    /// matched set when [`LocalEndpoints::publish`] applies `changed` (once per burst of
+    /// events, not once per event: a burst of `n` matches then costs `n`, not `n²`).
+    pub(crate) fn route(&self, message: DaemonMessage, changed: &mut Changed) {
         let entity = match &message {
             DaemonMessage::Matched { local, .. }
             | DaemonMessage::Incompatible { local, .. }
@@ -120,12 +134,12 @@ impl LocalEndpoints {
         let peers = endpoint.peers();
         match message {
             DaemonMessage::Matched { remote, .. } => {
-                peers.matched(remote, |all| endpoint.on_change(all));
+                peers.record_matched(remote);
+                changed.entry(entity).or_insert_with(|| endpoint.clone());
             }
-            DaemonMessage::Unmatched { remote, .. }
-                if peers.unmatched(&remote, |all| endpoint.on_change(all)) =>
-            {
-                endpoint.lost(remote);
+            DaemonMessage::Unmatched { remote, .. } => {
+                peers.record_unmatched(remote);
+                changed.entry(entity).or_insert_with(|| endpoint.clone());
             }
             DaemonMessage::Incompatible { remote, .. } => {
                 if let Endpoint::Consumer(state) = &endpoint {
@@ -148,6 +162,7 @@ impl LocalEndpoints {
                     );
                 }
                 peers.incompatible(remote);
+                changed.entry(entity).or_insert_with(|| endpoint.clone());
             }
             _ => {}
         }

@@ -12,7 +12,7 @@ use ndds_core::wire::{EndpointInfo, Guid};
 
 use crate::sync::{deadline, lock};
 
-/// The matched endpoints, as [`Peers::matched`] hands them to its `apply` step.
+/// The matched endpoints, as [`Peers::publish`] hands them to its `apply` step.
 pub(crate) type Matched<'a> = std::collections::btree_map::Values<'a, Guid, EndpointInfo>;
 
 #[derive(Debug, Default)]
@@ -21,6 +21,17 @@ struct Maps {
     incompatible: BTreeMap<Guid, EndpointInfo>,
     /// Matches not yet confirmed by a replacement daemon.
     stale: BTreeSet<Guid>,
+    /// Changes recorded and not yet published: invisible to everyone until
+    /// [`Peers::publish`] applies them, in order, with the data plane's update.
+    pending: Vec<Change>,
+}
+
+/// One recorded change of the matches.
+#[derive(Debug)]
+enum Change {
+    Matched(EndpointInfo),
+    Incompatible(EndpointInfo),
+    Unmatched(Guid),
 }
 
 /// Topic, type, and matched and incompatible peers of one local endpoint.
@@ -48,16 +59,46 @@ impl Peers {
         }
     }
 
-    /// Records a match. `apply` sees the matched endpoints after the change and runs before
-    /// anyone waiting for matches is woken, so a woken writer finds its destinations set.
-    pub(crate) fn matched(&self, remote: EndpointInfo, apply: impl FnOnce(Matched<'_>)) {
+    /// Records a match. Nobody sees it until [`Peers::publish`] applies it (so a burst of
+    /// matches is applied once, not once per match).
+    pub(crate) fn record_matched(&self, remote: EndpointInfo) {
+        lock(&self.maps).pending.push(Change::Matched(remote));
+    }
+
+    /// Records that a peer went away, as [`Peers::record_matched`] records a match.
+    pub(crate) fn record_unmatched(&self, remote: Guid) {
+        lock(&self.maps).pending.push(Change::Unmatched(remote));
+    }
+
+    /// Applies the recorded changes in order; `apply` sees the matched endpoints after them
+    /// and runs before anyone waiting for matches is woken, so a woken writer finds its
+    /// destinations set. Returns the peers that were matched and went away.
+    pub(crate) fn publish(&self, apply: impl FnOnce(Matched<'_>)) -> Vec<Guid> {
         let mut maps = lock(&self.maps);
-        maps.incompatible.remove(&remote.guid);
-        maps.stale.remove(&remote.guid);
-        maps.matched.insert(remote.guid, remote);
+        let mut lost = Vec::new();
+        for change in std::mem::take(&mut maps.pending) {
+            match change {
+                Change::Matched(remote) => {
+                    maps.incompatible.remove(&remote.guid);
+                    maps.stale.remove(&remote.guid);
+                    maps.matched.insert(remote.guid, remote);
+                }
+                Change::Incompatible(remote) => {
+                    maps.matched.remove(&remote.guid);
+                    maps.incompatible.insert(remote.guid, remote);
+                }
+                Change::Unmatched(remote) => {
+                    maps.incompatible.remove(&remote);
+                    if maps.matched.remove(&remote).is_some() {
+                        lost.push(remote);
+                    }
+                }
+            }
+        }
         self.apply(&maps, apply);
         drop(maps);
         self.wake_async();
+        lost
     }
 
     /// Wakes the async waiters (the maps' lock released).
@@ -106,24 +147,7 @@ impl Peers {
             remote_process = remote.process,
             "incompatible endpoint on topic: samples will not flow between these endpoints"
         );
-        let mut maps = lock(&self.maps);
-        maps.matched.remove(&remote.guid);
-        maps.incompatible.insert(remote.guid, remote);
-        self.changed.notify_all();
-        drop(maps);
-        self.wake_async();
-    }
-
-    /// Forgets a peer; `apply` as in [`Peers::matched`]. Returns whether it was matched (not
-    /// merely incompatible).
-    pub(crate) fn unmatched(&self, remote: &Guid, apply: impl FnOnce(Matched<'_>)) -> bool {
-        let mut maps = lock(&self.maps);
-        maps.incompatible.remove(remote);
-        let was_matched = maps.matched.remove(remote).is_some();
-        self.apply(&maps, apply);
-        drop(maps);
-        self.wake_async();
-        was_matched
+        lock(&self.maps).pending.push(Change::Incompatible(remote));
     }
 
     /// Marks every match as unconfirmed; [`Peers::sweep_stale`] later drops those the new
@@ -230,7 +254,17 @@ mod tests {
             0,
             "nothing wakes it meanwhile"
         );
-        peers.matched(consumer(1, &type_desc), |_| {});
+        peers.record_matched(consumer(1, &type_desc));
+        assert!(
+            peers.poll_matched(1, &mut cx).is_pending(),
+            "not seen before published"
+        );
+        assert_eq!(
+            counter.0.load(Ordering::SeqCst),
+            0,
+            "not before the match is applied"
+        );
+        peers.publish(|_| {});
         assert_eq!(
             counter.0.load(Ordering::SeqCst),
             1,
@@ -239,7 +273,8 @@ mod tests {
         assert!(peers.poll_matched(1, &mut cx).is_ready());
         // Waiting for two: woken by the next change too (here, the one match going away).
         assert!(peers.poll_matched(2, &mut cx).is_pending());
-        peers.unmatched(&consumer(1, &type_desc).guid, |_| {});
+        peers.record_unmatched(consumer(1, &type_desc).guid);
+        assert_eq!(peers.publish(|_| {}), [consumer(1, &type_desc).guid]);
         assert_eq!(counter.0.load(Ordering::SeqCst), 2);
         assert!(peers.poll_matched(2, &mut cx).is_pending());
     }
