@@ -134,8 +134,7 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
     .0;
     let to_first_sample = genuine_started.elapsed();
     let memory_after = cluster.daemon(VICTIM).memory().expect("daemon memory");
-    // Held after the flood (the tables); the peak also counts the flood's transient buffers
-    // (input queue, events), reported but not bounded here.
+    // Held after the flood (the tables), and at the peak (with the flood's input queue).
     let growth = memory_after.rss_kib.saturating_sub(memory_before.rss_kib);
     let peak_growth = memory_after.peak_kib.saturating_sub(memory_before.rss_kib);
     let graph = cluster.graph(VICTIM);
@@ -176,11 +175,12 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
         "the genuine producer is in the victim's table"
     );
     assert!(
-        growth <= MEMORY_BOUND_KIB,
-        "daemon memory grew by {growth} KiB (bound {MEMORY_BOUND_KIB} KiB)"
+        growth.max(peak_growth) <= MEMORY_BOUND_KIB,
+        "daemon memory grew by {growth} KiB, {peak_growth} KiB at the peak (bound \
+         {MEMORY_BOUND_KIB} KiB)"
     );
-    // Generous: the consumer's process also works through its matches with the forged
-    // producers (the figure is reported above and in docs/security.md).
+    // The issue asks for 2 s (measured: under 1 s); generous here, as for every real-process
+    // test on a loaded machine.
     assert!(
         to_first_sample < Duration::from_secs(10),
         "first genuine sample {to_first_sample:?} after the producer was declared"
