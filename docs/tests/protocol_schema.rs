@@ -11,7 +11,9 @@ use ndds_core::ipc::{ClientMessage, DaemonMessage, Role};
 use ndds_core::types::{ContainerShape, Format, VariantShape};
 use ndds_core::wire::data::{Addressing, Fragment, Gap, Heartbeat, Sample};
 use ndds_core::wire::feedback::{AckNack, NackFrag};
-use ndds_core::wire::{Announce, Bye, ConsumerMode, EndpointQos, Reliability, Solicit, Withdraw};
+use ndds_core::wire::{
+    Announce, Bye, ConsumerMode, EndpointQos, Probe, ProbeReply, Reliability, Solicit, Withdraw,
+};
 use ndds_docs::markdown::{Doc, Heading, Table, plain};
 use ndds_docs::report::Problems;
 use serde_reflection::{
@@ -49,6 +51,8 @@ fn registry() -> Registry {
         .and_then(|_| tracer.trace_simple_type::<Announce>())
         .and_then(|_| tracer.trace_simple_type::<Withdraw>())
         .and_then(|_| tracer.trace_simple_type::<Bye>())
+        .and_then(|_| tracer.trace_simple_type::<Probe>())
+        .and_then(|_| tracer.trace_simple_type::<ProbeReply>())
         .and_then(|_| tracer.trace_value(&mut samples, &addressing).map(|_| ()))
         .and_then(|_| tracer.trace_type::<Sample<'_>>(&samples))
         .and_then(|_| tracer.trace_type::<Fragment<'_>>(&samples))

@@ -7,11 +7,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Via};
+
+#[path = "support/probe.rs"]
+mod probe;
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     self, Announce, EndpointInfo, EndpointQos, Guid, Locator, Message, MessageKind, NodeInfo,
     ProducerQosWire,
 };
+use probe::answer_probe;
 
 fn locator(host: u8) -> Locator {
     Locator {
@@ -135,6 +139,12 @@ fn a_node_heard_by_unicast_gets_copies_until_its_multicast_is_heard() {
     let with_copy = vec![Destination::Multicast, Destination::Unicast(other)];
 
     engine.handle_datagram(now, from, Via::Unicast, &bytes);
+    assert_eq!(
+        engine.fanout(),
+        vec![Destination::Multicast],
+        "no copies to an address that has not answered its probe"
+    );
+    answer_probe(&mut engine, now, other, 0, 5);
     assert_eq!(engine.fanout(), with_copy, "heard by unicast only");
     engine.handle_datagram(now, from, Via::Multicast, &bytes);
     assert_eq!(
@@ -150,4 +160,48 @@ fn a_node_heard_by_unicast_gets_copies_until_its_multicast_is_heard() {
         with_copy,
         "multicast silent for half a lease"
     );
+}
+
+#[test]
+fn a_forged_probe_reply_validates_nothing() {
+    let now = Instant::now();
+    let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
+    let victim = locator(9);
+    let solicit = Message::Solicit(wire::Solicit {
+        node: NodeInfo {
+            hostname: "spoofed".into(),
+            pid: 1,
+            unicast: victim,
+            lease_ms: 5000,
+            announce_period_ms: 1000,
+            version: String::new(),
+        },
+    });
+    let mut bytes = Vec::new();
+    wire::encode(0, 9, &solicit, &mut bytes).unwrap();
+    engine.handle_timeout(now);
+    while engine.poll_transmit().is_some() {}
+    engine.handle_datagram(now, SocketAddr::V4(victim.into()), Via::Unicast, &bytes);
+    let mut guessed = Vec::new();
+    wire::encode(
+        0,
+        9,
+        &Message::ProbeReply(wire::ProbeReply { token: 42 }),
+        &mut guessed,
+    )
+    .unwrap();
+    engine.handle_datagram(now, SocketAddr::V4(victim.into()), Via::Unicast, &guessed);
+    // Past the reply jitter: the victim got one probe, as small as the solicitation, and
+    // nothing else.
+    engine.handle_timeout(now + Duration::from_secs(1));
+    let to_victim: Vec<_> = std::iter::from_fn(|| engine.poll_transmit())
+        .filter(|t| t.destination == Destination::Unicast(victim))
+        .collect();
+    assert_eq!(to_victim.len(), 1, "{to_victim:?}");
+    assert!(to_victim[0].payload.len() <= 3 * bytes.len());
+    assert_eq!(
+        wire::decode(&to_victim[0].payload).unwrap().0.kind,
+        MessageKind::Probe
+    );
+    assert_eq!(engine.fanout(), vec![Destination::Multicast]);
 }

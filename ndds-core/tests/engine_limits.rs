@@ -8,11 +8,15 @@ use ndds_core::discovery::engine::{
     MAX_ENDPOINTS_PER_NODE, MAX_NODES, MAX_REMOTE_BYTES, MAX_REMOTE_ENDPOINTS,
 };
 use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event, Origin, Via};
+
+#[path = "support/probe.rs"]
+mod probe;
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     self, Announce, DropReason, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo,
     ProducerQosWire, Solicit,
 };
+use probe::answer_probe;
 
 fn locator(host: u8, port: u16) -> Locator {
     Locator {
@@ -102,6 +106,8 @@ fn a_node_heard_by_unicast_gets_copies_only_at_its_own_source_address() {
         Via::Unicast,
         &datagram(2, &announce(honest)),
     );
+    // The honest node proves its address by answering the engine's probe.
+    answer_probe(&mut engine, now, honest, 0, 2);
     let victim = locator(99, 53);
     let source: SocketAddr = "10.0.0.3:7850".parse().unwrap();
     engine.handle_datagram(now, source, Via::Unicast, &datagram(3, &announce(victim)));

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use ndds_core::discovery::engine::{
     MAX_ENDPOINTS_PER_NODE, MAX_LEASE, MAX_NODES, MAX_PENDING_REPLIES, MAX_REMOTE_BYTES,
-    MAX_REMOTE_ENDPOINTS, NODE_OVERHEAD,
+    MAX_REMOTE_ENDPOINTS, NODE_OVERHEAD, PROBE_INTERVAL,
 };
 use ndds_core::discovery::fanout::unicast_window;
 use ndds_core::discovery::{DiscoveryConfig, Engine, MAX_PEERS, MAX_TOPIC_LEN};
@@ -61,6 +61,7 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("NODE_OVERHEAD", NODE_OVERHEAD.to_string()),
         ("MAX_PENDING_REPLIES", MAX_PENDING_REPLIES.to_string()),
         ("MAX_LEASE", duration(MAX_LEASE)),
+        ("PROBE_INTERVAL", duration(PROBE_INTERVAL)),
         ("MAX_PEERS", MAX_PEERS.to_string()),
         (
             "WITHDRAWN_PER_DATAGRAM",

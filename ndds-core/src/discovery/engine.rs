@@ -21,12 +21,12 @@
 //! ([`Engine::add_local`], [`Engine::remove_locals`], [`Engine::close`]) take no time; the
 //! fan-out they need is judged at the instant of the latest input.
 
-use std::collections::{BTreeSet, HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, HashSet, VecDeque};
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use super::config::{ConfigError, DiscoveryConfig};
+use super::config::{ConfigError, DiscoveryConfig, MAX_PEERS};
 use super::event::{Destination, Event, LossReason, Transmit};
 use super::fanout::{Fanout, Via};
 use super::sources::Sources;
@@ -34,7 +34,7 @@ use super::table::{Entry, Origin, Table, entry_cost};
 use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
-    NodeInfo, Solicit, Withdraw,
+    NodeInfo, Probe, ProbeReply, Solicit, Withdraw,
 };
 
 /// Longest topic name accepted, in bytes.
@@ -55,6 +55,8 @@ pub const NODE_OVERHEAD: usize = 512;
 pub const MAX_PENDING_REPLIES: usize = 1024;
 /// Longest lease accepted from a remote node; longer ones are shortened to this.
 pub const MAX_LEASE: Duration = Duration::from_secs(60);
+/// How often an address that has not answered is probed again (at most).
+pub const PROBE_INTERVAL: Duration = Duration::from_millis(500);
 /// Withdrawn guids carried per announcement datagram.
 const WITHDRAWN_PER_DATAGRAM: usize = 1024;
 
@@ -167,6 +169,14 @@ pub struct Engine {
     node_expiry: BTreeSet<(Instant, u64)>,
     /// What each source address holds, for eviction when the tables are full.
     sources: Sources,
+    /// Unicast locators that answered a probe: only they get replies and unicast copies.
+    validated: HashSet<Locator>,
+    /// When each locator was last probed.
+    probed: HashMap<Locator, Instant>,
+    /// Locators owed a full announcement once they answer their probe.
+    reply_wanted: HashSet<Locator>,
+    /// Keys the probe tokens.
+    probe_secret: [u8; 32],
     withdrawn: VecDeque<(Guid, u8)>,
     solicits: VecDeque<Instant>,
     replies: Vec<(Instant, Locator)>,
@@ -202,6 +212,7 @@ impl Engine {
         let node_id = config.node_id.filter(|id| *id != 0).unwrap_or(drawn);
         let solicits = config.solicit_delays.iter().map(|d| now + *d).collect();
         let fanout = Fanout::new(&config);
+        let probe_secret = probe_secret(config.seed, node_id);
         Ok(Engine {
             config,
             node_id,
@@ -210,6 +221,10 @@ impl Engine {
             nodes: HashMap::new(),
             node_expiry: BTreeSet::new(),
             sources: Sources::default(),
+            validated: HashSet::new(),
+            probed: HashMap::new(),
+            reply_wanted: HashSet::new(),
+            probe_secret,
             withdrawn: VecDeque::new(),
             solicits,
             replies: Vec::new(),
@@ -299,6 +314,7 @@ impl Engine {
             .nodes
             .values()
             .filter(|node| node.speaks_from_its_locator())
+            .filter(|node| self.is_validated(node.info.unicast))
             .filter(|node| self.fanout.multicast_stale(node.last_multicast, self.now))
             .map(|node| node.info.unicast);
         self.fanout.destinations(stale)
@@ -422,7 +438,13 @@ impl Engine {
             }
             Message::Announce(announce) => {
                 check_node(&announce.node)?;
+                let unicast = announce.node.unicast;
                 self.on_announce(now, header, (from, via), announce)?;
+                // A probe lost, or answered late: asked again (at most every PROBE_INTERVAL)
+                // while the node speaks from an address it has not proven.
+                if from == SocketAddr::V4(unicast.into()) && !self.is_validated(unicast) {
+                    self.probe(now, unicast);
+                }
             }
             Message::Withdraw(withdraw) => {
                 for guid in &withdraw.endpoints {
@@ -430,8 +452,72 @@ impl Engine {
                 }
             }
             Message::Bye(Bye) => self.forget_node(header.sender, LossReason::Bye),
+            // As large as the probe: answering anyone amplifies nothing.
+            Message::Probe(Probe { token }) => {
+                let SocketAddr::V4(to) = from else {
+                    return Err(DropReason::Invalid);
+                };
+                let reply = Message::ProbeReply(ProbeReply { token });
+                self.encode_and_push(&[Destination::Unicast(Locator::from(to))], &reply);
+            }
+            Message::ProbeReply(ProbeReply { token }) => {
+                let SocketAddr::V4(at) = from else {
+                    return Err(DropReason::Invalid);
+                };
+                let at = Locator::from(at);
+                if token != self.probe_token(at) {
+                    return Err(DropReason::Invalid);
+                }
+                self.probed.remove(&at);
+                if self.validated.len() < MAX_NODES + MAX_PEERS {
+                    self.validated.insert(at);
+                }
+                if self.reply_wanted.remove(&at) {
+                    self.schedule_reply(now, at, from);
+                }
+            }
         }
         Ok(())
+    }
+
+    /// The token a `Probe` to `at` carries: only this engine can compute it.
+    fn probe_token(&self, at: Locator) -> u64 {
+        use sha2::Digest as _;
+        let digest = sha2::Sha256::new()
+            .chain_update(self.probe_secret)
+            .chain_update(at.addr)
+            .chain_update(at.port.to_be_bytes())
+            .finalize();
+        u64::from_be_bytes(digest[..8].try_into().expect("8 bytes"))
+    }
+
+    /// Whether `at` proved that it receives there (or is a configured peer): only then does it
+    /// get more than probes.
+    fn is_validated(&self, at: Locator) -> bool {
+        self.validated.contains(&at) || self.fanout.peers().contains(&at)
+    }
+
+    /// Sends `at` a probe, at most once per `PROBE_INTERVAL`.
+    fn probe(&mut self, now: Instant, at: Locator) {
+        if self
+            .probed
+            .get(&at)
+            .is_some_and(|sent| now.saturating_duration_since(*sent) < PROBE_INTERVAL)
+        {
+            return;
+        }
+        if self.probed.len() >= MAX_PENDING_REPLIES {
+            self.probed
+                .retain(|_, sent| now.saturating_duration_since(*sent) < PROBE_INTERVAL);
+            if self.probed.len() >= MAX_PENDING_REPLIES {
+                return;
+            }
+        }
+        self.probed.insert(at, now);
+        let probe = Message::Probe(Probe {
+            token: self.probe_token(at),
+        });
+        self.encode_and_push(&[Destination::Unicast(at)], &probe);
     }
 
     fn on_announce(
@@ -464,6 +550,14 @@ impl Engine {
     fn schedule_reply(&mut self, now: Instant, to: Locator, from: SocketAddr) {
         if from != SocketAddr::V4(to.into()) {
             tracing::debug!(%from, announced = %to, "not answering: source is not the announced locator");
+            return;
+        }
+        if !self.is_validated(to) {
+            // First the proof that it receives there; the answer follows the proof.
+            if self.reply_wanted.len() < MAX_PENDING_REPLIES {
+                self.reply_wanted.insert(to);
+            }
+            self.probe(now, to);
             return;
         }
         if self.replies.len() >= MAX_PENDING_REPLIES || self.replies.iter().any(|(_, d)| *d == to) {
@@ -648,6 +742,10 @@ impl Engine {
             self.node_expiry.remove(&(known.expires, node));
             self.sources
                 .remove(known.source, node, known.last_seen, known.charged);
+            let at = known.info.unicast;
+            if !self.nodes.values().any(|other| other.info.unicast == at) {
+                self.validated.remove(&at);
+            }
             self.events.push_back(Event::NodeLost { node, reason });
         }
     }
@@ -987,4 +1085,15 @@ fn check_endpoint(info: &EndpointInfo) -> Result<(), LocalError> {
 /// The estimated bytes a remote node's own entry holds.
 fn node_cost(info: &NodeInfo) -> usize {
     NODE_OVERHEAD + info.hostname.len() + info.version.len()
+}
+
+/// The key of an engine's probe tokens, from its seed (random in a daemon) and node id.
+fn probe_secret(seed: u64, node_id: u64) -> [u8; 32] {
+    use sha2::Digest as _;
+    sha2::Sha256::new()
+        .chain_update(b"ndds discovery probe")
+        .chain_update(seed.to_be_bytes())
+        .chain_update(node_id.to_be_bytes())
+        .finalize()
+        .into()
 }

@@ -31,6 +31,10 @@ pub enum MessageKind {
     Withdraw = 3,
     /// A daemon leaves the domain: forget it and all of its endpoints.
     Bye = 4,
+    /// A daemon checks that a node receives at the address it claims.
+    Probe = 5,
+    /// The answer to a `Probe`.
+    ProbeReply = 6,
     /// Samples and stream control, sent by a producing process directly to a consuming one.
     Data = 16,
     /// Acknowledgements and repair requests from a consuming process to a producing one.
@@ -39,11 +43,13 @@ pub enum MessageKind {
 
 impl MessageKind {
     /// Every kind, in wire order.
-    pub const ALL: [MessageKind; 6] = [
+    pub const ALL: [MessageKind; 8] = [
         MessageKind::Solicit,
         MessageKind::Announce,
         MessageKind::Withdraw,
         MessageKind::Bye,
+        MessageKind::Probe,
+        MessageKind::ProbeReply,
         MessageKind::Data,
         MessageKind::Feedback,
     ];
@@ -60,6 +66,8 @@ impl MessageKind {
             MessageKind::Announce => "Announce",
             MessageKind::Withdraw => "Withdraw",
             MessageKind::Bye => "Bye",
+            MessageKind::Probe => "Probe",
+            MessageKind::ProbeReply => "ProbeReply",
             MessageKind::Data => "Data",
             MessageKind::Feedback => "Feedback",
         }

@@ -13,6 +13,7 @@ pub mod endpoint;
 pub mod feedback;
 pub mod header;
 pub mod node;
+pub mod probe;
 pub mod qos;
 pub mod solicit;
 pub mod withdraw;
@@ -26,6 +27,7 @@ pub use endpoint::{EndpointInfo, EndpointKind, Guid, Locator};
 pub use feedback::{FeedbackDatagram, FeedbackSub};
 pub use header::{HEADER_LEN, Header, MAGIC, MessageKind, PROTOCOL_VERSION};
 pub use node::NodeInfo;
+pub use probe::{Probe, ProbeReply};
 pub use qos::{ConsumerMode, ConsumerQosWire, EndpointQos, ProducerQosWire, Reliability};
 pub use solicit::Solicit;
 pub use withdraw::Withdraw;
@@ -123,6 +125,10 @@ pub enum Message {
     Withdraw(Withdraw),
     /// See [`bye`].
     Bye(Bye),
+    /// See [`probe`].
+    Probe(Probe),
+    /// See [`probe`].
+    ProbeReply(ProbeReply),
 }
 
 impl Message {
@@ -133,6 +139,8 @@ impl Message {
             Message::Announce(_) => MessageKind::Announce,
             Message::Withdraw(_) => MessageKind::Withdraw,
             Message::Bye(_) => MessageKind::Bye,
+            Message::Probe(_) => MessageKind::Probe,
+            Message::ProbeReply(_) => MessageKind::ProbeReply,
         }
     }
 }
@@ -172,6 +180,8 @@ pub fn encode(
         Message::Announce(body) => append_body(body, out),
         Message::Withdraw(body) => append_body(body, out),
         Message::Bye(body) => append_body(body, out),
+        Message::Probe(body) => append_body(body, out),
+        Message::ProbeReply(body) => append_body(body, out),
     };
     let size = out.len() - start;
     match result {
@@ -204,6 +214,8 @@ pub fn decode(bytes: &[u8]) -> Result<(Header, Message), DropReason> {
         MessageKind::Announce => Message::Announce(decode_body(body)?),
         MessageKind::Withdraw => Message::Withdraw(decode_body(body)?),
         MessageKind::Bye => Message::Bye(decode_body(body)?),
+        MessageKind::Probe => Message::Probe(decode_body(body)?),
+        MessageKind::ProbeReply => Message::ProbeReply(decode_body(body)?),
         MessageKind::Data | MessageKind::Feedback => return Err(DropReason::Unexpected),
     };
     Ok((header, message))
