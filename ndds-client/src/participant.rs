@@ -4,7 +4,9 @@
 //! Two threads serve a participant: the *session* thread reads the daemon's frames (match
 //! events and answers) and the *data* thread receives samples. Neither keeps the participant
 //! alive: when the last handle ([`Participant`], producers, consumers) is dropped, the session
-//! is closed, the daemon withdraws every endpoint at once, and both threads end.
+//! is closed, the daemon withdraws every endpoint at once, and both threads end. In a sealed
+//! domain whose keys came from a file, a third thread looks at that file every second and puts
+//! a rotation step in force.
 
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
@@ -186,11 +188,11 @@ impl ParticipantBuilder {
                 .map_err(|err: String| ConnectError::Setting(format!("NDDS_EMBEDDED: {err}")))?,
             (None, None) => EmbeddedPolicy::Auto,
         };
-        let key = match self
+        let key_file = self
             .key_file
-            .or_else(|| env("NDDS_KEY_FILE").map(PathBuf::from))
-        {
-            Some(path) => Some(ndds_daemon::keys::load(&path)?),
+            .or_else(|| env("NDDS_KEY_FILE").map(PathBuf::from));
+        let key = match &key_file {
+            Some(path) => Some(ndds_daemon::keys::load(path)?),
             None => None,
         };
         let seal_mode = if self.integrity_only {
@@ -206,8 +208,11 @@ impl ParticipantBuilder {
         });
         if embedded_config.key.is_none() && key.is_some() {
             embedded_config.key.clone_from(&key);
+            embedded_config.key_file.clone_from(&key_file);
             embedded_config.seal_mode = seal_mode;
         }
+        // The file the keys come from, watched for rotation steps.
+        let key_file = key_file.or_else(|| embedded_config.key_file.clone());
         // A key given only in the embedded daemon's configuration serves the participant too.
         let seal = match key {
             Some(keyring) => Some((keyring, seal_mode)),
@@ -237,6 +242,7 @@ impl ParticipantBuilder {
             role: self.role.unwrap_or(Role::Client),
             max_sample,
             seal,
+            key_file,
         })
     }
 }
@@ -253,6 +259,8 @@ struct Settings {
     max_sample: usize,
     /// The domain's keys and how to seal, in a sealed domain.
     seal: Option<(Keyring, SealMode)>,
+    /// The file the keys were read from (watched for rotation steps).
+    key_file: Option<PathBuf>,
 }
 
 impl Settings {
@@ -302,6 +310,7 @@ impl Drop for Inner {
             // The last handle may go on one of the participant's own threads (a direct
             // callback that owned an endpoint): that thread ends by itself once it returns.
             if thread.thread().id() != current {
+                thread.thread().unpark();
                 let _ = thread.join();
             }
         }
@@ -436,7 +445,13 @@ impl Participant {
             next_entity: AtomicU32::new(1),
             threads: Mutex::new(Vec::new()),
         });
-        inner.spawn_threads(reader)?;
+        let key_watch = match (&settings.key_file, &settings.seal) {
+            (Some(path), Some((keyring, _))) => {
+                Some(ndds_daemon::keys::KeyWatch::new(path, keyring.clone()))
+            }
+            _ => None,
+        };
+        inner.spawn_threads(reader, key_watch)?;
         tracing::debug!(participant = format_args!("{participant:016x}"), socket = %settings.socket.display(), "participant connected");
         Ok(Participant { inner })
     }
@@ -647,7 +662,37 @@ impl Inner {
     fn spawn_threads(
         self: &Arc<Self>,
         reader: std::os::unix::net::UnixStream,
+        key_watch: Option<ndds_daemon::keys::KeyWatch>,
     ) -> Result<(), ConnectError> {
+        if let Some(mut watch) = key_watch {
+            let data = self.data.clone();
+            let watcher = std::thread::Builder::new()
+                .name("ndds-keys".into())
+                .spawn(move || {
+                    // Woken early by the participant's drop (unpark).
+                    while !data.is_closed() {
+                        std::thread::park_timeout(ndds_daemon::keys::KEY_CHECK);
+                        match watch.changed() {
+                            None => {}
+                            Some(Ok(keyring)) => {
+                                tracing::info!(
+                                    path = %watch.path().display(),
+                                    sealing_epoch = keyring.send_epoch(),
+                                    accepted = ?keyring.epochs().collect::<Vec<_>>(),
+                                    "key file changed: new keys in force"
+                                );
+                                data.set_keyring(keyring);
+                            }
+                            Some(Err(err)) => tracing::error!(
+                                %err,
+                                "key file changed but cannot be used; the keys in force stay"
+                            ),
+                        }
+                    }
+                })
+                .map_err(ConnectError::Thread)?;
+            lock(&self.threads).push(watcher);
+        }
         let data = self.data.clone();
         let io_thread = std::thread::Builder::new()
             .name("ndds-io".into())

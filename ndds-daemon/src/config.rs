@@ -174,6 +174,7 @@ impl ConfigFile {
         config.seed = self.seed;
         if let Some(path) = self.key_file {
             config.key = Some(crate::keys::load(&path)?);
+            config.key_file = Some(path);
         }
         if self.integrity_only.unwrap_or(false) {
             config.seal_mode = SealMode::IntegrityOnly;
@@ -217,6 +218,9 @@ pub struct DaemonConfig {
     /// The domain's keys: every datagram sealed with them, only sealed ones accepted
     /// (`None`: an open domain).
     pub key: Option<Keyring>,
+    /// The file `key` was read from: watched, so rotation steps take effect without a restart
+    /// ([`crate::keys::KeyWatch`]).
+    pub key_file: Option<PathBuf>,
     /// How datagrams are sealed when there is a key.
     pub seal_mode: SealMode,
 }
@@ -243,6 +247,7 @@ impl DaemonConfig {
             ttl: 1,
             seed: None,
             key: None,
+            key_file: None,
             seal_mode: SealMode::Encrypt,
         }
     }

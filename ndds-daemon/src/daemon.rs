@@ -22,6 +22,7 @@ use crate::claim::SocketClaim;
 use crate::config::DaemonConfig;
 use crate::connection;
 use crate::driver::{Counters, Driver, Input};
+use crate::keys::{self, KeyWatch};
 use crate::local;
 use crate::peers::{self, Peer, PeerError};
 use crate::sockets::{self, DiscoverySockets, SocketError, UnicastPort};
@@ -207,6 +208,12 @@ impl Daemon {
         drop(inputs);
 
         let mut driver = Driver::new(engine, unicast, sockets.group, peers, counters);
+        let mut key_watch = match (&config.key_file, &config.key) {
+            (Some(path), Some(keyring)) => Some(KeyWatch::new(path, keyring.clone())),
+            _ => None,
+        };
+        let mut key_check = tokio::time::interval(keys::KEY_CHECK);
+        key_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         driver.flush().await;
         loop {
             let deadline = driver.deadline().map(tokio::time::Instant::from_std);
@@ -216,6 +223,11 @@ impl Daemon {
                 biased;
                 () = shutdown.cancelled() => break,
                 () = sleep_until(deadline) => driver.on_timer(),
+                _ = key_check.tick(), if key_watch.is_some() => {
+                    if let Some(watch) = key_watch.as_mut() {
+                        reload_keys(watch, &mut driver);
+                    }
+                }
                 input = queue.recv() => match input {
                     Some(input) => driver.on_input(input),
                     None => break,
@@ -237,6 +249,26 @@ impl Daemon {
         drop(claim);
         tracing::info!("ndds-daemon stopped");
         Ok(())
+    }
+}
+
+/// A rotation step written to the key file takes effect now; a file that cannot be used is
+/// reported and the keys in force stay.
+fn reload_keys(watch: &mut KeyWatch, driver: &mut Driver) {
+    match watch.changed() {
+        None => {}
+        Some(Ok(keyring)) => {
+            tracing::info!(
+                path = %watch.path().display(),
+                sealing_epoch = keyring.send_epoch(),
+                accepted = ?keyring.epochs().collect::<Vec<_>>(),
+                "key file changed: new keys in force"
+            );
+            driver.set_keyring(keyring);
+        }
+        Some(Err(err)) => {
+            tracing::error!(%err, "key file changed but cannot be used; the keys in force stay");
+        }
     }
 }
 

@@ -200,6 +200,11 @@ impl Driver {
         }
     }
 
+    /// Seals with `keyring`'s sending key and accepts its keys only (a rotation step).
+    pub fn set_keyring(&mut self, keyring: ndds_core::seal::Keyring) {
+        self.engine.set_keyring(keyring);
+    }
+
     /// Says `Bye` and stops discovery.
     pub fn close(&mut self) {
         self.engine.close();

@@ -114,6 +114,59 @@ fn write_new(path: &Path, keyring: &Keyring) -> std::io::Result<()> {
     file.sync_all()
 }
 
+/// How often daemons and participants look at their key file for a rotation step.
+pub const KEY_CHECK: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Watches a key file so that a rotation step (`ndds key rotate`, `use`, `retire`) takes
+/// effect without a restart: [`KeyWatch::changed`] reads the file again when its modification
+/// time, size or inode moved (the tools replace it by renaming, so the inode moves).
+#[derive(Debug)]
+pub struct KeyWatch {
+    path: PathBuf,
+    stamp: Option<(std::time::SystemTime, u64, u64)>,
+    current: Keyring,
+}
+
+impl KeyWatch {
+    /// Watches `path`, whose contents are `current` now.
+    pub fn new(path: &Path, current: Keyring) -> Self {
+        KeyWatch {
+            path: path.to_owned(),
+            stamp: stamp(path),
+            current,
+        }
+    }
+
+    /// The watched file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The new keys when the file changed and holds different ones; an error (once per
+    /// change) when it changed and cannot be used: the keys in force stay.
+    pub fn changed(&mut self) -> Option<Result<Keyring, KeyError>> {
+        let now = stamp(&self.path);
+        if now == self.stamp {
+            return None;
+        }
+        self.stamp = now;
+        match load(&self.path) {
+            Ok(keyring) if keyring == self.current => None,
+            Ok(keyring) => {
+                self.current = keyring.clone();
+                Some(Ok(keyring))
+            }
+            Err(err) => Some(Err(err)),
+        }
+    }
+}
+
+fn stamp(path: &Path) -> Option<(std::time::SystemTime, u64, u64)> {
+    use std::os::unix::fs::MetadataExt as _;
+    let meta = std::fs::metadata(path).ok()?;
+    Some((meta.modified().ok()?, meta.len(), meta.ino()))
+}
+
 /// A new random key (from the operating system's random source).
 pub fn random_key() -> Result<DomainKey, std::io::Error> {
     let mut bytes = [0u8; 32];

@@ -516,6 +516,16 @@ impl DataPlane {
         self.command(|core, now| core.producer_lost(now, entity, writer));
     }
 
+    /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.
+    pub(crate) fn set_keyring(&self, keyring: ndds_core::seal::Keyring) {
+        self.command(|core, _| core.set_keyring(keyring));
+    }
+
+    /// True once the participant closed its data plane.
+    pub(crate) fn is_closed(&self) -> bool {
+        self.closed.load(Ordering::Acquire)
+    }
+
     pub(crate) fn notify(&self, entity: u32, notification: Notification) {
         self.command(|core, _| core.notify(entity, notification));
     }
