@@ -33,7 +33,7 @@ enum Action {
         file: PathBuf,
     },
     /// Rotation, step 1: add a new key (accepted, not yet sealed with). Copy the file to
-    /// every host and restart their daemons and programs.
+    /// every host: daemons and programs put it in force within a second, no restart.
     Rotate {
         /// The key file.
         file: PathBuf,
@@ -91,7 +91,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             })?;
             outln!(
                 "added epoch {epoch} to {} (accepted, not yet sealed with): copy the file to \
-                 every host and restart them, then run `ndds key use {0} {epoch}`",
+                 every host (daemons and programs pick it up within a second), then run `ndds \
+                 key use {0} {epoch}`",
                 file.display()
             )?;
         }
@@ -105,8 +106,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 Ok(())
             })?;
             outln!(
-                "{} now seals with epoch {epoch}: copy it to every host and restart them, then \
-                 retire the old epoch with `ndds key retire`",
+                "{} now seals with epoch {epoch}: copy it to every host (picked up within a \
+                 second), then retire the old epoch with `ndds key retire`",
                 file.display()
             )?;
         }
@@ -121,7 +122,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 Ok(())
             })?;
             outln!(
-                "{} no longer accepts epoch {epoch}: copy it to every host and restart them",
+                "{} no longer accepts epoch {epoch}: copy it to every host (picked up within a \
+                 second)",
                 file.display()
             )?;
         }
