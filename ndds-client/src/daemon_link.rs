@@ -27,6 +27,8 @@ use crate::session::{self, Session};
 pub const RECONNECT_GRACE: Duration = Duration::from_secs(3);
 /// Bytes of frames read at once from the daemon (a burst's match events are applied together).
 const FRAMES_AT_HAND: usize = 64 * 1024;
+/// Most match events recorded before they are applied, however fast they keep coming.
+const PUBLISH_EVERY: usize = 1024;
 /// First and longest pause between reconnection attempts.
 const RETRY_FIRST: Duration = Duration::from_millis(50);
 const RETRY_MAX: Duration = Duration::from_millis(500);
@@ -70,9 +72,13 @@ fn read_until_lost(
     // are read and applied once the frames at hand are done.
     let mut reader = BufReader::with_capacity(FRAMES_AT_HAND, &*stream);
     let mut changed = Changed::new();
+    let mut recorded = 0usize;
     loop {
-        if reader.buffer().is_empty() {
+        // Published when the frames at hand are done, and at least every `PUBLISH_EVERY`
+        // events of a stream that never pauses.
+        if reader.buffer().is_empty() || recorded >= PUBLISH_EVERY {
             endpoints.publish(&mut changed);
+            recorded = 0;
         }
         let timeout = sweep_at.map(|at| {
             at.saturating_duration_since(Instant::now())
@@ -87,6 +93,7 @@ fn read_until_lost(
             Ok(Some(message)) => {
                 if let Some(event) = session.complete(message) {
                     endpoints.route(event, &mut changed);
+                    recorded += 1;
                 }
             }
             Err(err)

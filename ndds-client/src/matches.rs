@@ -75,7 +75,9 @@ impl Peers {
     /// destinations set. Returns the peers that were matched and went away.
     pub(crate) fn publish(&self, apply: impl FnOnce(Matched<'_>)) -> Vec<Guid> {
         let mut maps = lock(&self.maps);
-        let mut lost = Vec::new();
+        // Lost: matched before and not after (a peer unmatched and matched again within one
+        // burst is not lost; one that became incompatible is).
+        let before: Vec<Guid> = maps.matched.keys().copied().collect();
         for change in std::mem::take(&mut maps.pending) {
             match change {
                 Change::Matched(remote) => {
@@ -89,12 +91,14 @@ impl Peers {
                 }
                 Change::Unmatched(remote) => {
                     maps.incompatible.remove(&remote);
-                    if maps.matched.remove(&remote).is_some() {
-                        lost.push(remote);
-                    }
+                    maps.matched.remove(&remote);
                 }
             }
         }
+        let lost: Vec<Guid> = before
+            .into_iter()
+            .filter(|guid| !maps.matched.contains_key(guid))
+            .collect();
         self.apply(&maps, apply);
         drop(maps);
         self.wake_async();
@@ -277,5 +281,23 @@ mod tests {
         assert_eq!(peers.publish(|_| {}), [consumer(1, &type_desc).guid]);
         assert_eq!(counter.0.load(Ordering::SeqCst), 2);
         assert!(peers.poll_matched(2, &mut cx).is_pending());
+    }
+
+    #[test]
+    fn a_peer_unmatched_and_matched_again_in_one_burst_is_not_lost() {
+        let type_desc = TypeDescription::of::<u32>();
+        let peers = Peers::new("t", type_desc.clone());
+        let (one, two) = (consumer(1, &type_desc), consumer(2, &type_desc));
+        peers.record_matched(one.clone());
+        peers.record_matched(two.clone());
+        assert!(peers.publish(|_| {}).is_empty());
+        // One flaps within a burst; two becomes incompatible.
+        peers.record_unmatched(one.guid);
+        peers.record_matched(one.clone());
+        peers.incompatible(two.clone());
+        let mut seen = Vec::new();
+        let lost = peers.publish(|all| seen.extend(all.map(|info| info.guid)));
+        assert_eq!(lost, [two.guid]);
+        assert_eq!(seen, [one.guid]);
     }
 }

@@ -205,3 +205,66 @@ fn a_forged_probe_reply_validates_nothing() {
     );
     assert_eq!(engine.fanout(), vec![Destination::Multicast]);
 }
+
+/// A correct token validates an address only while its probe is outstanding and a known node
+/// announces it: replies cannot fill the validated set with addresses of nobody.
+#[test]
+fn a_probe_reply_counts_only_for_a_live_node_and_an_outstanding_probe() {
+    let now = Instant::now();
+    let mut engine = Engine::new(DiscoveryConfig::new(0, locator(1)), now).unwrap();
+    let other = locator(5);
+    let from = SocketAddr::V4(other.into());
+    let announce = Message::Announce(Announce {
+        node: NodeInfo {
+            hostname: "other".into(),
+            pid: 1,
+            unicast: other,
+            lease_ms: 5000,
+            announce_period_ms: 1000,
+            version: String::new(),
+        },
+        endpoints: vec![],
+        withdrawn: vec![],
+    });
+    let mut bytes = Vec::new();
+    wire::encode(0, 5, &announce, &mut bytes).unwrap();
+    engine.handle_datagram(now, from, Via::Unicast, &bytes);
+    let token = std::iter::from_fn(|| engine.poll_transmit())
+        .find_map(|t| match wire::decode(&t.payload) {
+            Ok((_, Message::Probe(probe))) => Some(probe.token),
+            _ => None,
+        })
+        .expect("a probe");
+    // The node leaves; its probe's answer comes after.
+    let mut bye = Vec::new();
+    wire::encode(0, 5, &Message::Bye(wire::Bye), &mut bye).unwrap();
+    engine.handle_datagram(now, from, Via::Unicast, &bye);
+    let mut reply = Vec::new();
+    wire::encode(
+        0,
+        5,
+        &Message::ProbeReply(wire::ProbeReply { token }),
+        &mut reply,
+    )
+    .unwrap();
+    let invalid = engine.stats().dropped(wire::DropReason::Invalid);
+    engine.handle_datagram(now, from, Via::Unicast, &reply);
+    assert_eq!(
+        engine.stats().dropped(wire::DropReason::Invalid),
+        invalid + 1
+    );
+    // Back again: not validated by that old answer; a second answer to no probe counts as
+    // nothing either.
+    engine.handle_datagram(now, from, Via::Unicast, &bytes);
+    assert_eq!(engine.fanout(), vec![Destination::Multicast]);
+    answer_probe(&mut engine, now, other, 0, 5);
+    assert_eq!(
+        engine.fanout(),
+        vec![Destination::Multicast, Destination::Unicast(other)]
+    );
+    engine.handle_datagram(now, from, Via::Unicast, &reply);
+    assert_eq!(
+        engine.stats().dropped(wire::DropReason::Invalid),
+        invalid + 2
+    );
+}

@@ -116,6 +116,12 @@ impl Daemon {
         };
         let mut discovery = config.discovery();
         discovery.seed = config.seed.unwrap_or_else(|| fastrand::u64(..));
+        // Never from the seed either: a configured seed must not make probe tokens guessable.
+        let secret = crate::keys::random_bytes().map_err(|source| DaemonError::Listen {
+            path: PathBuf::from("/dev/urandom"),
+            source,
+        })?;
+        discovery.probe_secret = Some(secret);
         // Never from the seed: two hosts given one seed must still have distinct ids.
         discovery.node_id = Some(fastrand::u64(1..));
         discovery.hostname = gethostname::gethostname().to_string_lossy().into_owned();

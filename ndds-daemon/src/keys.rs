@@ -128,11 +128,13 @@ pub struct KeyWatch {
 }
 
 impl KeyWatch {
-    /// Watches `path`, whose contents are `current` now.
+    /// Watches `path`, whose contents were `current` when read. The first check reads the
+    /// file again whatever its stamp: a step written between that read and this watch is not
+    /// missed.
     pub fn new(path: &Path, current: Keyring) -> Self {
         KeyWatch {
             path: path.to_owned(),
-            stamp: stamp(path),
+            stamp: None,
             current,
         }
     }
@@ -169,12 +171,18 @@ fn stamp(path: &Path) -> Option<(std::time::SystemTime, u64, u64)> {
 
 /// A new random key (from the operating system's random source).
 pub fn random_key() -> Result<DomainKey, std::io::Error> {
-    let mut bytes = [0u8; 32];
-    std::fs::File::open("/dev/urandom")
-        .and_then(|mut random| std::io::Read::read_exact(&mut random, &mut bytes))?;
+    let mut bytes = random_bytes()?;
     let key = DomainKey::from_bytes(bytes);
     bytes.fill(0);
     Ok(key)
+}
+
+/// 32 bytes from the operating system's random source.
+pub fn random_bytes() -> Result<[u8; 32], std::io::Error> {
+    let mut bytes = [0u8; 32];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut random| std::io::Read::read_exact(&mut random, &mut bytes))?;
+    Ok(bytes)
 }
 
 /// How a daemon or participant seals with `keyring`: `mode`, a session from the wall clock

@@ -14,6 +14,9 @@ pub struct DiscoveryConfig {
     pub seed: u64,
     /// This node's id; drawn from `seed` when `None`. Every node of a domain needs its own.
     pub node_id: Option<u64>,
+    /// The key of this node's address-probe tokens: random in a daemon (from the operating
+    /// system); `None` derives it from `seed` and the node id, which is predictable (tests).
+    pub probe_secret: Option<[u8; 32]>,
     /// Host name announced to other nodes.
     pub hostname: String,
     /// Process id announced to other nodes.
@@ -57,6 +60,7 @@ impl DiscoveryConfig {
         DiscoveryConfig {
             domain,
             seed: 0,
+            probe_secret: None,
             node_id: None,
             hostname: String::new(),
             pid: 0,

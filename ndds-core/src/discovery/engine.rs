@@ -212,7 +212,9 @@ impl Engine {
         let node_id = config.node_id.filter(|id| *id != 0).unwrap_or(drawn);
         let solicits = config.solicit_delays.iter().map(|d| now + *d).collect();
         let fanout = Fanout::new(&config);
-        let probe_secret = probe_secret(config.seed, node_id);
+        let probe_secret = config
+            .probe_secret
+            .unwrap_or_else(|| probe_secret(config.seed, node_id));
         Ok(Engine {
             config,
             node_id,
@@ -465,10 +467,13 @@ impl Engine {
                     return Err(DropReason::Invalid);
                 };
                 let at = Locator::from(at);
-                if token != self.probe_token(at) {
+                // Only an answer to a probe still outstanding, for an address a known node
+                // announces: nobody can fill the validated set with addresses of nobody.
+                let announced = self.nodes.values().any(|node| node.info.unicast == at);
+                if token != self.probe_token(at) || !announced || self.probed.remove(&at).is_none()
+                {
                     return Err(DropReason::Invalid);
                 }
-                self.probed.remove(&at);
                 if self.validated.len() < MAX_NODES + MAX_PEERS {
                     self.validated.insert(at);
                 }
@@ -507,8 +512,10 @@ impl Engine {
             return;
         }
         if self.probed.len() >= MAX_PENDING_REPLIES {
-            self.probed
-                .retain(|_, sent| now.saturating_duration_since(*sent) < PROBE_INTERVAL);
+            // Probes unanswered for a while are given up, with the replies they held back.
+            let (probed, wanted) = (&mut self.probed, &mut self.reply_wanted);
+            probed.retain(|_, sent| now.saturating_duration_since(*sent) < PROBE_INTERVAL * 4);
+            wanted.retain(|at| probed.contains_key(at));
             if self.probed.len() >= MAX_PENDING_REPLIES {
                 return;
             }
@@ -745,6 +752,8 @@ impl Engine {
             let at = known.info.unicast;
             if !self.nodes.values().any(|other| other.info.unicast == at) {
                 self.validated.remove(&at);
+                self.probed.remove(&at);
+                self.reply_wanted.remove(&at);
             }
             self.events.push_back(Event::NodeLost { node, reason });
         }
