@@ -160,7 +160,12 @@ fn lock(socket: &Path) -> Result<File, DaemonError> {
         .custom_flags(libc::O_NOFOLLOW)
         .open(&path)
         .map_err(failed)?;
-    local::owned_by_me(&path, file.metadata().map_err(failed)?.uid())?;
+    let meta = file.metadata().map_err(failed)?;
+    local::owned_by_me(&path, meta.uid())?;
+    // A hard link to some other file of ours would be truncated below.
+    if !meta.file_type().is_file() || meta.nlink() != 1 {
+        return Err(DaemonError::BadLockFile { path: path.clone() });
+    }
     // SAFETY: flock on a file descriptor this function owns; no memory is shared.
     let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
     if locked != 0 {

@@ -23,6 +23,10 @@ use std::sync::atomic::Ordering;
 use crate::driver::{ClientId, Counters, Input};
 use crate::local::PeerCred;
 
+/// Largest frame a client may send: its largest message is a declaration, whose type
+/// description fits one datagram. (Frames to clients may reach [`ipc::MAX_FRAME`].)
+pub const MAX_CLIENT_FRAME: usize = 1 << 20;
+
 /// Frames the driver may queue for one client before the client counts as not reading.
 pub const OUTBOX: usize = 4096;
 /// How long the frames left after a session ends may take to write.
@@ -32,8 +36,19 @@ const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(500)
 ///
 /// Unlike `tokio_util`'s `LengthDelimitedCodec`, decoding never reserves the length a prefix
 /// claims: the read buffer grows only as bytes arrive.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct FrameCodec;
+#[derive(Clone, Copy, Debug)]
+pub struct FrameCodec {
+    /// Longest frame decoded; longer ones are errors.
+    pub max: usize,
+}
+
+impl Default for FrameCodec {
+    fn default() -> Self {
+        FrameCodec {
+            max: ipc::MAX_FRAME,
+        }
+    }
+}
 
 impl Decoder for FrameCodec {
     type Item = BytesMut;
@@ -44,13 +59,10 @@ impl Decoder for FrameCodec {
             return Ok(None);
         };
         let len = u32::from_be_bytes(prefix.try_into().expect("4-byte prefix")) as usize;
-        if len > ipc::MAX_FRAME {
+        if len > self.max {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::InvalidData,
-                format!(
-                    "frame of {len} bytes exceeds the {} byte limit",
-                    ipc::MAX_FRAME
-                ),
+                format!("frame of {len} bytes exceeds the {} byte limit", self.max),
             ));
         }
         if src.len() < ipc::FRAME_PREFIX + len {
@@ -97,8 +109,13 @@ pub async fn serve(
     counters: Arc<Counters>,
 ) {
     let (read_half, write_half) = stream.into_split();
-    let mut reader = FramedRead::new(read_half, FrameCodec);
-    let mut writer = FramedWrite::new(write_half, FrameCodec);
+    let mut reader = FramedRead::new(
+        read_half,
+        FrameCodec {
+            max: MAX_CLIENT_FRAME,
+        },
+    );
+    let mut writer = FramedWrite::new(write_half, FrameCodec::default());
     let (outbox, mut pending) = mpsc::channel(OUTBOX);
     let link = ClientLink {
         outbox,
@@ -183,7 +200,7 @@ mod tests {
 
     #[test]
     fn a_claimed_length_reserves_nothing_until_bytes_arrive() {
-        let mut codec = FrameCodec;
+        let mut codec = FrameCodec::default();
         let mut buf = BytesMut::new();
         buf.extend_from_slice(&(ipc::MAX_FRAME as u32).to_be_bytes());
         buf.extend_from_slice(b"abcd");
@@ -197,7 +214,7 @@ mod tests {
 
     #[test]
     fn frames_round_trip_and_oversized_claims_are_errors() {
-        let mut codec = FrameCodec;
+        let mut codec = FrameCodec::default();
         let mut buf = BytesMut::new();
         codec
             .encode(Bytes::from_static(b"hello"), &mut buf)
@@ -209,5 +226,12 @@ mod tests {
         buf.extend_from_slice(&(ipc::MAX_FRAME as u32 + 1).to_be_bytes());
         let err = codec.decode(&mut buf).unwrap_err();
         assert_eq!(err.kind(), std::io::ErrorKind::InvalidData);
+        // A client's frames are held to a far smaller limit.
+        let mut client = FrameCodec {
+            max: MAX_CLIENT_FRAME,
+        };
+        let mut buf = BytesMut::new();
+        buf.extend_from_slice(&(MAX_CLIENT_FRAME as u32 + 1).to_be_bytes());
+        assert!(client.decode(&mut buf).is_err());
     }
 }

@@ -52,6 +52,15 @@ pub enum DaemonError {
         /// The socket path.
         path: PathBuf,
     },
+    /// The lock file beside the socket path is not a plain file with one name.
+    #[error(
+        "{path} is not a plain lock file (a hard link or a special file): remove it or choose \
+         another --socket path"
+    )]
+    BadLockFile {
+        /// The lock file.
+        path: PathBuf,
+    },
     /// The Unix socket could not be created.
     #[error("cannot listen on {path}: {source}")]
     Listen {

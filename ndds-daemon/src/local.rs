@@ -165,17 +165,16 @@ pub fn default_socket(domain: u16) -> PathBuf {
     socket_dir().join(domain::socket_name(domain))
 }
 
-/// Where a client of `domain` finds its daemon: this user's default socket if a daemon is
-/// there, else the system daemon's, else this user's default (where an embedded daemon will
-/// listen).
+/// Where a client of `domain` finds its daemon: this user's default socket if a socket is
+/// there, else the system daemon's if one answers there, else this user's default (where an
+/// embedded daemon will listen). A system socket left by a daemon that died is passed over.
 pub fn locate(domain: u16) -> PathBuf {
     let own = default_socket(domain);
     let system = Path::new(SYSTEM_DIR).join(domain::socket_name(domain));
-    [&own, &system]
-        .into_iter()
-        .find(|path| is_socket(path))
-        .unwrap_or(&own)
-        .clone()
+    if !is_socket(&own) && std::os::unix::net::UnixStream::connect(&system).is_ok() {
+        return system;
+    }
+    own
 }
 
 fn is_socket(path: &Path) -> bool {

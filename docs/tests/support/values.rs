@@ -83,6 +83,10 @@ pub fn expected() -> Vec<(&'static str, String)> {
         ("FRAME_PREFIX", ipc::FRAME_PREFIX.to_string()),
         ("MAX_FRAME", ipc::MAX_FRAME.to_string()),
         ("OUTBOX", ndds_daemon::connection::OUTBOX.to_string()),
+        (
+            "MAX_CLIENT_FRAME",
+            ndds_daemon::connection::MAX_CLIENT_FRAME.to_string(),
+        ),
         ("GRAPH_PAGE", ndds_daemon::driver::GRAPH_PAGE.to_string()),
         (
             "GRAPH_PAGE_BYTES",
