@@ -22,14 +22,16 @@
 //!
 //! Files of another user are never used, probed or removed: a lock file or socket at the path
 //! that belongs to someone else is a squatter's, refused with its owner named
-//! ([`crate::local::LocalError::Squatted`]). The socket is bound under a temporary name, given
-//! its mode (0660) and group, then renamed into place, so it is never reachable with the
-//! umask's permissions.
+//! ([`crate::local::LocalError::Squatted`]). The socket is bound in a private (0700) directory
+//! of its own, given its mode (0660) and group there, then renamed into place, so nobody can
+//! connect before it is restricted, whatever the umask.
 
 use std::fs::File;
 use std::io::{Read as _, Seek as _, Write as _};
 use std::os::fd::AsRawFd as _;
-use std::os::unix::fs::{FileTypeExt as _, MetadataExt as _, OpenOptionsExt as _};
+use std::os::unix::fs::{
+    DirBuilderExt as _, FileTypeExt as _, MetadataExt as _, OpenOptionsExt as _,
+};
 use std::path::{Path, PathBuf};
 
 use tokio::net::UnixListener;
@@ -111,29 +113,36 @@ impl Drop for SocketClaim {
     }
 }
 
-/// Binds under a temporary name beside `path`, restricts the file, then renames it to `path`.
+/// Binds in a private (0700) directory of its own beside `path`, gives the socket its mode and
+/// group there, then renames it to `path`: nobody can connect before it is restricted, whatever
+/// the umask.
 fn bind(path: &Path, group: Option<u32>) -> Result<UnixListener, DaemonError> {
     let mut name = path.as_os_str().to_owned();
-    name.push(format!(".{}.new", std::process::id()));
-    let fresh = PathBuf::from(name);
-    let _ = std::fs::remove_file(&fresh);
-    let listener = UnixListener::bind(&fresh).map_err(|source| DaemonError::Listen {
-        path: fresh.clone(),
-        source,
-    })?;
-    let placed = local::restrict_socket(&fresh, group)
-        .map_err(DaemonError::from)
-        .and_then(|()| {
-            std::fs::rename(&fresh, path).map_err(|source| DaemonError::Listen {
-                path: path.to_owned(),
-                source,
-            })
-        });
-    if let Err(err) = placed {
-        let _ = std::fs::remove_file(&fresh);
-        return Err(err);
+    name.push(format!(".{}.bind", std::process::id()));
+    let private = PathBuf::from(name);
+    let failed = |path: &Path| {
+        let path = path.to_owned();
+        move |source| DaemonError::Listen { path, source }
+    };
+    // Left over by a daemon of this pid that died: ours to remove.
+    if let Ok(meta) = std::fs::symlink_metadata(&private) {
+        local::owned_by_me(&private, meta.uid())?;
+        let _ = std::fs::remove_dir_all(&private);
     }
-    Ok(listener)
+    std::fs::DirBuilder::new()
+        .mode(0o700)
+        .create(&private)
+        .map_err(failed(&private))?;
+    let fresh = private.join("socket");
+    let placed = UnixListener::bind(&fresh)
+        .map_err(failed(&fresh))
+        .and_then(|listener| {
+            local::restrict_socket(&fresh, group)?;
+            std::fs::rename(&fresh, path).map_err(failed(path))?;
+            Ok(listener)
+        });
+    let _ = std::fs::remove_dir_all(&private);
+    placed
 }
 
 /// The lock file of a socket path.
