@@ -103,22 +103,7 @@ fn twenty_hosts_with_ten_topics_each_converge_and_discovery_traffic_stays_small(
     let daemons = started.elapsed() - built;
 
     let spawned = Instant::now();
-    let nodes: Vec<ClientProcess> = (0..HOSTS)
-        .map(|host| {
-            let topic = format!("{PREFIX}h{host}");
-            let args = [
-                "produce", "--topic", &topic, "--topics", "10", "--rate", "0",
-            ];
-            cluster.test_node(host, &args)
-        })
-        .collect();
-    for (host, node) in nodes.iter().enumerate() {
-        assert!(
-            node.event("ready", WAIT).is_some(),
-            "node on host {host} ready"
-        );
-    }
-    let last_ready = Instant::now();
+    let (_nodes, last_ready) = start_producers(&cluster);
     let from_spawn = last_ready - spawned;
     let times = convergence(&cluster, last_ready, WAIT);
     let converged: Vec<Duration> = times.iter().flatten().copied().collect();
@@ -206,10 +191,9 @@ fn twenty_hosts_with_ten_topics_each_converge_and_discovery_traffic_stays_small(
     eprintln!("whole test: {:?}", started.elapsed());
 }
 
-/// Starts 20 daemons in `domain` and a client of ten producers on each; returns how long after
-/// the last client was ready every daemon saw all 200 endpoints (`None` if one never did).
-fn converge_in(domain: interop_tests::TestDomain) -> Option<Duration> {
-    let cluster = Cluster::start_in(Network::new(HOSTS), domain);
+/// Starts a client of `TOPICS` producers on each host and waits until all are ready; returns
+/// them and when the last one was.
+fn start_producers(cluster: &Cluster) -> (Vec<ClientProcess>, Instant) {
     let nodes: Vec<ClientProcess> = (0..HOSTS)
         .map(|host| {
             let topic = format!("{PREFIX}h{host}");
@@ -225,7 +209,14 @@ fn converge_in(domain: interop_tests::TestDomain) -> Option<Duration> {
             "node on host {host} ready"
         );
     }
-    let last_ready = Instant::now();
+    (nodes, Instant::now())
+}
+
+/// Starts 20 daemons in `domain` and a client of ten producers on each; returns how long after
+/// the last client was ready every daemon saw all 200 endpoints (`None` if one never did).
+fn converge_in(domain: interop_tests::TestDomain) -> Option<Duration> {
+    let cluster = Cluster::start_in(Network::new(HOSTS), domain);
+    let (_nodes, last_ready) = start_producers(&cluster);
     let times = convergence(&cluster, last_ready, WAIT);
     if times.iter().any(Option::is_none) {
         return None;

@@ -672,21 +672,8 @@ impl Inner {
                     // Woken early by the participant's drop (unpark).
                     while !data.is_closed() {
                         std::thread::park_timeout(ndds_daemon::keys::KEY_CHECK);
-                        match watch.changed() {
-                            None => {}
-                            Some(Ok(keyring)) => {
-                                tracing::info!(
-                                    path = %watch.path().display(),
-                                    sealing_epoch = keyring.send_epoch(),
-                                    accepted = ?keyring.epochs().collect::<Vec<_>>(),
-                                    "key file changed: new keys in force"
-                                );
-                                data.set_keyring(keyring);
-                            }
-                            Some(Err(err)) => tracing::error!(
-                                %err,
-                                "key file changed but cannot be used; the keys in force stay"
-                            ),
+                        if let Some(keyring) = watch.poll() {
+                            data.set_keyring(keyring);
                         }
                     }
                 })

@@ -239,8 +239,8 @@ impl Daemon {
                 () = shutdown.cancelled() => break,
                 () = sleep_until(deadline) => driver.on_timer(),
                 _ = key_check.tick(), if key_watch.is_some() => {
-                    if let Some(watch) = key_watch.as_mut() {
-                        reload_keys(watch, &mut driver);
+                    if let Some(keyring) = key_watch.as_mut().and_then(KeyWatch::poll) {
+                        driver.set_keyring(keyring);
                     }
                 }
                 input = queue.recv() => match input {
@@ -264,26 +264,6 @@ impl Daemon {
         drop(claim);
         tracing::info!("ndds-daemon stopped");
         Ok(())
-    }
-}
-
-/// A rotation step written to the key file takes effect now; a file that cannot be used is
-/// reported and the keys in force stay.
-fn reload_keys(watch: &mut KeyWatch, driver: &mut Driver) {
-    match watch.changed() {
-        None => {}
-        Some(Ok(keyring)) => {
-            tracing::info!(
-                path = %watch.path().display(),
-                sealing_epoch = keyring.send_epoch(),
-                accepted = ?keyring.epochs().collect::<Vec<_>>(),
-                "key file changed: new keys in force"
-            );
-            driver.set_keyring(keyring);
-        }
-        Some(Err(err)) => {
-            tracing::error!(%err, "key file changed but cannot be used; the keys in force stay");
-        }
     }
 }
 

@@ -144,9 +144,30 @@ impl KeyWatch {
         &self.path
     }
 
+    /// The new keys to put in force, when the file changed and holds different ones. Both
+    /// outcomes of a change are logged: new keys, or a file that cannot be used (then the keys
+    /// in force stay).
+    pub fn poll(&mut self) -> Option<Keyring> {
+        match self.changed()? {
+            Ok(keyring) => {
+                tracing::info!(
+                    path = %self.path.display(),
+                    sealing_epoch = keyring.send_epoch(),
+                    accepted = ?keyring.epochs().collect::<Vec<_>>(),
+                    "key file changed: new keys in force"
+                );
+                Some(keyring)
+            }
+            Err(err) => {
+                tracing::error!(%err, "key file changed but cannot be used; the keys in force stay");
+                None
+            }
+        }
+    }
+
     /// The new keys when the file changed and holds different ones; an error (once per
     /// change) when it changed and cannot be used: the keys in force stay.
-    pub fn changed(&mut self) -> Option<Result<Keyring, KeyError>> {
+    fn changed(&mut self) -> Option<Result<Keyring, KeyError>> {
         let now = stamp(&self.path);
         if now == self.stamp {
             return None;
