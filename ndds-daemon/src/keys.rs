@@ -118,7 +118,7 @@ fn write_new(path: &Path, keyring: &Keyring) -> std::io::Result<()> {
 pub const KEY_CHECK: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// Watches a key file so that a rotation step (`ndds key rotate`, `use`, `retire`) takes
-/// effect without a restart: [`KeyWatch::changed`] reads the file again when its modification
+/// effect without a restart: [`KeyWatch::poll`] reads the file again when its modification
 /// time, size or inode moved (the tools replace it by renaming, so the inode moves).
 #[derive(Debug)]
 pub struct KeyWatch {
