@@ -119,6 +119,7 @@ impl LocalEndpoints {
         let entity = match &message {
             DaemonMessage::Matched { local, .. }
             | DaemonMessage::Incompatible { local, .. }
+            | DaemonMessage::NotPermitted { local, .. }
             | DaemonMessage::Unmatched { local, .. } => *local,
             other => {
                 tracing::debug!(?other, "unexpected frame from the daemon");
@@ -161,6 +162,20 @@ impl LocalEndpoints {
                         },
                     );
                 }
+                peers.incompatible(remote);
+                changed.entry(entity).or_insert_with(|| endpoint.clone());
+            }
+            DaemonMessage::NotPermitted { remote, reason, .. } => {
+                if let Endpoint::Consumer(state) = &endpoint {
+                    state.plane.notify(
+                        state.entity,
+                        Notification::NotPermitted {
+                            writer: remote.guid,
+                            reason: reason.clone(),
+                        },
+                    );
+                }
+                tracing::warn!(topic = %remote.topic, remote = %remote.guid, %reason, "not matched: not permitted");
                 peers.incompatible(remote);
                 changed.entry(entity).or_insert_with(|| endpoint.clone());
             }

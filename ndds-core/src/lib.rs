@@ -37,6 +37,7 @@ pub mod participant;
 pub mod ports;
 pub mod reliability;
 pub mod seal;
+pub mod security;
 pub mod suggest;
 pub mod types;
 pub mod wire;

@@ -212,20 +212,33 @@ proptest! {
         let _ = wire::decode_for_domain(&bytes, 0);
     }
 
-    /// Discovery kinds decode as themselves or not at all; `Data` and `Feedback` bodies are
-    /// never decoded by `wire::decode`.
+    /// Discovery kinds decode as themselves or not at all; `Data` and `Feedback` bodies (and
+    /// `Signed` envelopes, which the engine opens first) are never decoded by `wire::decode`.
     #[test]
     fn valid_header_then_noise_never_panics_nor_overallocates(bytes in valid_header_then_noise()) {
         let expected = MessageKind::from_u8(bytes[5]).unwrap();
         match decode_within_budget(&bytes) {
             Ok(kind) => prop_assert_eq!(kind, expected),
             Err(DropReason::Unexpected) => {
-                prop_assert!(matches!(expected, MessageKind::Data | MessageKind::Feedback));
+                prop_assert!(matches!(
+                    expected,
+                    MessageKind::Data | MessageKind::Feedback | MessageKind::Signed
+                ));
             }
             Err(reason) => prop_assert_eq!(reason, DropReason::Malformed),
         }
-        if matches!(expected, MessageKind::Data | MessageKind::Feedback) {
+        if matches!(expected, MessageKind::Data | MessageKind::Feedback | MessageKind::Signed) {
             prop_assert_eq!(decode_within_budget(&bytes), Err(DropReason::Unexpected));
+        }
+    }
+
+    /// A `Signed` envelope of noise never panics, and verifies only with a true signature.
+    #[test]
+    fn signed_noise_never_verifies(body in vec(any::<u8>(), 0..1024), sender in any::<u64>()) {
+        let mut bytes = header_bytes(MessageKind::Signed as u8, 0, sender);
+        bytes.extend_from_slice(&body);
+        if let Ok(view) = wire::signed::parse(&bytes) {
+            prop_assert!(view.verify().is_err());
         }
     }
 

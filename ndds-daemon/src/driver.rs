@@ -267,6 +267,27 @@ impl Driver {
                     },
                 )
             }
+            Event::Refused {
+                local,
+                remote,
+                reason,
+            } => {
+                tracing::info!(
+                    topic = remote.topic,
+                    local = %local,
+                    remote = %remote.guid,
+                    %reason,
+                    "pair refused by the permissions document"
+                );
+                (
+                    local,
+                    DaemonMessage::NotPermitted {
+                        local: local.entity,
+                        remote,
+                        reason,
+                    },
+                )
+            }
             Event::Unmatched { local, remote } => (
                 local,
                 DaemonMessage::Unmatched {
@@ -309,7 +330,8 @@ impl Driver {
         // Behind what already waits, to keep the order.
         match message {
             DaemonMessage::Matched { local, remote }
-            | DaemonMessage::Incompatible { local, remote } => {
+            | DaemonMessage::Incompatible { local, remote }
+            | DaemonMessage::NotPermitted { local, remote, .. } => {
                 entry.backlog.pairs.insert((local, remote.guid));
             }
             DaemonMessage::Unmatched { local, remote } => {
@@ -749,11 +771,19 @@ pub fn hex(id: u64) -> String {
 
 /// The message that tells the owner of `local` the current state of its pair with `remote`.
 fn pair_now(engine: &Engine, local: Guid, remote: Guid) -> DaemonMessage {
-    let local_info = engine.endpoint(&local).map(|e| &e.info);
-    let remote_info = engine.endpoint(&remote).map(|e| &e.info);
-    match (local_info, remote_info) {
-        (Some(l), Some(r)) if l.topic == r.topic && l.kind() != r.kind() => {
-            if ndds_core::discovery::incompatibility(l, r).is_none() {
+    let local_entry = engine.endpoint(&local);
+    let remote_entry = engine.endpoint(&remote);
+    match (local_entry, remote_entry) {
+        (Some(l), Some(r)) if l.info.topic == r.info.topic && l.info.kind() != r.info.kind() => {
+            let refused = r.refused.as_ref().or(l.refused.as_ref());
+            let (l, r) = (&l.info, &r.info);
+            if let Some(refusal) = refused {
+                DaemonMessage::NotPermitted {
+                    local: local.entity,
+                    remote: r.clone(),
+                    reason: refusal.to_string(),
+                }
+            } else if ndds_core::discovery::incompatibility(l, r).is_none() {
                 DaemonMessage::Matched {
                     local: local.entity,
                     remote: r.clone(),

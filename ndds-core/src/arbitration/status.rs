@@ -62,6 +62,14 @@ pub enum Notification {
         /// This consumer's fingerprint.
         local_fingerprint: u64,
     },
+    /// A producer of this topic is not matched because the domain's permissions document
+    /// does not allow it (or this consumer): its samples never reach this consumer.
+    NotPermitted {
+        /// The other endpoint.
+        writer: Guid,
+        /// Why, in words: the subject and the rule.
+        reason: String,
+    },
     /// A reliable producer's samples `from..to` will never arrive: its history no longer
     /// held them when they were found missing.
     SamplesLost {

@@ -32,6 +32,8 @@ use super::fanout::{Fanout, Via};
 use super::sources::Sources;
 use super::table::{Entry, Origin, Table, entry_cost};
 use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
+use crate::security::{Guard, Permissions, PublicId, Refusal};
+use crate::wire::signed::{self, SIGNED_OVERHEAD};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
     NodeInfo, Probe, ProbeReply, Solicit, Withdraw,
@@ -78,6 +80,9 @@ pub struct RemoteNode {
     pub source: IpAddr,
     /// Estimated bytes it holds here: its own entry and its endpoints.
     pub charged: usize,
+    /// The identity that signs its datagrams (domains with permissions; `None`: it signs
+    /// nothing, or this engine checks no signatures).
+    pub identity: Option<PublicId>,
 }
 
 impl RemoteNode {
@@ -118,6 +123,11 @@ pub struct Stats {
     /// New remote nodes or endpoints refused because the tables were full and their own
     /// source was the busiest (nobody else's entries are evicted for it).
     pub refused_full: u64,
+    /// Remote endpoints the permissions document does not allow (each time one is announced
+    /// new or changed, or refused again after the document or the node's identity changed).
+    pub refused_endpoints: u64,
+    /// Local declarations the permissions document does not allow this node's subject.
+    pub refused_local: u64,
 }
 
 impl Stats {
@@ -153,6 +163,9 @@ pub enum LocalError {
         /// Encoded size of an announcement carrying only this endpoint.
         size: usize,
     },
+    /// The permissions document does not allow this node's subject the endpoint.
+    #[error("not permitted: {0}")]
+    NotPermitted(Refusal),
     /// The engine was closed.
     #[error("the discovery engine is closed")]
     Closed,
@@ -196,6 +209,10 @@ pub struct Engine {
     opened: Vec<u8>,
     /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
     warned: (bool, bool),
+    /// Identity and permissions, in a domain with a permissions document.
+    guard: Option<Guard>,
+    /// The permissions document's validity ended.
+    permissions_expired: bool,
 }
 
 impl Engine {
@@ -242,7 +259,47 @@ impl Engine {
             seal: None,
             opened: Vec::new(),
             warned: (false, false),
+            guard: None,
+            permissions_expired: false,
         })
+    }
+
+    /// Signs every datagram sent from now on with `guard`'s identity, binds each remote node to
+    /// the identity that signs its datagrams, and lets only the endpoints `guard`'s document
+    /// allows match (see [`crate::security`]). Called right after [`Engine::new`], before any
+    /// traffic; [`Engine::set_permissions`] replaces the document later.
+    pub fn guard_with(&mut self, guard: Guard) {
+        self.guard = Some(guard);
+        self.permissions_expired = false;
+    }
+
+    /// Replaces the permissions document (a new version was installed): every remote endpoint
+    /// is judged again, and matches come and go accordingly. Local endpoints declared under
+    /// the old document stay. Does nothing without [`Engine::guard_with`].
+    pub fn set_permissions(&mut self, permissions: Arc<Permissions>, valid_until: Option<Instant>) {
+        let Some(guard) = &mut self.guard else {
+            return;
+        };
+        guard.permissions = permissions;
+        guard.valid_until = valid_until;
+        self.permissions_expired = valid_until.is_some_and(|at| at <= self.now);
+        self.judge_all();
+    }
+
+    /// The permissions document in force, if any.
+    pub fn permissions(&self) -> Option<&Arc<Permissions>> {
+        self.guard.as_ref().map(|g| &g.permissions)
+    }
+
+    /// This node's identity, in a domain with permissions.
+    pub fn identity(&self) -> Option<PublicId> {
+        self.guard.as_ref().map(|g| g.identity.public())
+    }
+
+    /// The subject name the document gives `identity`.
+    pub fn subject_of(&self, identity: &PublicId) -> Option<&str> {
+        let guard = self.guard.as_ref()?;
+        guard.permissions.subject(identity).map(|s| s.name.as_str())
     }
 
     /// Seals every datagram sent from now on and accepts only sealed ones (a domain with a
@@ -416,11 +473,32 @@ impl Engine {
         if self.closed {
             return Err(DropReason::Unexpected);
         }
+        let (outer, _) = Header::parse(bytes)?;
+        if outer.domain != self.config.domain {
+            return Err(DropReason::OtherDomain);
+        }
+        let (bytes, identity) = if outer.kind == wire::MessageKind::Signed {
+            let view = signed::parse(bytes)?;
+            if outer.sender == self.node_id {
+                self.check_id_clash(from);
+                return Err(DropReason::Own);
+            }
+            // Only an engine that enforces permissions checks signatures (and believes them).
+            if self.guard.is_some() {
+                view.verify()?;
+                (view.inner, Some(view.identity))
+            } else {
+                (view.inner, None)
+            }
+        } else {
+            (bytes, None)
+        };
         let (header, message) = wire::decode_for_domain(bytes, self.config.domain)?;
         if header.sender == self.node_id {
             self.check_id_clash(from);
             return Err(DropReason::Own);
         }
+        self.check_identity(header.sender, identity)?;
         // Node ids travel in clear: a known node speaks only from its own address, so nobody
         // else can say its `Bye`, withdraw its endpoints or shorten its lease. (A node whose
         // address changes is heard again once its old entry has expired.)
@@ -435,13 +513,13 @@ impl Engine {
             Message::Solicit(solicit) => {
                 check_node(&solicit.node)?;
                 let unicast = solicit.node.unicast;
-                self.touch_node(now, header.sender, (from, via), solicit.node)?;
+                self.touch_node(now, header.sender, (from, via), solicit.node, identity)?;
                 self.schedule_reply(now, unicast, from);
             }
             Message::Announce(announce) => {
                 check_node(&announce.node)?;
                 let unicast = announce.node.unicast;
-                self.on_announce(now, header, (from, via), announce)?;
+                self.on_announce(now, header, (from, via), announce, identity)?;
                 // A probe lost, or answered late: asked again (at most every PROBE_INTERVAL)
                 // while the node speaks from an address it has not proven.
                 if from == SocketAddr::V4(unicast.into()) && !self.is_validated(unicast) {
@@ -533,11 +611,12 @@ impl Engine {
         header: Header,
         (from, via): (SocketAddr, Via),
         announce: Announce,
+        identity: Option<PublicId>,
     ) -> Result<(), DropReason> {
         let node = header.sender;
         let lease = lease_of(&announce.node);
         let unicast = announce.node.unicast;
-        if self.touch_node(now, node, (from, via), announce.node)? {
+        if self.touch_node(now, node, (from, via), announce.node, identity)? {
             // A node we did not know: answer with everything we have so it need not wait for
             // our next refresh (its Solicit may have been lost).
             self.schedule_reply(now, unicast, from);
@@ -581,6 +660,7 @@ impl Engine {
         node: u64,
         (from, via): (SocketAddr, Via),
         info: NodeInfo,
+        identity: Option<PublicId>,
     ) -> Result<bool, DropReason> {
         let lease = lease_of(&info);
         let by_multicast = (via == Via::Multicast).then_some(now);
@@ -621,6 +701,7 @@ impl Engine {
                 expires: now + lease,
                 source: from.ip(),
                 charged: cost,
+                identity,
             },
         );
         self.sources.add(from.ip(), node, now, cost);
@@ -721,13 +802,83 @@ impl Engine {
             self.stats.invalid_endpoints += 1;
             return;
         }
+        let refused = self.judge(node, &info);
         let entry = Entry {
             info,
             origin: Origin::Remote(node),
             expires: Some(expires),
+            refused,
         };
         self.table.insert(entry, &mut self.events);
         self.recharge(node);
+    }
+
+    /// Whether the permissions document lets `node` have `info`; the refusal is counted and
+    /// logged (at debug level: a refused node repeats itself every announcement).
+    fn judge(&mut self, node: u64, info: &EndpointInfo) -> Option<Arc<Refusal>> {
+        let guard = self.guard.as_ref()?;
+        let refusal = if self.permissions_expired {
+            let p = &guard.permissions;
+            Refusal::Expired {
+                serial: p.serial,
+                window: format!("until Unix time {}", p.not_after),
+            }
+        } else {
+            let identity = self.nodes.get(&node).and_then(|n| n.identity);
+            guard
+                .permissions
+                .check(identity.as_ref(), &info.topic, info.kind())
+                .err()?
+        };
+        self.stats.refused_endpoints += 1;
+        tracing::debug!(
+            node = format_args!("{node:016x}"),
+            topic = %info.topic,
+            %refusal,
+            "remote endpoint refused"
+        );
+        Some(Arc::new(refusal))
+    }
+
+    /// Judges every remote endpoint of `node` again (its identity became known).
+    fn judge_node(&mut self, node: u64) {
+        for guid in self.table.owned_by(Origin::Remote(node)) {
+            let Some(info) = self.table.get(&guid).map(|e| e.info.clone()) else {
+                continue;
+            };
+            let refused = self.judge(node, &info);
+            self.table.set_refused(&guid, refused, &mut self.events);
+        }
+    }
+
+    /// Judges every remote endpoint again (a new document, or the old one expired).
+    fn judge_all(&mut self) {
+        let nodes: Vec<u64> = self.nodes.keys().copied().collect();
+        for node in nodes {
+            self.judge_node(node);
+        }
+    }
+
+    /// In a domain with permissions, a node is bound to the identity it first signed with:
+    /// its datagrams must carry that identity from then on. A node first heard unsigned is
+    /// bound when it first signs (and its endpoints are judged again).
+    fn check_identity(&mut self, node: u64, identity: Option<PublicId>) -> Result<(), DropReason> {
+        if self.guard.is_none() {
+            return Ok(());
+        }
+        let Some(known) = self.nodes.get_mut(&node) else {
+            return Ok(());
+        };
+        match (known.identity, identity) {
+            (Some(bound), Some(said)) if bound == said => Ok(()),
+            (Some(_), _) => Err(DropReason::Unverified),
+            (None, None) => Ok(()),
+            (None, Some(said)) => {
+                known.identity = Some(said);
+                self.judge_node(node);
+                Ok(())
+            }
+        }
     }
 
     fn remove_remote(&mut self, node: u64, guid: &Guid) {
@@ -768,16 +919,45 @@ impl Engine {
             return Err(LocalError::Duplicate(info.guid));
         }
         check_endpoint(&info)?;
+        if let Some(guard) = &self.guard {
+            let own = guard.identity.public();
+            let refusal = if self.permissions_expired {
+                Some(Refusal::Expired {
+                    serial: guard.permissions.serial,
+                    window: format!("until Unix time {}", guard.permissions.not_after),
+                })
+            } else {
+                guard
+                    .permissions
+                    .check(Some(&own), &info.topic, info.kind())
+                    .err()
+            };
+            if let Some(refusal) = refusal {
+                self.stats.refused_local += 1;
+                return Err(LocalError::NotPermitted(refusal));
+            }
+        }
         let announce = Message::Announce(Announce {
             node: self.node_info(),
             endpoints: vec![info.clone()],
             withdrawn: Vec::new(),
         });
         let mut payload = Vec::new();
-        if let Err(wire::EncodeError::TooLarge { size }) =
-            wire::encode(self.config.domain, self.node_id, &announce, &mut payload)
-        {
-            return Err(LocalError::TooLarge { size });
+        let signing = if self.guard.is_some() {
+            SIGNED_OVERHEAD
+        } else {
+            0
+        };
+        match wire::encode(self.config.domain, self.node_id, &announce, &mut payload) {
+            Err(wire::EncodeError::TooLarge { size }) => {
+                return Err(LocalError::TooLarge { size });
+            }
+            Ok(()) if payload.len() + signing > MAX_DATAGRAM => {
+                return Err(LocalError::TooLarge {
+                    size: payload.len() + signing,
+                });
+            }
+            _ => {}
         }
         // A guid declared again must no longer be listed as withdrawn.
         self.withdrawn.retain(|(guid, _)| *guid != info.guid);
@@ -785,6 +965,7 @@ impl Engine {
             info,
             origin: Origin::Local,
             expires: None,
+            refused: None,
         };
         self.table.insert(entry, &mut self.events);
         let destinations = self.fanout();
@@ -840,6 +1021,15 @@ impl Engine {
         self.now = self.now.max(now);
         // Expire first: a node forgotten now gets no more unicast copies.
         self.expire(now);
+        let valid_until = self.guard.as_ref().and_then(|g| g.valid_until);
+        if !self.permissions_expired && valid_until.is_some_and(|at| at <= now) {
+            tracing::error!(
+                "the permissions document's validity ended: every remote endpoint is refused until \
+                 a new signed document is installed (`ndds security sign`)"
+            );
+            self.permissions_expired = true;
+            self.judge_all();
+        }
         while self.solicits.front().is_some_and(|t| *t <= now) {
             self.solicits.pop_front();
             let message = Message::Solicit(Solicit {
@@ -912,7 +1102,13 @@ impl Engine {
             .copied()
             .into_iter()
             .chain(self.replies.iter().map(|(at, _)| *at))
-            .chain(self.next_expiry);
+            .chain(self.next_expiry)
+            .chain(
+                self.guard
+                    .as_ref()
+                    .and_then(|g| g.valid_until)
+                    .filter(|_| !self.permissions_expired),
+            );
         for at in candidates {
             next = next.min(at);
         }
@@ -994,6 +1190,21 @@ impl Engine {
 
     /// Queues one datagram for each destination; the copies share their bytes.
     fn push_transmits(&mut self, destinations: &[Destination], payload: Arc<[u8]>) {
+        // Signed before sealing: the signature speaks for the node, the seal for the domain.
+        let payload = match &self.guard {
+            None => payload,
+            Some(guard) => match signed::wrap(&payload, &guard.identity) {
+                Ok(signed) if signed.len() <= MAX_DATAGRAM => signed.into(),
+                _ => {
+                    self.stats.unsealable += 1;
+                    tracing::error!(
+                        bytes = payload.len(),
+                        "discovery datagram not signed: not sent"
+                    );
+                    return;
+                }
+            },
+        };
         // Sealed once: every destination keeps its own replay window, so copies may share
         // one counter.
         let payload = match &mut self.seal {

@@ -23,7 +23,17 @@ pub enum Event {
         /// The other endpoint.
         remote: EndpointInfo,
     },
-    /// A previously matched or incompatible endpoint went away.
+    /// `local` and `remote` would pair, but the permissions document does not allow one of
+    /// them (see [`crate::security`]).
+    Refused {
+        /// The local endpoint.
+        local: Guid,
+        /// The other endpoint.
+        remote: EndpointInfo,
+        /// Why, in words: the subject, the rule.
+        reason: String,
+    },
+    /// A previously matched, incompatible or refused endpoint went away.
     Unmatched {
         /// The local endpoint.
         local: Guid,

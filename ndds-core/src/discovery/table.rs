@@ -14,9 +14,11 @@
 //! memory bound.
 
 use std::collections::{BTreeSet, HashMap};
+use std::sync::Arc;
 use std::time::Instant;
 
 use super::event::Event;
+use crate::security::Refusal;
 use crate::wire::{EndpointInfo, EndpointKind, EndpointQos, Guid, Reliability};
 
 /// Why a producer and a consumer of one topic do not match.
@@ -62,6 +64,9 @@ pub struct Entry {
     pub origin: Origin,
     /// When a remote entry decays unless refreshed (`None` for local entries).
     pub expires: Option<Instant>,
+    /// Why the permissions document does not let this (remote) endpoint match anything;
+    /// `None`: no document, or it allows it.
+    pub refused: Option<Arc<Refusal>>,
 }
 
 /// Bytes an entry is estimated to hold beyond its encoded size: the entry in its hash map
@@ -205,10 +210,10 @@ impl Table {
                 continue;
             };
             if entry.origin == Origin::Local {
-                events.extend([pair_event(&entry.info, &other.info)]);
+                events.extend([pair_event(&entry, other)]);
             }
             if other.origin == Origin::Local {
-                events.extend([pair_event(&other.info, &entry.info)]);
+                events.extend([pair_event(other, &entry)]);
             }
         }
         topic.side(kind).of(entry.origin).insert(guid);
@@ -217,8 +222,25 @@ impl Table {
         self.entries.insert(guid, entry);
     }
 
+    /// Gives an entry a new refusal: its pairs are unmatched and paired again (with the match
+    /// events that brings) when it changed.
+    pub fn set_refused(
+        &mut self,
+        guid: &Guid,
+        refused: Option<Arc<Refusal>>,
+        events: &mut impl Extend<Event>,
+    ) {
+        if self.entries.get(guid).is_none_or(|e| e.refused == refused) {
+            return;
+        }
+        if let Some(mut entry) = self.remove(guid, events) {
+            entry.refused = refused;
+            self.insert(entry, events);
+        }
+    }
+
     /// Removes an entry and pushes an `Unmatched` event for every local endpoint that was
-    /// paired with it (matched or incompatible).
+    /// paired with it (matched, incompatible or refused).
     pub fn remove(&mut self, guid: &Guid, events: &mut impl Extend<Event>) -> Option<Entry> {
         let entry = self.entries.remove(guid)?;
         unindex(&mut self.by_origin, &mut self.by_expiry, &entry);
@@ -322,7 +344,15 @@ fn unindex(
     }
 }
 
-fn pair_event(local: &EndpointInfo, other: &EndpointInfo) -> Event {
+fn pair_event(local: &Entry, other: &Entry) -> Event {
+    if let Some(refusal) = other.refused.as_ref().or(local.refused.as_ref()) {
+        return Event::Refused {
+            local: local.info.guid,
+            remote: other.info.clone(),
+            reason: refusal.to_string(),
+        };
+    }
+    let (local, other) = (&local.info, &other.info);
     if incompatibility(local, other).is_none() {
         Event::Matched {
             local: local.guid,

@@ -55,7 +55,17 @@ pub enum DaemonMessage {
         /// The other endpoint.
         remote: EndpointInfo,
     },
-    /// A matched or incompatible endpoint went away.
+    /// A local endpoint of this client would pair with another endpoint, but the domain's
+    /// permissions document does not allow one of them.
+    NotPermitted {
+        /// The client's entity.
+        local: u32,
+        /// The other endpoint.
+        remote: EndpointInfo,
+        /// Why, in words: the subject and the rule.
+        reason: String,
+    },
+    /// A matched, incompatible or refused endpoint went away.
     Unmatched {
         /// The client's entity.
         local: u32,

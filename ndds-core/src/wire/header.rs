@@ -35,6 +35,8 @@ pub enum MessageKind {
     Probe = 5,
     /// The answer to a `Probe`.
     ProbeReply = 6,
+    /// Another discovery datagram, signed by its daemon's identity (domains with permissions).
+    Signed = 7,
     /// Samples and stream control, sent by a producing process directly to a consuming one.
     Data = 16,
     /// Acknowledgements and repair requests from a consuming process to a producing one.
@@ -43,13 +45,14 @@ pub enum MessageKind {
 
 impl MessageKind {
     /// Every kind, in wire order.
-    pub const ALL: [MessageKind; 8] = [
+    pub const ALL: [MessageKind; 9] = [
         MessageKind::Solicit,
         MessageKind::Announce,
         MessageKind::Withdraw,
         MessageKind::Bye,
         MessageKind::Probe,
         MessageKind::ProbeReply,
+        MessageKind::Signed,
         MessageKind::Data,
         MessageKind::Feedback,
     ];
@@ -68,6 +71,7 @@ impl MessageKind {
             MessageKind::Bye => "Bye",
             MessageKind::Probe => "Probe",
             MessageKind::ProbeReply => "ProbeReply",
+            MessageKind::Signed => "Signed",
             MessageKind::Data => "Data",
             MessageKind::Feedback => "Feedback",
         }

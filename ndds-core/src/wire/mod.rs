@@ -15,6 +15,7 @@ pub mod header;
 pub mod node;
 pub mod probe;
 pub mod qos;
+pub mod signed;
 pub mod solicit;
 pub mod withdraw;
 
@@ -71,11 +72,15 @@ pub enum DropReason {
     /// A discovery message naming a known node, from another address than that node's.
     #[error("names a known node but comes from another address")]
     Spoofed,
+    /// A signed discovery datagram whose signature does not verify, or one that is unsigned
+    /// or signed by another identity than the node's (domains with permissions).
+    #[error("signature missing, wrong or of another identity")]
+    Unverified,
 }
 
 impl DropReason {
     /// Every reason, for counter tables.
-    pub const ALL: [DropReason; 10] = [
+    pub const ALL: [DropReason; 11] = [
         DropReason::Truncated,
         DropReason::ForeignMagic,
         DropReason::UnsupportedVersion,
@@ -86,6 +91,7 @@ impl DropReason {
         DropReason::Own,
         DropReason::Unexpected,
         DropReason::Spoofed,
+        DropReason::Unverified,
     ];
 
     /// Stable snake-case name used as a counter key.
@@ -101,6 +107,7 @@ impl DropReason {
             DropReason::Own => "own",
             DropReason::Unexpected => "unexpected",
             DropReason::Spoofed => "spoofed",
+            DropReason::Unverified => "unverified",
         }
     }
 
@@ -216,7 +223,10 @@ pub fn decode(bytes: &[u8]) -> Result<(Header, Message), DropReason> {
         MessageKind::Bye => Message::Bye(decode_body(body)?),
         MessageKind::Probe => Message::Probe(decode_body(body)?),
         MessageKind::ProbeReply => Message::ProbeReply(decode_body(body)?),
-        MessageKind::Data | MessageKind::Feedback => return Err(DropReason::Unexpected),
+        // A signed envelope is opened by the engine first (see [`signed`]).
+        MessageKind::Signed | MessageKind::Data | MessageKind::Feedback => {
+            return Err(DropReason::Unexpected);
+        }
     };
     Ok((header, message))
 }

@@ -231,6 +231,23 @@ impl SimNet {
         self.flush();
     }
 
+    /// Declares a local endpoint on node `n`, which may refuse it.
+    pub fn try_add_local(
+        &mut self,
+        n: usize,
+        info: EndpointInfo,
+    ) -> Result<(), ndds_core::discovery::LocalError> {
+        let result = self.nodes[n].engine.add_local(info);
+        self.flush();
+        result
+    }
+
+    /// Runs `change` on node `n`'s engine now (a command such as a new permissions document).
+    pub fn command(&mut self, n: usize, change: impl FnOnce(&mut Engine)) {
+        change(&mut self.nodes[n].engine);
+        self.flush();
+    }
+
     /// Removes local endpoints of node `n`.
     pub fn remove_locals(&mut self, n: usize, guids: &[Guid]) {
         self.nodes[n].engine.remove_locals(guids);
@@ -359,6 +376,13 @@ impl SimNet {
             // Sealed: only the header is in clear.
             let flags = ndds_core::seal::SEALED | ndds_core::seal::CLEAR;
             MessageKind::from_u8(payload[5] & !flags).expect("engines send valid datagrams")
+        } else if payload[5] == MessageKind::Signed as u8 {
+            // Signed: the kind of the datagram inside.
+            let view = wire::signed::parse(&payload).expect("engines send valid datagrams");
+            wire::decode(view.inner)
+                .expect("engines send valid datagrams")
+                .0
+                .kind
         } else {
             wire::decode(&payload)
                 .expect("engines send valid datagrams")
@@ -417,6 +441,11 @@ impl SimNet {
             .engine
             .handle_datagram(now, from, Via::Unicast, bytes);
         self.flush();
+    }
+
+    /// The virtual clock's instant now.
+    pub fn now(&self) -> Instant {
+        self.now
     }
 
     /// Virtual time since the network was created.

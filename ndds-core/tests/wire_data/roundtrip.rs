@@ -375,7 +375,7 @@ proptest! {
             let version = Some(DropReason::UnsupportedVersion);
             prop_assert_eq!(parse_both(&bytes, domain), (version, version));
             bytes[4] = PROTOCOL_VERSION;
-            bytes[5] = [0, 7, 15, 18, 255][usize::from(value) % 5];
+            bytes[5] = [0, 8, 15, 18, 255][usize::from(value) % 5];
             let unknown = Some(DropReason::UnknownKind);
             prop_assert_eq!(parse_both(&bytes, domain), (unknown, unknown));
         }

@@ -84,6 +84,10 @@ pub fn notification(topic: &str, notification: &Notification) -> Value {
                 "local_fingerprint": format!("{local_fingerprint:016x}"),
             }),
         ),
+        Notification::NotPermitted { writer, reason } => (
+            "NotPermitted",
+            json!({"writer": writer.to_string(), "reason": reason}),
+        ),
         Notification::SamplesLost { writer, from, to } => (
             "SamplesLost",
             json!({"writer": writer.to_string(), "from": from, "to": to}),

@@ -1,0 +1,213 @@
+//! Ed25519 identities: a daemon's, and the administrator's that signs permissions documents.
+
+use std::fmt;
+use std::str::FromStr;
+
+use ed25519_dalek::Signer as _;
+
+/// The text prefix of a public key (`ed25519:` then 64 hex digits).
+pub const KEY_PREFIX: &str = "ed25519:";
+
+/// An Ed25519 public key: who a daemon or an administrator is.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PublicId([u8; 32]);
+
+impl PublicId {
+    /// The key from its 32 bytes.
+    pub fn from_bytes(bytes: [u8; 32]) -> Self {
+        PublicId(bytes)
+    }
+
+    /// Its 32 bytes.
+    pub fn as_bytes(&self) -> &[u8; 32] {
+        &self.0
+    }
+
+    /// Whether `signature` is this key's signature of `message`.
+    pub fn verifies(&self, message: &[u8], signature: &[u8; 64]) -> bool {
+        let Ok(key) = ed25519_dalek::VerifyingKey::from_bytes(&self.0) else {
+            return false;
+        };
+        let signature = ed25519_dalek::Signature::from_bytes(signature);
+        key.verify_strict(message, &signature).is_ok()
+    }
+
+    /// The first 8 hex digits, for tables.
+    pub fn short(&self) -> String {
+        hex(&self.0[..4])
+    }
+}
+
+impl fmt::Display for PublicId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{KEY_PREFIX}{}", hex(&self.0))
+    }
+}
+
+impl fmt::Debug for PublicId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "PublicId({self})")
+    }
+}
+
+/// Why a key's text form was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum KeyTextError {
+    /// Not `ed25519:` followed by 64 hex digits.
+    #[error("`{0}` is not a public key: expected `ed25519:` followed by 64 hex digits")]
+    Malformed(String),
+    /// 32 bytes that are not a point of the curve.
+    #[error("`{0}` is not a valid Ed25519 public key")]
+    NotAKey(String),
+}
+
+impl FromStr for PublicId {
+    type Err = KeyTextError;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let text = text.trim();
+        let digits = text
+            .strip_prefix(KEY_PREFIX)
+            .ok_or_else(|| KeyTextError::Malformed(text.to_owned()))?;
+        let bytes: [u8; 32] =
+            unhex(digits).ok_or_else(|| KeyTextError::Malformed(text.to_owned()))?;
+        ed25519_dalek::VerifyingKey::from_bytes(&bytes)
+            .map_err(|_| KeyTextError::NotAKey(text.to_owned()))?;
+        Ok(PublicId(bytes))
+    }
+}
+
+impl serde::Serialize for PublicId {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for PublicId {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let text = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+        text.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// A secret Ed25519 key: a daemon's identity, or an administrator's signing key.
+///
+/// The secret never appears in `Debug` output.
+#[derive(Clone)]
+pub struct Identity {
+    key: ed25519_dalek::SigningKey,
+}
+
+impl Identity {
+    /// The identity whose secret is these 32 bytes (drawn from the operating system's random
+    /// source by the caller: this crate does no IO).
+    pub fn from_secret(secret: [u8; 32]) -> Self {
+        Identity {
+            key: ed25519_dalek::SigningKey::from_bytes(&secret),
+        }
+    }
+
+    /// The public half.
+    pub fn public(&self) -> PublicId {
+        PublicId(self.key.verifying_key().to_bytes())
+    }
+
+    /// Signs `message`.
+    pub fn sign(&self, message: &[u8]) -> [u8; 64] {
+        self.key.sign(message).to_bytes()
+    }
+
+    /// The text of an identity file: the secret and, for reading by eye, the public key.
+    pub fn to_file_text(&self) -> String {
+        format!(
+            "# ndds identity: keep this file secret (mode 0600)\nsecret {}\npublic {}\n",
+            hex(self.key.as_bytes()),
+            self.public()
+        )
+    }
+
+    /// Reads an identity file written by [`Identity::to_file_text`].
+    pub fn parse(text: &str) -> Result<Identity, IdentityFileError> {
+        let mut secret = None;
+        let mut public = None;
+        for (index, line) in text.lines().enumerate() {
+            let line_no = index + 1;
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            match line.split_once(' ') {
+                Some(("secret", value)) => {
+                    let bytes: [u8; 32] =
+                        unhex(value.trim()).ok_or(IdentityFileError::BadLine(line_no))?;
+                    secret = Some(bytes);
+                }
+                Some(("public", value)) => {
+                    public = Some(
+                        value
+                            .parse::<PublicId>()
+                            .map_err(|_| IdentityFileError::BadLine(line_no))?,
+                    );
+                }
+                _ => return Err(IdentityFileError::BadLine(line_no)),
+            }
+        }
+        let identity = Identity::from_secret(secret.ok_or(IdentityFileError::NoSecret)?);
+        if public.is_some_and(|public| public != identity.public()) {
+            return Err(IdentityFileError::Mismatch);
+        }
+        Ok(identity)
+    }
+}
+
+impl fmt::Debug for Identity {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Identity")
+            .field("public", &self.public())
+            .finish_non_exhaustive()
+    }
+}
+
+impl PartialEq for Identity {
+    fn eq(&self, other: &Self) -> bool {
+        self.public() == other.public()
+    }
+}
+
+impl Eq for Identity {}
+
+/// Why an identity file was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum IdentityFileError {
+    /// A line that is neither `secret HEX` nor `public ed25519:HEX`.
+    #[error("line {0}: expected `secret <64 hex digits>` or `public ed25519:<64 hex digits>`")]
+    BadLine(usize),
+    /// No `secret` line.
+    #[error("no `secret` line: not an ndds identity file")]
+    NoSecret,
+    /// The `public` line is not the secret's public key.
+    #[error("the `public` line is not the public key of the `secret` line (edited by hand?)")]
+    Mismatch,
+}
+
+/// Lower-case hex of `bytes`.
+pub(crate) fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write as _;
+    let mut text = String::with_capacity(bytes.len() * 2);
+    for byte in bytes {
+        let _ = write!(text, "{byte:02x}");
+    }
+    text
+}
+
+/// `N` bytes from exactly `2 N` hex digits.
+pub(crate) fn unhex<const N: usize>(text: &str) -> Option<[u8; N]> {
+    if text.len() != 2 * N || !text.is_ascii() {
+        return None;
+    }
+    let mut out = [0u8; N];
+    for (i, byte) in out.iter_mut().enumerate() {
+        *byte = u8::from_str_radix(&text[2 * i..2 * i + 2], 16).ok()?;
+    }
+    Some(out)
+}

@@ -1,0 +1,303 @@
+//! Discovery with identities and a permissions document (see `support/simnet.rs` and
+//! `ndds_core::security`): a subject matches what its rules allow and nothing else, both
+//! sides say why, a node is bound to the identity it signs with, an unsigned node is seen but
+//! matches nothing, and a new document (or the old one's end) takes effect at once.
+
+#[path = "support/fixtures.rs"]
+mod fixtures;
+#[path = "support/simnet.rs"]
+mod simnet;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use ndds_core::discovery::{Engine, Event, LocalError};
+use ndds_core::security::{Guard, Identity, Pattern, Permissions, Subject};
+use ndds_core::wire::{self, Bye, DropReason, Message, signed};
+
+use fixtures::*;
+use simnet::{SimNet, config};
+
+const PERIOD: Duration = Duration::from_secs(1);
+const LEASE: Duration = Duration::from_secs(5);
+
+fn identity(n: u8) -> Identity {
+    Identity::from_secret([n + 1; 32])
+}
+
+fn patterns(list: &[&str]) -> Vec<Pattern> {
+    list.iter().map(|p| Pattern::new(p).unwrap()).collect()
+}
+
+fn subject(name: &str, n: u8, publish: &[&str], subscribe: &[&str]) -> Subject {
+    Subject {
+        name: name.to_owned(),
+        key: identity(n).public(),
+        publish: patterns(publish),
+        subscribe: patterns(subscribe),
+        own: Vec::new(),
+        use_: Vec::new(),
+    }
+}
+
+fn document(serial: u64, subjects: Vec<Subject>) -> Arc<Permissions> {
+    Arc::new(Permissions {
+        serial,
+        domain: None,
+        not_before: 0,
+        not_after: u64::MAX,
+        subjects,
+    })
+}
+
+/// The administrator's document: node 0 is `arm` (publishes `arm/*`, reads everything), node 1
+/// is `viewer` (only `status/*`). Node 2 holds the domain key but is no subject.
+fn official() -> Arc<Permissions> {
+    document(
+        1,
+        vec![
+            subject("arm", 0, &["arm/*", "status/*"], &["*"]),
+            subject("viewer", 1, &["status/*"], &["status/*"]),
+        ],
+    )
+}
+
+fn guard(n: u8, permissions: Arc<Permissions>) -> impl FnOnce(&mut Engine) {
+    move |engine| {
+        engine.guard_with(Guard {
+            identity: identity(n),
+            permissions,
+            valid_until: None,
+        })
+    }
+}
+
+/// Nodes 0 and 1 enforce the official document; node 2 enforces one it wrote itself, which
+/// lets it do everything.
+fn three_nodes() -> SimNet {
+    let mut net = SimNet::new(11);
+    net.add_node_with(config(0, 500, PERIOD, LEASE), guard(0, official()));
+    net.add_node_with(config(1, 501, PERIOD, LEASE), guard(1, official()));
+    let own = document(99, vec![subject("rogue", 2, &["*"], &["*"])]);
+    net.add_node_with(config(2, 502, PERIOD, LEASE), guard(2, own));
+    net
+}
+
+fn refused(
+    local: ndds_core::wire::Guid,
+    other: ndds_core::wire::Guid,
+    words: &str,
+) -> impl Fn(&Event) -> bool {
+    move |e| {
+        matches!(e, Event::Refused { local: l, remote, reason }
+            if *l == local && remote.guid == other && reason.contains(words))
+    }
+}
+
+#[test]
+fn a_subject_matches_what_its_rules_allow_and_both_sides_say_why() {
+    let mut net = three_nodes();
+    let arm_pose = producer::<Pose>(guid(0, 1), "arm/pose");
+    let arm_status = producer::<Pose>(guid(0, 2), "status/arm");
+    let arm_cmd_in = consumer::<Pose>(guid(0, 3), "arm/cmd");
+    for info in [&arm_pose, &arm_status, &arm_cmd_in] {
+        net.add_local(0, info.clone());
+    }
+    // The viewer's own daemon refuses what the document does not give it, at declaration.
+    let viewer_status = consumer::<Pose>(guid(1, 1), "status/arm");
+    net.add_local(1, viewer_status.clone());
+    let refusal = net
+        .try_add_local(1, consumer::<Pose>(guid(1, 2), "arm/pose"))
+        .expect_err("viewer may not read arm/pose");
+    let text = refusal.to_string();
+    assert!(matches!(refusal, LocalError::NotPermitted(_)), "{text}");
+    assert!(
+        text.contains("`viewer` may not subscribe `arm/pose`")
+            && text.contains("subscribe 'status/*'"),
+        "{text}"
+    );
+    assert_eq!(net.engine(1).stats().refused_local, 1);
+    // The rogue's document lets it declare anything; the others refuse it.
+    let rogue_reader = consumer::<Pose>(guid(2, 1), "arm/pose");
+    let rogue_writer = producer::<Pose>(guid(2, 2), "arm/cmd");
+    net.add_local(2, rogue_reader.clone());
+    net.add_local(2, rogue_writer.clone());
+    net.run_for(Duration::from_secs(3));
+
+    assert_eq!(
+        count(
+            &net,
+            1,
+            Duration::ZERO,
+            matched(viewer_status.guid, arm_status.guid)
+        ),
+        1
+    );
+    let not_subject = "is not a subject of permissions document 1";
+    assert!(
+        first(
+            &net,
+            0,
+            Duration::ZERO,
+            refused(arm_pose.guid, rogue_reader.guid, not_subject)
+        )
+        .is_some()
+    );
+    assert!(
+        first(
+            &net,
+            0,
+            Duration::ZERO,
+            refused(arm_cmd_in.guid, rogue_writer.guid, not_subject)
+        )
+        .is_some()
+    );
+    // The rogue's document does not name node 0: it refuses node 0's endpoints too.
+    assert!(
+        first(
+            &net,
+            2,
+            Duration::ZERO,
+            refused(rogue_reader.guid, arm_pose.guid, "document 99")
+        )
+        .is_some()
+    );
+    for n in 0..3 {
+        let matched_with_rogue = net.events_since(n, Duration::ZERO).any(|(_, e)| {
+            matches!(e, Event::Matched { local, remote }
+                if (local.participant == guid(2, 1).participant) != (remote.guid.participant == guid(2, 1).participant))
+        });
+        assert!(!matched_with_rogue, "node {n} matched across the rogue");
+    }
+    assert!(net.engine(0).stats().refused_endpoints >= 2);
+    // Every node knows every other and whom it signs as.
+    let rogue_id = net.engine(2).node_id();
+    let (_, rogue) = net
+        .engine(0)
+        .nodes()
+        .find(|(id, _)| *id == rogue_id)
+        .unwrap();
+    assert_eq!(rogue.identity, Some(identity(2).public()));
+    assert_eq!(
+        net.engine(0).subject_of(&identity(1).public()),
+        Some("viewer")
+    );
+    assert_eq!(net.engine(0).subject_of(&identity(2).public()), None);
+}
+
+#[test]
+fn a_node_is_bound_to_the_identity_it_signs_with() {
+    let mut net = three_nodes();
+    let arm_pose = producer::<Pose>(guid(0, 1), "arm/pose");
+    net.add_local(0, arm_pose.clone());
+    net.add_local(1, consumer::<Pose>(guid(1, 1), "status/x"));
+    net.run_for(Duration::from_secs(2));
+    assert!(net.knows(1, arm_pose.guid));
+    let node0 = net.engine(0).node_id();
+    let mut bye = Vec::new();
+    wire::encode(simnet::DOMAIN, node0, &Message::Bye(Bye {}), &mut bye).unwrap();
+    // Unsigned, then signed by another subject of the document, from node 0's own address.
+    let by_viewer = signed::wrap(&bye, &identity(1)).unwrap();
+    // Node 0's identity with a signature changed in one bit.
+    let mut tampered = signed::wrap(&bye, &identity(0)).unwrap();
+    tampered[wire::HEADER_LEN + 32 + 10] ^= 1;
+    for datagram in [&bye, &by_viewer, &tampered] {
+        net.inject(1, simnet::locator(0), datagram);
+    }
+    net.run_for(Duration::from_millis(10));
+    assert!(net.knows(1, arm_pose.guid), "a forged Bye removed node 0");
+    assert_eq!(net.engine(1).stats().dropped(DropReason::Unverified), 3);
+}
+
+#[test]
+fn an_unsigned_node_is_seen_and_matches_nothing() {
+    let mut net = SimNet::new(12);
+    net.add_node_with(config(0, 600, PERIOD, LEASE), guard(0, official()));
+    net.add_node(config(1, 601, PERIOD, LEASE));
+    let arm_pose = producer::<Pose>(guid(0, 1), "arm/pose");
+    let open_reader = consumer::<Pose>(guid(1, 1), "arm/pose");
+    net.add_local(0, arm_pose.clone());
+    net.add_local(1, open_reader.clone());
+    net.run_for(Duration::from_secs(3));
+    let open_id = net.engine(1).node_id();
+    let (_, open) = net
+        .engine(0)
+        .nodes()
+        .find(|(id, _)| *id == open_id)
+        .unwrap();
+    assert_eq!(open.identity, None);
+    assert!(
+        first(
+            &net,
+            0,
+            Duration::ZERO,
+            refused(arm_pose.guid, open_reader.guid, "not authenticated")
+        )
+        .is_some()
+    );
+    assert_eq!(
+        count(
+            &net,
+            0,
+            Duration::ZERO,
+            matched(arm_pose.guid, open_reader.guid)
+        ),
+        0
+    );
+}
+
+#[test]
+fn a_new_document_and_the_end_of_one_take_effect_at_once() {
+    let mut net = three_nodes();
+    let arm_pose = producer::<Pose>(guid(0, 1), "arm/pose");
+    let rogue_reader = consumer::<Pose>(guid(2, 1), "arm/pose");
+    net.add_local(0, arm_pose.clone());
+    net.add_local(2, rogue_reader.clone());
+    net.run_for(Duration::from_secs(2));
+    assert_eq!(
+        count(
+            &net,
+            0,
+            Duration::ZERO,
+            matched(arm_pose.guid, rogue_reader.guid)
+        ),
+        0
+    );
+    // The administrator admits node 2 as `logger`; node 0 installs the new version, which
+    // is valid for one more second.
+    let mut subjects = official().subjects.clone();
+    subjects.push(subject("logger", 2, &[], &["arm/*"]));
+    let second = document(2, subjects);
+    let now = net.elapsed();
+    let until = net.now() + Duration::from_secs(1);
+    net.command(0, move |engine| engine.set_permissions(second, Some(until)));
+    assert!(first(&net, 0, now, matched(arm_pose.guid, rogue_reader.guid)).is_some());
+    assert_eq!(
+        net.engine(0).subject_of(&identity(2).public()),
+        Some("logger")
+    );
+    // Its end refuses the pair again.
+    net.run_for(Duration::from_secs(2));
+    assert!(first(&net, 0, now, unmatched(arm_pose.guid, rogue_reader.guid)).is_some());
+    assert!(
+        first(
+            &net,
+            0,
+            now,
+            refused(arm_pose.guid, rogue_reader.guid, "is not valid now")
+        )
+        .is_some()
+    );
+    // A valid document again.
+    let later = net.elapsed();
+    net.command(0, |engine| engine.set_permissions(official(), None));
+    assert!(
+        first(
+            &net,
+            0,
+            later,
+            refused(arm_pose.guid, rogue_reader.guid, "document 1")
+        )
+        .is_some()
+    );
+}
