@@ -71,6 +71,8 @@ pub struct TestDomain {
     /// The domain's key file, in a sealed domain: daemons get `--key-file`, clients
     /// `NDDS_KEY_FILE`.
     pub key: Option<PathBuf>,
+    /// More flags for the daemon of each name (an identity, a permissions document).
+    pub daemon_extra: std::collections::BTreeMap<String, Vec<String>>,
 }
 
 impl TestDomain {
@@ -83,6 +85,7 @@ impl TestDomain {
             group: Ipv4Addr::new(239, 255, rng.u8(100..=254), rng.u8(1..=254)),
             dir: tempfile::tempdir().expect("temporary directory"),
             key: None,
+            daemon_extra: std::collections::BTreeMap::new(),
         }
     }
 
@@ -134,6 +137,7 @@ impl TestDomain {
             LEASE.as_millis().to_string(),
         ];
         args.extend(key);
+        args.extend(self.daemon_extra.get(name).into_iter().flatten().cloned());
         args
     }
 

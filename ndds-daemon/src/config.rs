@@ -19,6 +19,9 @@
 //! | `multicast_ttl` | 1 |
 //! | `key_file` | none: the domain is open (`NDDS_KEY_FILE`) |
 //! | `integrity_only` | false: sealed datagrams are encrypted |
+//! | `permissions` | none: every daemon holding the key may do everything (`NDDS_PERMISSIONS`) |
+//! | `admin_key` | none; required with `permissions` (`NDDS_ADMIN_KEY`) |
+//! | `identity` | `/var/lib/ndds/identity` (root) or `$XDG_STATE_HOME/ndds/identity`, made on first use |
 
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
@@ -31,6 +34,24 @@ use serde::Deserialize;
 
 use crate::iface;
 use crate::peers::PeerSpec;
+use crate::security;
+
+/// Reads a permissions document (the TOML parser comes with the `cli` feature).
+fn read_permissions(
+    path: &std::path::Path,
+    admin: &ndds_core::security::PublicId,
+    domain: u16,
+) -> Result<ndds_core::security::Permissions, security::SecurityError> {
+    #[cfg(feature = "cli")]
+    {
+        security::load_permissions(path, admin, domain)
+    }
+    #[cfg(not(feature = "cli"))]
+    {
+        let _ = (path, admin, domain);
+        Err(security::SecurityError::NoParser)
+    }
+}
 
 /// The daemon's settings as the config file and the command line give them, every one
 /// optional. Unknown keys in the file are an error.
@@ -98,6 +119,19 @@ pub struct ConfigFile {
         arg(long = "integrity-only", num_args = 0, default_missing_value = "true")
     )]
     pub integrity_only: Option<bool>,
+    /// The domain's signed permissions document (`ndds security init`, `add`, `sign`): this
+    /// daemon then signs its discovery datagrams with its identity and lets only what the
+    /// document allows match. Needs --key-file and --admin-key [default: none].
+    #[cfg_attr(feature = "cli", arg(long, env = "NDDS_PERMISSIONS"))]
+    pub permissions: Option<PathBuf>,
+    /// The administrator's public key that signs the permissions document: `ed25519:...`, or
+    /// the path of a file holding it (`admin.pub`).
+    #[cfg_attr(feature = "cli", arg(long, env = "NDDS_ADMIN_KEY"))]
+    pub admin_key: Option<String>,
+    /// This daemon's identity file, made on first use [default: /var/lib/ndds/identity as
+    /// root, else $XDG_STATE_HOME/ndds/identity].
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub identity: Option<PathBuf>,
 }
 
 impl ConfigFile {
@@ -133,6 +167,9 @@ impl ConfigFile {
             seed: self.seed.or(lower.seed),
             key_file: self.key_file.or(lower.key_file),
             integrity_only: self.integrity_only.or(lower.integrity_only),
+            permissions: self.permissions.or(lower.permissions),
+            admin_key: self.admin_key.or(lower.admin_key),
+            identity: self.identity.or(lower.identity),
         }
     }
 
@@ -179,6 +216,35 @@ impl ConfigFile {
         if self.integrity_only.unwrap_or(false) {
             config.seal_mode = SealMode::IntegrityOnly;
         }
+        if let Some(path) = self.permissions {
+            let admin = self
+                .admin_key
+                .as_deref()
+                .ok_or(security::SecurityError::NeedsAdmin)?;
+            let admin = security::admin_key(admin)?;
+            if config.key.is_none() {
+                return Err(security::SecurityError::NeedsKey.into());
+            }
+            let permissions = read_permissions(&path, &admin, domain)?;
+            let identity_file = self
+                .identity
+                .unwrap_or_else(security::default_identity_path);
+            let (identity, created) = security::load_or_create_identity(&identity_file)?;
+            if created {
+                tracing::info!(
+                    file = %identity_file.display(),
+                    identity = %identity.public(),
+                    "made this daemon's identity: add it to the permissions document (`ndds security add`)"
+                );
+            }
+            config.security = Some(security::Security {
+                identity,
+                identity_file,
+                permissions: std::sync::Arc::new(permissions),
+                permissions_file: path,
+                admin,
+            });
+        }
         config.discovery().validate()?;
         Ok(config)
     }
@@ -223,6 +289,8 @@ pub struct DaemonConfig {
     pub key_file: Option<PathBuf>,
     /// How datagrams are sealed when there is a key.
     pub seal_mode: SealMode,
+    /// Identity and permissions document (`None`: no permissions in this domain).
+    pub security: Option<security::Security>,
 }
 
 impl DaemonConfig {
@@ -249,6 +317,7 @@ impl DaemonConfig {
             key: None,
             key_file: None,
             seal_mode: SealMode::Encrypt,
+            security: None,
         }
     }
 
@@ -303,6 +372,9 @@ pub enum ConfigError {
     /// The key file cannot be used.
     #[error(transparent)]
     Key(#[from] crate::keys::KeyError),
+    /// The identity or the permissions document could not be used.
+    #[error(transparent)]
+    Security(#[from] security::SecurityError),
     /// The socket group does not exist.
     #[error(transparent)]
     Local(#[from] crate::local::LocalError),

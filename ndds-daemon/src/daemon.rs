@@ -147,6 +147,23 @@ impl Daemon {
                 "sealed domain: only datagrams sealed with the domain key are accepted"
             );
         }
+        if let Some(security) = &config.security {
+            engine.guard_with(security.guard());
+            let identity = security.identity.public();
+            tracing::info!(
+                %identity,
+                subject = ?engine.subject_of(&identity),
+                document = security.permissions.serial,
+                file = %security.permissions_file.display(),
+                "permissions: discovery is signed, and only what the document allows matches"
+            );
+            if engine.subject_of(&identity).is_none() {
+                tracing::warn!(
+                    %identity,
+                    "this daemon's identity is not a subject of the permissions document: its clients may declare nothing; add it with `ndds security add NAME {identity} ...` and sign"
+                );
+            }
+        }
         Ok(Daemon {
             config,
             engine,

@@ -610,6 +610,11 @@ impl Driver {
             peers: self.peer_summaries(),
             multicast_seen_ms: None,
             unicast_copies: false,
+            identity: self.engine.identity().map(|id| id.to_string()),
+            subject: (self.engine.identity())
+                .and_then(|id| self.engine.subject_of(&id).map(str::to_owned)),
+            authenticated: self.engine.identity().is_some(),
+            refused_endpoints: 0,
         };
         let copies: HashSet<Locator> = (self.engine.fanout().into_iter())
             .filter_map(|d| match d {
@@ -617,6 +622,12 @@ impl Driver {
                 Destination::Multicast => None,
             })
             .collect();
+        let mut refused: std::collections::HashMap<u64, u32> = std::collections::HashMap::new();
+        for entry in self.engine.endpoints() {
+            if let (Origin::Remote(node), Some(_)) = (entry.origin, &entry.refused) {
+                *refused.entry(node).or_default() += 1;
+            }
+        }
         let mut nodes: Vec<NodeSummary> = self
             .engine
             .nodes()
@@ -630,6 +641,11 @@ impl Driver {
                 peers: Vec::new(),
                 multicast_seen_ms: remote.last_multicast.map(millis_since),
                 unicast_copies: copies.contains(&remote.info.unicast),
+                identity: remote.identity.map(|id| id.to_string()),
+                subject: (remote.identity.as_ref())
+                    .and_then(|id| self.engine.subject_of(id).map(str::to_owned)),
+                authenticated: remote.identity.is_some(),
+                refused_endpoints: refused.get(&node).copied().unwrap_or(0),
             })
             .collect();
         nodes.sort_by(|a, b| {

@@ -35,6 +35,7 @@ pub mod iface;
 pub mod keys;
 pub mod local;
 pub mod peers;
+pub mod security;
 pub mod sockets;
 
 pub use config::{ConfigError, ConfigFile, DaemonConfig};

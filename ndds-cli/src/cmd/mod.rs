@@ -9,6 +9,7 @@ mod perf;
 mod ports;
 mod publish;
 mod run;
+mod security;
 mod topics;
 
 use clap::{Parser, Subcommand};
@@ -47,6 +48,8 @@ enum Command {
     Run(run::Args),
     /// Domain key files: a new one, and the steps of a key rotation.
     Key(key::Args),
+    /// Identities and the permissions document: who may publish, subscribe, own or use what.
+    Security(security::Args),
 }
 
 impl Cli {
@@ -70,6 +73,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
         Command::Key(args) => key::run(&args),
+        Command::Security(args) => security::run(&args),
         Command::Run(args) => run::run(&cli.daemon, &args),
     }
 }

@@ -41,6 +41,14 @@ struct NodeView {
     lease_ms: u32,
     announce_period_ms: u32,
     last_seen_ms: u64,
+    /// In a domain with permissions: the identity that signs its datagrams.
+    identity: Option<String>,
+    /// The subject the answering daemon's permissions document gives that identity.
+    subject: Option<String>,
+    /// Whether the answering daemon verified its signatures (the local node: whether it signs).
+    authenticated: bool,
+    /// How many of its endpoints the answering daemon's document refuses.
+    refused_endpoints: u32,
     version: String,
     processes: Vec<ProcessView>,
     /// The answering daemon's counters (datagrams, drops by reason, sessions); empty for
@@ -78,6 +86,8 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         )?;
         return Ok(());
     }
+    // The answering daemon signs: it checks everyone's signatures.
+    let guarded = nodes.first().is_some_and(|local| local.identity.is_some());
     for node in &nodes {
         outln!(
             "{} {} (node {}, daemon pid {}, v{}){}",
@@ -100,6 +110,9 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             node.lease_ms,
             node.announce_period_ms
         )?;
+        if let Some(line) = security_text(node, guarded) {
+            outln!("    {line}")?;
+        }
         if let Some(peers) = &node.peers {
             outln!("    peers: {}", peers_text(peers))?;
         }
@@ -144,6 +157,37 @@ fn multicast_text(node: &NodeView) -> String {
         (None, true) => "  multicast off".to_owned(),
         (None, false) => String::new(),
     }
+}
+
+/// The identity line, in a domain with permissions (the answering daemon signs, or the node
+/// does).
+fn security_text(node: &NodeView, guarded: bool) -> Option<String> {
+    let Some(identity) = node.identity.as_deref() else {
+        return guarded.then(|| {
+            format!(
+                "not authenticated: its datagrams are not signed ({} endpoints refused)",
+                node.refused_endpoints
+            )
+        });
+    };
+    let short: String = identity.chars().take(8 + 16).collect();
+    let subject = node
+        .subject
+        .as_ref()
+        .map_or("no subject of the document".to_owned(), |s| {
+            format!("subject `{s}`")
+        });
+    let state = match (node.local, node.authenticated) {
+        (true, _) => "this daemon",
+        (false, true) => "authenticated",
+        (false, false) => "not authenticated",
+    };
+    let refused = if node.refused_endpoints > 0 {
+        format!(", {} endpoints refused", node.refused_endpoints)
+    } else {
+        String::new()
+    };
+    Some(format!("identity {short}…  {subject}, {state}{refused}"))
 }
 
 fn peers_text(peers: &[PeerView]) -> String {
@@ -227,6 +271,10 @@ fn node_view(node: &NodeSummary, local: bool) -> NodeView {
         lease_ms: node.info.lease_ms,
         announce_period_ms: node.info.announce_period_ms,
         last_seen_ms: node.last_seen_ms,
+        identity: node.identity.clone(),
+        subject: node.subject.clone(),
+        authenticated: node.authenticated,
+        refused_endpoints: node.refused_endpoints,
         version: node.info.version.clone(),
         processes: Vec::new(),
         counters: BTreeMap::new(),
@@ -268,6 +316,10 @@ mod tests {
             peers: Vec::new(),
             multicast_seen_ms: None,
             unicast_copies: false,
+            identity: None,
+            subject: None,
+            authenticated: false,
+            refused_endpoints: 0,
         }
     }
 

@@ -45,6 +45,17 @@ pub struct NodeSummary {
     /// unicast: a configured peer, or a node not heard by multicast lately (false for the local
     /// node).
     pub unicast_copies: bool,
+    /// The identity that signs its datagrams, in a domain with permissions (`ed25519:...`;
+    /// `None`: it signs nothing, or the answering daemon checks no signatures).
+    pub identity: Option<String>,
+    /// The subject the answering daemon's permissions document gives that identity.
+    pub subject: Option<String>,
+    /// Whether the answering daemon verified its signatures (for the local node: whether it
+    /// signs).
+    pub authenticated: bool,
+    /// How many of its endpoints the answering daemon's document refuses (0 for the local
+    /// node, whose refused declarations never enter the table).
+    pub refused_endpoints: u32,
 }
 
 /// One configured unicast peer of the answering daemon.
