@@ -55,16 +55,6 @@ pub enum DaemonMessage {
         /// The other endpoint.
         remote: EndpointInfo,
     },
-    /// A local endpoint of this client would pair with another endpoint, but the domain's
-    /// permissions document does not allow one of them.
-    NotPermitted {
-        /// The client's entity.
-        local: u32,
-        /// The other endpoint.
-        remote: EndpointInfo,
-        /// Why, in words: the subject and the rule.
-        reason: String,
-    },
     /// A matched, incompatible or refused endpoint went away.
     Unmatched {
         /// The client's entity.
@@ -80,5 +70,15 @@ pub enum DaemonMessage {
         graph: Graph,
         /// The guid to ask the next page after; `None` on the last page.
         next: Option<Guid>,
+    },
+    /// A local endpoint of this client would pair with another endpoint, but the domain's
+    /// permissions document does not allow one of them.
+    NotPermitted {
+        /// The client's entity.
+        local: u32,
+        /// The other endpoint.
+        remote: EndpointInfo,
+        /// Why, in words: the subject and the rule.
+        reason: String,
     },
 }
