@@ -494,12 +494,16 @@ fn discovery_engine_seeds(corpus: &mut Corpus) {
             "sealed_aes_integrity",
             flag::KEYED | flag::AES | flag::INTEGRITY_ONLY,
         ),
+        ("permissions", flag::KEYED | flag::GUARDED),
     ] {
         let now = Instant::now();
         let mut remote =
             Engine::new(discovery::config(1, flags & flag::UNICAST != 0), now).expect("valid");
         if flags & flag::KEYED != 0 {
             remote.seal_with(discovery::seal_setup(flags, 7));
+        }
+        if flags & flag::GUARDED != 0 {
+            remote.guard_with(discovery::guard(1));
         }
         remote
             .add_local(discovery::endpoint(0xB0, 1, true, 1))

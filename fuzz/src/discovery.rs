@@ -8,6 +8,9 @@
 //!        bit 1: the key file says AES-256-GCM (else ChaCha20-Poly1305)
 //!        bit 2: remote senders seal integrity-only (else encrypted)
 //!        bit 3: multicast off, host 1 is the engine's configured peer
+//!        bit 4: permissions: the engine signs and checks signatures, and enforces a
+//!               document where host 1 may do everything, host 2 read `status/*`, host 3
+//!               nothing (no subject)
 //! op := RAW      u16 len | datagram          from host (first byte % 4), via (bit 7)
 //!     | FRAMED   u16 len | sel kind body      header built here: sender node sel % 4
 //!     | SEALED   u16 len | sel kind body      as FRAMED, then sealed with that sender's key
@@ -16,16 +19,19 @@
 //!     | CLOSE    u16 len |                    the engine says goodbye
 //! ```
 //!
-//! Sender `sel % 4 == 3` is the engine's own node id (its own datagrams looped back). A
-//! sealed sender keeps one [`Sealer`] per (node, session) so that counters grow as a real
+//! Sender `sel % 4 == 3` is the engine's own node id (its own datagrams looped back). With
+//! bit 6 of `sel`, FRAMED and SEALED datagrams are signed by the identity of host
+//! `1 + (sel >> 4) % 3` before sealing (its own, or another's). A sealed sender keeps one [`Sealer`] per (node, session) so that counters grow as a real
 //! sender's do; `sel / 4 % 4` picks the session.
 
 use std::collections::HashMap;
 use std::net::{SocketAddr, SocketAddrV4};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ndds_core::discovery::{DiscoveryConfig, Engine, Via};
 use ndds_core::seal::{SealMode, SealSetup, Sealer};
+use ndds_core::security::{Guard, Identity, Pattern, Permissions, Subject};
 use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     ConsumerQosWire, EndpointInfo, EndpointQos, Guid, Header, MessageKind, ProducerQosWire,
@@ -62,6 +68,52 @@ pub mod flag {
     pub const INTEGRITY_ONLY: u8 = 4;
     /// Multicast off; host 1 is a configured peer.
     pub const UNICAST: u8 = 8;
+    /// Identities, signatures and a permissions document.
+    pub const GUARDED: u8 = 16;
+}
+
+/// The identity of host `index` (0 is the engine under test).
+pub fn identity(index: u8) -> Identity {
+    Identity::from_secret([index.wrapping_add(0x10); 32])
+}
+
+/// The permissions document of a guarded engine: hosts 0 and 1 may do everything, host 2 read
+/// `status/*`, host 3 is no subject.
+pub fn permissions() -> Arc<Permissions> {
+    let all = vec![Pattern::new("*").expect("a pattern")];
+    let subject = |name: &str, index: u8, publish: Vec<Pattern>, subscribe: Vec<Pattern>| Subject {
+        name: name.to_owned(),
+        key: identity(index).public(),
+        publish,
+        subscribe,
+        own: all.clone(),
+        use_: Vec::new(),
+    };
+    Arc::new(Permissions {
+        serial: 1,
+        domain: None,
+        not_before: 0,
+        not_after: u64::MAX,
+        subjects: vec![
+            subject("self", 0, all.clone(), all.clone()),
+            subject("arm", 1, all.clone(), all.clone()),
+            subject(
+                "viewer",
+                2,
+                Vec::new(),
+                vec![Pattern::new("status/*").expect("a pattern")],
+            ),
+        ],
+    })
+}
+
+/// The guard of host `index`.
+pub fn guard(index: u8) -> Guard {
+    Guard {
+        identity: identity(index),
+        permissions: permissions(),
+        valid_until: None,
+    }
 }
 
 /// Node ids of the remote hosts 1, 2 and 3 (host 0 is the engine under test).
@@ -169,6 +221,9 @@ pub fn run(data: &[u8]) {
     if flags & flag::KEYED != 0 {
         engine.seal_with(seal_setup(flags, 1));
     }
+    if flags & flag::GUARDED != 0 {
+        engine.guard_with(guard(0));
+    }
     let mut harness = Harness {
         engine,
         flags,
@@ -210,6 +265,14 @@ impl Harness {
                 }
                 .emit(&mut datagram);
                 datagram.extend_from_slice(chunk.rest());
+                if sel & 0x40 != 0 {
+                    let Ok(signed) =
+                        ndds_core::wire::signed::wrap(&datagram, &identity(1 + (sel >> 4) % 3))
+                    else {
+                        return;
+                    };
+                    datagram = signed;
+                }
                 if code % 6 == op::SEALED {
                     let session = sel / 4 % 4;
                     let flags = self.flags;
