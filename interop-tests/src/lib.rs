@@ -99,6 +99,46 @@ impl TestDomain {
         domain
     }
 
+    /// A new sealed domain with a permissions document signed by a new administrator key, in
+    /// which each daemon of `names` has an identity of its own and is a subject (of its name)
+    /// that may publish and subscribe to everything: the daemons sign and check all
+    /// discovery (docs/security.md).
+    pub fn with_permissions(names: &[String]) -> Self {
+        use ndds_core::security::{Identity, sign};
+        let mut domain = Self::sealed();
+        let admin = Identity::from_secret(ndds_daemon::keys::random_bytes().expect("random"));
+        let admin_pub = domain.path("admin.pub");
+        std::fs::write(&admin_pub, format!("{}\n", admin.public())).expect("admin.pub");
+        let mut text = format!(
+            "serial = 1\ndomain = {}\nnot_before = \"2000-01-01T00:00:00Z\"\n\
+             not_after = \"2100-01-01T00:00:00Z\"\n",
+            domain.domain
+        );
+        for name in names {
+            let file = domain.path(&format!("{name}.id"));
+            let (identity, _) =
+                ndds_daemon::security::load_or_create_identity(&file).expect("an identity");
+            text.push_str(&format!(
+                "\n[[subject]]\nname = \"{name}\"\nkey = \"{}\"\npublish = [\"*\"]\nsubscribe = [\"*\"]\n",
+                identity.public()
+            ));
+            domain.daemon_extra.insert(
+                name.clone(),
+                vec![
+                    "--identity".into(),
+                    file.display().to_string(),
+                    "--permissions".into(),
+                    domain.path("permissions.toml").display().to_string(),
+                    "--admin-key".into(),
+                    admin_pub.display().to_string(),
+                ],
+            );
+        }
+        std::fs::write(domain.path("permissions.toml"), sign(&text, &admin))
+            .expect("permissions.toml");
+        domain
+    }
+
     /// The socket path of the daemon called `name`.
     pub fn socket(&self, name: &str) -> PathBuf {
         self.dir.path().join(format!("{name}.sock"))

@@ -224,8 +224,9 @@ fn converge_in(domain: interop_tests::TestDomain) -> Option<Duration> {
     times.into_iter().flatten().max()
 }
 
-/// The same convergence in an open and in a sealed domain, one after the other: sealing every
-/// discovery datagram must not slow discovery down (the figures go to docs/benchmarks.md).
+/// The same convergence in an open domain, a sealed one, and a sealed one with identities and
+/// permissions, one after the other: sealing and signing every discovery datagram must not slow
+/// discovery down (the figures go to docs/benchmarks.md).
 #[test]
 fn twenty_hosts_converge_in_a_sealed_domain_as_in_an_open_one() {
     if support::skipped() {
@@ -234,13 +235,20 @@ fn twenty_hosts_converge_in_a_sealed_domain_as_in_an_open_one() {
     let _turn = exclusive();
     let open = converge_in(interop_tests::TestDomain::new());
     let sealed = converge_in(interop_tests::TestDomain::sealed());
+    let names: Vec<String> = (0..HOSTS).map(Cluster::daemon_name).collect();
+    let permitted = converge_in(interop_tests::TestDomain::with_permissions(&names));
     eprintln!(
-        "{HOSTS} hosts x {TOPICS} endpoints: every daemon sees all endpoints {open:?} (open) \
-         and {sealed:?} (sealed) after the last client was ready"
+        "{HOSTS} hosts x {TOPICS} endpoints: every daemon sees all endpoints {open:?} (open), \
+         {sealed:?} (sealed) and {permitted:?} (sealed, signed, with permissions) after the \
+         last client was ready"
     );
     assert!(open.is_some(), "the open domain converged");
     assert!(
         sealed.is_some_and(|t| t <= PERIOD * 10),
         "the sealed domain converged within ten refresh periods: {sealed:?}"
+    );
+    assert!(
+        permitted.is_some_and(|t| t <= PERIOD * 10),
+        "the domain with permissions converged within ten refresh periods: {permitted:?}"
     );
 }
