@@ -200,7 +200,7 @@ fn a_node_is_bound_to_the_identity_it_signs_with() {
     let by_viewer = signed::wrap(&bye, &identity(1)).unwrap();
     // Node 0's identity with a signature changed in one bit.
     let mut tampered = signed::wrap(&bye, &identity(0)).unwrap();
-    tampered[wire::HEADER_LEN + 32 + 10] ^= 1;
+    tampered[wire::HEADER_LEN + 64 + 10] ^= 1;
     for datagram in [&bye, &by_viewer, &tampered] {
         net.inject(1, simnet::locator(0), datagram);
     }

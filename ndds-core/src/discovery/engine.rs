@@ -32,7 +32,7 @@ use super::fanout::{Fanout, Via};
 use super::sources::Sources;
 use super::table::{Entry, Origin, Table, entry_cost};
 use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
-use crate::security::{Guard, Permissions, PublicId, Refusal};
+use crate::security::{DataKeys, Guard, Permissions, PublicId, Refusal};
 use crate::wire::signed::{self, SIGNED_OVERHEAD};
 use crate::wire::{
     self, Announce, Bye, DropReason, EndpointInfo, Guid, Header, Locator, MAX_DATAGRAM, Message,
@@ -83,7 +83,23 @@ pub struct RemoteNode {
     /// The identity that signs its datagrams (domains with permissions; `None`: it signs
     /// nothing, or this engine checks no signatures).
     pub identity: Option<PublicId>,
+    /// The secret this node's daemon and this one share (from their agreement keys), from
+    /// which the data keys of their participants' pairs derive.
+    shared: Option<Shared>,
 }
+
+/// A shared secret, never printed.
+#[derive(Clone, Copy)]
+struct Shared([u8; 32]);
+
+impl std::fmt::Debug for Shared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Shared(..)")
+    }
+}
+
+/// A signing identity and its agreement key, as a `Signed` datagram names them.
+type Speaker = (PublicId, [u8; 32]);
 
 impl RemoteNode {
     /// Whether its datagrams come from the locator it announces, as a daemon's do (it sends
@@ -486,7 +502,7 @@ impl Engine {
             // Only an engine that enforces permissions checks signatures (and believes them).
             if self.guard.is_some() {
                 view.verify()?;
-                (view.inner, Some(view.identity))
+                (view.inner, Some((view.identity, view.agreement)))
             } else {
                 (view.inner, None)
             }
@@ -611,7 +627,7 @@ impl Engine {
         header: Header,
         (from, via): (SocketAddr, Via),
         announce: Announce,
-        identity: Option<PublicId>,
+        identity: Option<Speaker>,
     ) -> Result<(), DropReason> {
         let node = header.sender;
         let lease = lease_of(&announce.node);
@@ -660,7 +676,7 @@ impl Engine {
         node: u64,
         (from, via): (SocketAddr, Via),
         info: NodeInfo,
-        identity: Option<PublicId>,
+        identity: Option<Speaker>,
     ) -> Result<bool, DropReason> {
         let lease = lease_of(&info);
         let by_multicast = (via == Via::Multicast).then_some(now);
@@ -701,7 +717,8 @@ impl Engine {
                 expires: now + lease,
                 source: from.ip(),
                 charged: cost,
-                identity,
+                identity: identity.map(|(id, _)| id),
+                shared: identity.and_then(|speaker| self.shared_with(speaker)),
             },
         );
         self.sources.add(from.ip(), node, now, cost);
@@ -862,23 +879,56 @@ impl Engine {
     /// In a domain with permissions, a node is bound to the identity it first signed with:
     /// its datagrams must carry that identity from then on. A node first heard unsigned is
     /// bound when it first signs (and its endpoints are judged again).
-    fn check_identity(&mut self, node: u64, identity: Option<PublicId>) -> Result<(), DropReason> {
+    fn check_identity(&mut self, node: u64, identity: Option<Speaker>) -> Result<(), DropReason> {
         if self.guard.is_none() {
             return Ok(());
         }
+        let shared = identity.and_then(|speaker| self.shared_with(speaker));
         let Some(known) = self.nodes.get_mut(&node) else {
             return Ok(());
         };
         match (known.identity, identity) {
-            (Some(bound), Some(said)) if bound == said => Ok(()),
+            (Some(bound), Some((said, _))) if bound == said => {
+                // The agreement key is signed with the identity: the newest one counts.
+                known.shared = shared;
+                Ok(())
+            }
             (Some(_), _) => Err(DropReason::Unverified),
             (None, None) => Ok(()),
-            (None, Some(said)) => {
+            (None, Some((said, _))) => {
                 known.identity = Some(said);
+                known.shared = shared;
                 self.judge_node(node);
                 Ok(())
             }
         }
+    }
+
+    /// The secret this engine's identity shares with `speaker`'s agreement key.
+    fn shared_with(&self, (_, agreement): Speaker) -> Option<Shared> {
+        let guard = self.guard.as_ref()?;
+        guard.identity.shared_secret(&agreement).map(Shared)
+    }
+
+    /// The data keys of the pair of `local`'s participant and `other`'s, in a domain with
+    /// permissions: derived from the secret this daemon shares with `other`'s daemon (or, for
+    /// two participants of this node, from this identity alone). `None` without permissions,
+    /// or for a pair the document does not allow, or an endpoint not known.
+    pub fn data_keys(&self, local: &Guid, other: &Guid) -> Option<DataKeys> {
+        let guard = self.guard.as_ref()?;
+        let (mine, theirs) = (self.table.get(local)?, self.table.get(other)?);
+        if mine.origin != Origin::Local || mine.refused.is_some() || theirs.refused.is_some() {
+            return None;
+        }
+        let shared = match theirs.origin {
+            Origin::Local => guard.identity.derive(b"local data pairs"),
+            Origin::Remote(node) => self.nodes.get(&node)?.shared?.0,
+        };
+        Some(DataKeys::derive(
+            &shared,
+            local.participant,
+            other.participant,
+        ))
     }
 
     fn remove_remote(&mut self, node: u64, guid: &Guid) {

@@ -157,6 +157,9 @@ pub struct CoreStats {
     pub seal: OpenStats,
     /// Datagrams not sent because they could not be sealed.
     pub unsealable: u64,
+    /// Datagrams not sent because their destination has no data key (a domain with
+    /// permissions: the pair was never matched by this participant's daemon).
+    pub unkeyed: u64,
 }
 
 impl CoreStats {
@@ -228,6 +231,53 @@ impl ParticipantCore {
             self.config.domain,
             setup.require_encryption,
         ));
+    }
+
+    /// A domain with permissions: from now on this participant sends only to peers whose
+    /// data keys its daemon gave ([`ParticipantCore::set_pair_keys`]) and opens only their
+    /// datagrams, with those keys; a host that holds the domain key but was never matched
+    /// can neither read nor write its data. Needs [`ParticipantCore::seal_with`] first (false
+    /// otherwise: nothing changes).
+    pub fn require_pair_keys(&mut self) -> bool {
+        let Some(opener) = &mut self.opener else {
+            return false;
+        };
+        opener.require_pair_keys();
+        self.transmits.pairwise = true;
+        true
+    }
+
+    /// The data keys of this participant's pair with `peer`, whose data socket is `at`
+    /// (given by the daemon with the pair's first match). False when this participant seals
+    /// nothing, or already holds keys for [`crate::seal::MAX_SENDERS`] peers.
+    pub fn set_pair_keys(
+        &mut self,
+        peer: u64,
+        at: SocketAddrV4,
+        keys: &crate::security::DataKeys,
+    ) -> bool {
+        let (Some(opener), Some(sealer)) = (&mut self.opener, &self.transmits.sealer) else {
+            return false;
+        };
+        let sealers = &mut self.transmits.pair_sealers;
+        if !sealers.contains_key(&at) && sealers.len() >= crate::seal::MAX_SENDERS {
+            return false;
+        }
+        if !opener.set_pair_key(peer, crate::seal::DomainKey::from_bytes(keys.receive)) {
+            return false;
+        }
+        let epoch = sealer.epoch();
+        let keyring = Keyring::new(epoch, crate::seal::DomainKey::from_bytes(keys.send))
+            .with_cipher(opener.keyring().cipher());
+        let pair = Sealer::new(
+            &keyring,
+            self.config.domain,
+            self.config.participant,
+            sealer.session(),
+            sealer.mode(),
+        );
+        sealers.insert(at, pair);
+        true
     }
 
     /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.
@@ -818,6 +868,7 @@ impl ParticipantCore {
         stats.transmits = self.transmits.datagrams;
         stats.transmit_bytes = self.transmits.bytes;
         stats.unsealable = self.transmits.unsealable;
+        stats.unkeyed = self.transmits.unkeyed;
         if let Some(opener) = &self.opener {
             stats.seal = opener.stats().clone();
         }

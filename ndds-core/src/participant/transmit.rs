@@ -1,6 +1,6 @@
 //! The datagrams the core asks its driver to send, and the buffers they are built in.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddrV4;
 use std::ops::Range;
 use std::sync::Arc;
@@ -86,6 +86,12 @@ pub(crate) struct Transmits {
     pub(crate) sealer: Option<Sealer>,
     /// Datagrams not sent because they could not be sealed (a session's counter used up).
     pub(crate) unsealable: u64,
+    /// Sealers by destination, with the pair's data key (a domain with permissions).
+    pub(crate) pair_sealers: HashMap<SocketAddrV4, Sealer>,
+    /// Send only to destinations with a data key (a domain with permissions).
+    pub(crate) pairwise: bool,
+    /// Datagrams not sent because their destination has no data key.
+    pub(crate) unkeyed: u64,
 }
 
 impl Transmits {
@@ -100,6 +106,11 @@ impl Transmits {
         // The most recently freed spare large enough (a small one would have to grow). A new
         // one is rounded up to a power of two, so heads that grow a little at a time (a batch
         // a few samples longer than any before) do not each need a new buffer.
+        if self.pairwise && !self.pair_sealers.contains_key(&to) {
+            // Its daemon never gave this pair a key: the document does not allow it.
+            self.unkeyed += 1;
+            return;
+        }
         let sealed = self.sealer.is_some();
         let copied = tail
             .as_ref()
@@ -128,7 +139,11 @@ impl Transmits {
             }
             tail => tail.map(|(bytes, range)| (Arc::clone(bytes), range)),
         };
-        if let Some(sealer) = &mut self.sealer
+        let sealer = match self.pair_sealers.get_mut(&to) {
+            Some(sealer) => Some(sealer),
+            None => self.sealer.as_mut(),
+        };
+        if let Some(sealer) = sealer
             && sealer.seal(&mut buffer).is_err()
         {
             self.unsealable += 1;

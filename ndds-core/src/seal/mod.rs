@@ -122,11 +122,15 @@ pub enum OpenError {
     /// From a session older than the newest one accepted from that sender.
     #[error("stale session")]
     StaleSession,
+    /// In a domain with permissions: from a sender this receiver holds no data key for (its
+    /// daemon never matched the pair).
+    #[error("no data key for this sender (not matched by this participant's daemon)")]
+    Unkeyed,
 }
 
 impl OpenError {
     /// Every reason, for counter tables.
-    pub const ALL: [OpenError; 7] = [
+    pub const ALL: [OpenError; 8] = [
         OpenError::Truncated,
         OpenError::NotSealed,
         OpenError::ClearRefused,
@@ -134,6 +138,7 @@ impl OpenError {
         OpenError::BadTag,
         OpenError::Replayed,
         OpenError::StaleSession,
+        OpenError::Unkeyed,
     ];
 
     /// Its index in [`OpenError::ALL`].
@@ -151,6 +156,7 @@ impl OpenError {
             OpenError::BadTag => "bad_tag",
             OpenError::Replayed => "replayed",
             OpenError::StaleSession => "stale_session",
+            OpenError::Unkeyed => "unkeyed",
         }
     }
 }

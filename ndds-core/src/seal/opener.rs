@@ -48,6 +48,11 @@ struct SenderState {
 /// The receiving side of a sealed domain (see the module documentation).
 pub struct Opener {
     keyring: Keyring,
+    /// Data keys by sender, in a domain with permissions: a sender's datagrams open with its
+    /// key, never with the domain's.
+    pair_keys: HashMap<u64, super::DomainKey>,
+    /// Refuse senders without a data key (a participant of a domain with permissions).
+    require_pairs: bool,
     domain: u16,
     require_encryption: bool,
     senders: HashMap<(u64, u32), SenderState>,
@@ -72,11 +77,31 @@ impl Opener {
     pub fn new(keyring: Keyring, domain: u16, require_encryption: bool) -> Self {
         Opener {
             keyring,
+            pair_keys: HashMap::default(),
+            require_pairs: false,
             domain,
             require_encryption,
             senders: HashMap::default(),
             stats: OpenStats::default(),
         }
+    }
+
+    /// Opens `sender`'s datagrams with `key` only from now on (its data key, in a domain
+    /// with permissions); at most [`super::MAX_SENDERS`] senders have one (more are refused,
+    /// false).
+    pub fn set_pair_key(&mut self, sender: u64, key: super::DomainKey) -> bool {
+        if !self.pair_keys.contains_key(&sender) && self.pair_keys.len() >= super::MAX_SENDERS {
+            return false;
+        }
+        self.pair_keys.insert(sender, key);
+        // What was derived from the domain key for this sender no longer counts.
+        self.senders.retain(|(from, _), _| *from != sender);
+        true
+    }
+
+    /// Refuses every sender without a data key ([`Opener::set_pair_key`]).
+    pub fn require_pair_keys(&mut self) {
+        self.require_pairs = true;
     }
 
     /// Takes a new keyring (a rotation step): senders of epochs it no longer holds are
@@ -148,8 +173,10 @@ impl Opener {
         let epoch = u32::from_le_bytes([datagram[16], datagram[17], datagram[18], datagram[19]]);
         let session = u64_at(datagram, 20);
         let counter = u64_at(datagram, 28);
-        let Some(key) = self.keyring.key(epoch) else {
-            return Err(OpenError::UnknownEpoch);
+        let key = match self.pair_keys.get(&sender) {
+            Some(key) => key,
+            None if self.require_pairs => return Err(OpenError::Unkeyed),
+            None => self.keyring.key(epoch).ok_or(OpenError::UnknownEpoch)?,
         };
         let known = self.senders.get(&(sender, epoch));
         let same_session = known.is_some_and(|state| state.session == session);

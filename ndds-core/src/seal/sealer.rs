@@ -80,6 +80,21 @@ impl Sealer {
         }
     }
 
+    /// The key epoch it seals with.
+    pub fn epoch(&self) -> u32 {
+        self.epoch
+    }
+
+    /// The session it seals for.
+    pub fn session(&self) -> u64 {
+        self.session
+    }
+
+    /// Encrypted, or integrity only.
+    pub fn mode(&self) -> SealMode {
+        self.mode
+    }
+
     /// Datagrams sealed so far in this session.
     pub fn sealed(&self) -> u64 {
         self.counter

@@ -96,15 +96,20 @@ impl<'de> serde::Deserialize<'de> for PublicId {
 #[derive(Clone)]
 pub struct Identity {
     key: ed25519_dalek::SigningKey,
+    /// The public half of the agreement key (computed once: every signed datagram carries it).
+    agreement: [u8; 32],
 }
 
 impl Identity {
     /// The identity whose secret is these 32 bytes (drawn from the operating system's random
     /// source by the caller: this crate does no IO).
     pub fn from_secret(secret: [u8; 32]) -> Self {
-        Identity {
+        let mut identity = Identity {
             key: ed25519_dalek::SigningKey::from_bytes(&secret),
-        }
+            agreement: [0; 32],
+        };
+        identity.agreement = x25519_dalek::PublicKey::from(&identity.agreement_secret()).to_bytes();
+        identity
     }
 
     /// The public half.
@@ -115,6 +120,51 @@ impl Identity {
     /// Signs `message`.
     pub fn sign(&self, message: &[u8]) -> [u8; 64] {
         self.key.sign(message).to_bytes()
+    }
+
+    /// 32 secret bytes for `purpose`, derived from the identity's secret (HKDF-SHA256): the
+    /// identity's other keys, each for one use only.
+    pub fn derive(&self, purpose: &[u8]) -> [u8; 32] {
+        let hkdf = hkdf::Hkdf::<sha2::Sha256>::new(Some(b"ndds-identity-v1"), self.key.as_bytes());
+        let mut out = [0u8; 32];
+        // 32 bytes is far below HKDF-SHA256's limit: this cannot fail.
+        let _ = hkdf.expand(purpose, &mut out);
+        out
+    }
+
+    /// The public half of this identity's X25519 key agreement key (announced, signed, in
+    /// every `Signed` datagram).
+    pub fn agreement_public(&self) -> [u8; 32] {
+        self.agreement
+    }
+
+    /// The secret this identity shares with the holder of the agreement key `peer` (X25519,
+    /// then HKDF with both public keys in order, so both sides derive the same bytes);
+    /// `None` for a degenerate peer key (a low-order point).
+    pub fn shared_secret(&self, peer: &[u8; 32]) -> Option<[u8; 32]> {
+        let own = self.agreement_public();
+        let shared = self
+            .agreement_secret()
+            .diffie_hellman(&x25519_dalek::PublicKey::from(*peer));
+        if !shared.was_contributory() {
+            return None;
+        }
+        let (low, high) = if own <= *peer {
+            (own, *peer)
+        } else {
+            (*peer, own)
+        };
+        let hkdf = hkdf::Hkdf::<sha2::Sha256>::new(Some(b"ndds-pair-v1"), shared.as_bytes());
+        let mut info = [0u8; 64];
+        info[..32].copy_from_slice(&low);
+        info[32..].copy_from_slice(&high);
+        let mut out = [0u8; 32];
+        let _ = hkdf.expand(&info, &mut out);
+        Some(out)
+    }
+
+    fn agreement_secret(&self) -> x25519_dalek::StaticSecret {
+        x25519_dalek::StaticSecret::from(self.derive(b"x25519 agreement"))
     }
 
     /// The text of an identity file: the secret and, for reading by eye, the public key.

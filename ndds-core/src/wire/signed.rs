@@ -2,14 +2,16 @@
 //! domains with a permissions document.
 //!
 //! ```text
-//!  0                16                      48                                  112
-//!  +----------------+-----------------------+-----------------------------------+----------
-//!  | header (kind 7)| identity (32 bytes)   | signature (64 bytes)              | inner
-//!  +----------------+-----------------------+-----------------------------------+----------
+//!  0                16                  48                  80                           144
+//!  +----------------+-------------------+-------------------+----------------------------+------
+//!  | header (kind 7)| identity (32)     | agreement (32)    | signature (64)             | inner
+//!  +----------------+-------------------+-------------------+----------------------------+------
 //! ```
 //!
 //! `inner` is a complete discovery datagram (header and body) of the same domain and sender;
-//! the signature is the identity's Ed25519 signature of `ndds-signed-v1` followed by `inner`.
+//! `agreement` is the sender's X25519 public key (for the data keys of its participants'
+//! pairs, [`crate::security::DataKeys`]); the signature is the identity's Ed25519 signature of
+//! `ndds-signed-v1`, then `agreement`, then `inner`.
 //! Every datagram a daemon with an identity sends is signed, so a node's endpoints, leases
 //! and `Bye` are believed only from the identity it first spoke with. (Replays of a signed
 //! datagram are what the domain key's seal refuses: permissions require a sealed domain.)
@@ -19,7 +21,7 @@ use super::header::{HEADER_LEN, Header, MessageKind};
 use crate::security::{Identity, PublicId};
 
 /// Bytes a signature adds to a datagram: a header, the identity, the signature.
-pub const SIGNED_OVERHEAD: usize = HEADER_LEN + 32 + 64;
+pub const SIGNED_OVERHEAD: usize = HEADER_LEN + 32 + 32 + 64;
 
 /// A signed datagram, not yet verified.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,6 +30,8 @@ pub struct SignedView<'a> {
     pub header: Header,
     /// Who says it signed.
     pub identity: PublicId,
+    /// Its X25519 public key.
+    pub agreement: [u8; 32],
     /// The signature.
     pub signature: [u8; 64],
     /// The datagram signed.
@@ -47,7 +51,7 @@ impl SignedView<'_> {
         }
         if !self
             .identity
-            .verifies(&message(self.inner), &self.signature)
+            .verifies(&message(&self.agreement, self.inner), &self.signature)
         {
             return Err(DropReason::Unverified);
         }
@@ -61,16 +65,18 @@ pub fn parse(bytes: &[u8]) -> Result<SignedView<'_>, DropReason> {
     if header.kind != MessageKind::Signed {
         return Err(DropReason::Unexpected);
     }
-    if body.len() < 96 + HEADER_LEN {
+    if body.len() < 128 + HEADER_LEN {
         return Err(DropReason::Malformed);
     }
     let identity = PublicId::from_bytes(body[..32].try_into().expect("32 bytes"));
-    let signature: [u8; 64] = body[32..96].try_into().expect("64 bytes");
+    let agreement: [u8; 32] = body[32..64].try_into().expect("32 bytes");
+    let signature: [u8; 64] = body[64..128].try_into().expect("64 bytes");
     Ok(SignedView {
         header,
         identity,
+        agreement,
         signature,
-        inner: &body[96..],
+        inner: &body[128..],
     })
 }
 
@@ -83,15 +89,18 @@ pub fn wrap(inner: &[u8], identity: &Identity) -> Result<Vec<u8>, DropReason> {
         ..header
     }
     .emit(&mut out);
+    let agreement = identity.agreement_public();
     out.extend_from_slice(identity.public().as_bytes());
-    out.extend_from_slice(&identity.sign(&message(inner)));
+    out.extend_from_slice(&agreement);
+    out.extend_from_slice(&identity.sign(&message(&agreement, inner)));
     out.extend_from_slice(inner);
     Ok(out)
 }
 
-fn message(inner: &[u8]) -> Vec<u8> {
-    let mut message = Vec::with_capacity(14 + inner.len());
+fn message(agreement: &[u8; 32], inner: &[u8]) -> Vec<u8> {
+    let mut message = Vec::with_capacity(14 + 32 + inner.len());
     message.extend_from_slice(b"ndds-signed-v1");
+    message.extend_from_slice(agreement);
     message.extend_from_slice(inner);
     message
 }

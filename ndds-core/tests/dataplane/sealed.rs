@@ -129,3 +129,77 @@ fn a_participant_with_another_key_or_none_reads_and_writes_nothing() {
     assert!(silenced.contains(&guid(3, 10)), "{silenced:?}");
     assert!(!silenced.contains(&guid(1, 10)), "{silenced:?}");
 }
+
+/// Data keys of a domain with permissions: the pair of nodes 0 and 1 holds keys from their
+/// daemons; node 2 holds the domain key too, is even matched both ways (as if discovery had
+/// let it in), and ignores the rule (it seals with the domain key, as in a domain without
+/// permissions), but no daemon gave it keys. Nothing of the pair reaches it, nothing it sends
+/// is opened, and a datagram it seals with the domain key in node 0's name fails its tag.
+#[test]
+fn with_data_keys_a_host_with_only_the_domain_key_reads_and_writes_nothing() {
+    use crate::sim::{locator, participant_id};
+    use ndds_core::security::DataKeys;
+    let mut net = SimNet::new(9, 3);
+    for node in 0..3 {
+        net.nodes[node]
+            .core
+            .seal_with(setup(7, 1, SealMode::Encrypt));
+    }
+    for node in 0..2 {
+        assert!(net.nodes[node].core.require_pair_keys());
+    }
+    let shared = [42u8; 32];
+    for (a, b) in [(0, 1), (1, 0)] {
+        let keys = DataKeys::derive(&shared, participant_id(a), participant_id(b));
+        assert!(
+            net.nodes[a]
+                .core
+                .set_pair_keys(participant_id(b), locator(b), &keys)
+        );
+    }
+    net.add_producer(0, 1, reliable_producer(16));
+    net.add_producer(2, 2, reliable_producer(16));
+    for node in 1..3 {
+        net.add_consumer(node, 10, reliable_consumer(None), App::Eager);
+        net.connect((0, 1), (node, 10));
+    }
+    net.connect((2, 2), (1, 10));
+    let total = 100;
+    net.add_writer(WriterApp::new(0, 1, total, MS, 0));
+    net.add_writer(WriterApp::new(2, 2, 50, MS, 0));
+    net.run_for(Duration::from_secs(3));
+    // Node 2 forges a datagram in node 0's name, sealed with the domain key.
+    let mut forged = Vec::new();
+    ndds_core::wire::Header {
+        kind: ndds_core::wire::MessageKind::Data,
+        domain: net.nodes[0].core.config().domain,
+        sender: participant_id(0),
+    }
+    .emit(&mut forged);
+    forged.extend_from_slice(&[0u8; 24]);
+    ndds_core::seal::Sealer::new(
+        &setup(7, 9, SealMode::Encrypt).keyring,
+        net.nodes[0].core.config().domain,
+        participant_id(0),
+        9,
+        SealMode::Encrypt,
+    )
+    .seal(&mut forged)
+    .unwrap();
+    net.inject(locator(0), 1, forged);
+    net.run_for(Duration::from_millis(100));
+
+    let good = net.consumer(1, 10);
+    assert_eq!(exactly(&good.seqs_from(guid(0, 1)), 1, total), Ok(()));
+    assert!(
+        good.seqs_from(guid(2, 2)).is_empty(),
+        "node 2 wrote to node 1"
+    );
+    assert!(net.consumer(2, 10).got.is_empty(), "node 2 read node 0");
+    // Node 0 sent node 2 nothing; node 1 opened nothing of node 2's, and not the forgery.
+    assert!(stats(&net, 0).unkeyed > 0, "{:?}", stats(&net, 0));
+    let at_one = stats(&net, 1).seal;
+    assert!(at_one.dropped(OpenError::Unkeyed) > 0, "{at_one:?}");
+    assert_eq!(at_one.dropped(OpenError::BadTag), 1, "{at_one:?}");
+    assert!(at_one.opened > 0);
+}
