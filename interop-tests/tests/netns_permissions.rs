@@ -9,7 +9,9 @@
 //!
 //! Neither can read or write `arm/*`: 0 samples either way, while `status/*` flows; each side
 //! says why (the refused declaration's error, the consumers' `NotPermitted` notifications on
-//! both sides, the daemons' logs), and `ndds nodes` shows who is authenticated as whom.
+//! both sides, the daemons' logs), and `ndds nodes` shows who is authenticated as whom. The
+//! domain key does not help the third host either: 1000 datagrams it seals with it in arm's
+//! name fail their tag at the viewer, which opens arm's data with the pair's data key.
 //! Needs root, `ip` and `nft`.
 
 mod support;
@@ -226,6 +228,78 @@ fn a_host_with_the_key_but_no_permission_for_arm_can_neither_read_nor_write_it()
         "why the viewer may not write: {}",
         write.stderr
     );
+
+    // The rogue holds the domain key: it seals 1000 datagrams in the name of arm's
+    // participant and sends them to the viewer's consumer of status/arm. They do not open: the
+    // viewer opens arm's data with the pair's data key, which only their daemons can derive.
+    let arm_participant = cluster
+        .graph(ARM)
+        .endpoints
+        .iter()
+        .find(|e| e.info.topic == "status/arm" && e.node == cluster.graph(ARM).local.node)
+        .map(|e| e.info.guid.participant)
+        .expect("arm's status producer");
+    let counted_reader = node(
+        &cluster,
+        VIEWER,
+        &[
+            "consume",
+            "--topic",
+            "status/arm",
+            "--count",
+            "300",
+            "--timeout",
+            "30",
+        ],
+    );
+    let viewer_socket = cluster
+        .graph(VIEWER)
+        .endpoints
+        .iter()
+        .find(|e| e.info.topic == "status/arm" && e.info.pid == counted_reader.pid())
+        .map(|e| std::net::SocketAddrV4::from(e.info.locator))
+        .expect("the viewer's counted consumer");
+    let keyring = ndds_daemon::keys::load(cluster.domain().key.as_ref().unwrap()).expect("key");
+    let domain_id = cluster.domain().domain;
+    let forged = 1000;
+    let rogue_host = cluster.host(ROGUE);
+    let from = rogue_host.ip();
+    rogue_host.enter(|| {
+        let socket = std::net::UdpSocket::bind((from, 0)).expect("rogue socket");
+        let mut sealer = ndds_core::seal::Sealer::new(
+            &keyring,
+            domain_id,
+            arm_participant,
+            u64::MAX / 2,
+            ndds_core::seal::SealMode::Encrypt,
+        );
+        for i in 0..forged {
+            let mut datagram = Vec::new();
+            ndds_core::wire::Header {
+                kind: ndds_core::wire::MessageKind::Data,
+                domain: domain_id,
+                sender: arm_participant,
+            }
+            .emit(&mut datagram);
+            datagram.extend_from_slice(&[i as u8; 64]);
+            sealer.seal(&mut datagram).expect("sealed");
+            socket.send_to(&datagram, viewer_socket).expect("sent");
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    });
+    let done = counted_reader
+        .event("done", Duration::from_secs(30))
+        .expect("the counted consumer finishes");
+    let bad_tag = done["stats"]["seal_dropped"]["bad_tag"]
+        .as_u64()
+        .unwrap_or(0);
+    eprintln!(
+        "permissions: {forged} datagrams sealed with the domain key in arm's name: the viewer \
+         received {} samples, counted {bad_tag} bad tags",
+        done["received"]
+    );
+    assert_eq!(done["received"], 300);
+    assert!(bad_tag >= forged, "{done}");
 
     // The rogue declares what its own document allows; arm's daemon refuses it.
     let rogue_reader = consume(ROGUE, "arm/pose");

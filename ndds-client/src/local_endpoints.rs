@@ -120,6 +120,7 @@ impl LocalEndpoints {
             DaemonMessage::Matched { local, .. }
             | DaemonMessage::Incompatible { local, .. }
             | DaemonMessage::NotPermitted { local, .. }
+            | DaemonMessage::PairKeys { local, .. }
             | DaemonMessage::Unmatched { local, .. } => *local,
             other => {
                 tracing::debug!(?other, "unexpected frame from the daemon");
@@ -164,6 +165,23 @@ impl LocalEndpoints {
                 }
                 peers.incompatible(remote);
                 changed.entry(entity).or_insert_with(|| endpoint.clone());
+            }
+            DaemonMessage::PairKeys {
+                participant,
+                locator,
+                keys,
+                ..
+            } => {
+                let plane = match &endpoint {
+                    Endpoint::Producer(state) => &state.plane,
+                    Endpoint::Consumer(state) => &state.plane,
+                };
+                if !plane.set_pair_keys(participant, SocketAddrV4::from(locator), &keys) {
+                    tracing::warn!(
+                        peer = format_args!("{participant:016x}"),
+                        "data keys not installed (no domain key here, or too many peers)"
+                    );
+                }
             }
             DaemonMessage::NotPermitted { remote, reason, .. } => {
                 if let Endpoint::Consumer(state) = &endpoint {

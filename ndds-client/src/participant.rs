@@ -428,6 +428,13 @@ impl Participant {
             }
             Err(source) => return Err(ConnectError::DataSocket { interface, source }),
         };
+        if welcome.pairwise && !data.require_pair_keys() {
+            tracing::warn!(
+                "the domain has a permissions document and this program no domain key: its \
+                 samples are not sealed, so no peer opens them; give it the domain's key file \
+                 (NDDS_KEY_FILE)"
+            );
+        }
         let reader = stream.try_clone().map_err(ConnectError::Thread)?;
         let session = Arc::new(Session::new(
             settings.socket.clone(),

@@ -244,13 +244,18 @@ impl Driver {
 
     fn route(&mut self, event: Event) {
         let (local, message) = match event {
-            Event::Matched { local, remote } => (
-                local,
-                DaemonMessage::Matched {
-                    local: local.entity,
-                    remote,
-                },
-            ),
+            Event::Matched { local, remote } => {
+                if let Some(keys) = self.pair_keys(local, &remote) {
+                    self.send_to_owner(local, keys);
+                }
+                (
+                    local,
+                    DaemonMessage::Matched {
+                        local: local.entity,
+                        remote,
+                    },
+                )
+            }
             Event::Incompatible { local, remote } => {
                 tracing::warn!(
                     topic = remote.topic,
@@ -304,9 +309,25 @@ impl Driver {
                 return;
             }
         };
+        self.send_to_owner(local, message);
+    }
+
+    /// Sends `message` to the client that owns `local`.
+    fn send_to_owner(&mut self, local: Guid, message: DaemonMessage) {
         if let Some(client) = self.by_participant.get(&local.participant).copied() {
             self.send(client, message);
         }
+    }
+
+    /// The data keys of `local`'s pair with `remote`, in a domain with permissions.
+    fn pair_keys(&self, local: Guid, remote: &EndpointInfo) -> Option<DaemonMessage> {
+        let keys = self.engine.data_keys(&local, &remote.guid)?;
+        Some(DaemonMessage::PairKeys {
+            local: local.entity,
+            participant: remote.guid.participant,
+            locator: remote.locator,
+            keys,
+        })
     }
 
     fn send(&mut self, client: ClientId, message: DaemonMessage) {
@@ -329,6 +350,8 @@ impl Driver {
         };
         // Behind what already waits, to keep the order.
         match message {
+            // The pair's `Matched` waits among the pairs, and its keys are sent again with it.
+            DaemonMessage::PairKeys { .. } => {}
             DaemonMessage::Matched { local, remote }
             | DaemonMessage::Incompatible { local, remote }
             | DaemonMessage::NotPermitted { local, remote, .. } => {
@@ -400,7 +423,27 @@ impl Driver {
                     participant,
                     entity,
                 };
-                pair_now(&self.engine, local, remote)
+                let now = pair_now(&self.engine, local, remote);
+                match &now {
+                    DaemonMessage::Matched { remote, .. } => {
+                        let keys = self.engine.data_keys(&local, &remote.guid).map(|keys| {
+                            DaemonMessage::PairKeys {
+                                local: local.entity,
+                                participant: remote.guid.participant,
+                                locator: remote.locator,
+                                keys,
+                            }
+                        });
+                        match keys {
+                            Some(keys) => {
+                                entry.backlog.answers.push_front(now);
+                                keys
+                            }
+                            None => now,
+                        }
+                    }
+                    _ => now,
+                }
             } else {
                 entry.backlog.stalled_since = None;
                 return;
@@ -481,6 +524,7 @@ impl Driver {
             interface: config.unicast.addr,
             pid: config.pid,
             version: config.version.clone(),
+            pairwise: self.engine.identity().is_some(),
         }
     }
 

@@ -117,6 +117,9 @@ pub struct ParticipantStats {
     pub seal_dropped: Vec<(&'static str, u64)>,
     /// Datagrams not sent because they could not be sealed.
     pub unsealable: u64,
+    /// Datagrams not sent because their destination has no data key (a domain with
+    /// permissions: the daemon never matched the pair).
+    pub unkeyed: u64,
 }
 
 impl ParticipantStats {
@@ -472,6 +475,7 @@ impl DataPlane {
                 .map(|reason| (reason.name(), stats.seal.dropped(*reason)))
                 .collect(),
             unsealable: stats.unsealable,
+            unkeyed: stats.unkeyed,
         }
     }
 
@@ -514,6 +518,21 @@ impl DataPlane {
 
     pub(crate) fn producer_lost(&self, entity: u32, writer: Guid) {
         self.command(|core, now| core.producer_lost(now, entity, writer));
+    }
+
+    /// The domain has permissions: data goes to, and comes from, peers with data keys only.
+    pub(crate) fn require_pair_keys(&self) -> bool {
+        self.command(|core, _| core.require_pair_keys())
+    }
+
+    /// The data keys of this participant's pair with `peer` (its data socket `at`).
+    pub(crate) fn set_pair_keys(
+        &self,
+        peer: u64,
+        at: SocketAddrV4,
+        keys: &ndds_core::security::DataKeys,
+    ) -> bool {
+        self.command(|core, _| core.set_pair_keys(peer, at, keys))
     }
 
     /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.

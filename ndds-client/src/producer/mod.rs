@@ -26,7 +26,7 @@ pub(crate) struct ProducerState {
     pub(crate) entity: u32,
     qos: ProducerQos,
     pub(crate) peers: Peers,
-    plane: Arc<DataPlane>,
+    pub(crate) plane: Arc<DataPlane>,
     /// Buffers samples are encoded into before the data plane takes them (and shares them
     /// with its history and the datagrams that carry them). Held by a write from encoding
     /// until its datagrams are sent, so two threads writing with this producer never put its

@@ -3,7 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::graph::Graph;
-use crate::wire::{EndpointInfo, Guid};
+use crate::security::DataKeys;
+use crate::wire::{EndpointInfo, Guid, Locator};
 
 /// The daemon's answer to a valid `Hello`.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -22,6 +23,10 @@ pub struct Welcome {
     pub pid: u32,
     /// Daemon software version.
     pub version: String,
+    /// The domain has a permissions document: the client must seal its data for, and open it
+    /// from, its matched peers with the data keys the daemon gives ([`DaemonMessage::PairKeys`])
+    /// and nobody else.
+    pub pairwise: bool,
 }
 
 /// A frame from daemon to client.
@@ -80,5 +85,17 @@ pub enum DaemonMessage {
         remote: EndpointInfo,
         /// Why, in words: the subject and the rule.
         reason: String,
+    },
+    /// The data keys of the pair of this client's participant and `participant` (at
+    /// `locator`), sent before the pair's first `Matched` in a domain with permissions.
+    PairKeys {
+        /// The client's entity the match is for.
+        local: u32,
+        /// The other participant.
+        participant: u64,
+        /// Its data socket.
+        locator: Locator,
+        /// The keys.
+        keys: DataKeys,
     },
 }

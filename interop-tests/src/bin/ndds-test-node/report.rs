@@ -140,5 +140,12 @@ pub fn stats(stats: &ParticipantStats) -> Value {
         "unvalidated_feedback": stats.unvalidated_feedback,
         "pieces_withheld": stats.pieces_withheld,
         "dropped": dropped,
+        "seal_opened": stats.seal_opened,
+        "seal_dropped": stats
+            .seal_dropped
+            .iter()
+            .map(|(name, count)| ((*name).to_owned(), json!(count)))
+            .collect::<serde_json::Map<String, Value>>(),
+        "unkeyed": stats.unkeyed,
     })
 }
