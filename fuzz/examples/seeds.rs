@@ -363,7 +363,23 @@ fn ipc_seeds(corpus: &mut Corpus) {
                 interface: [127, 0, 0, 1],
                 pid: 7,
                 version: "0.1.0".into(),
+                pairwise: true,
             }),
+        ),
+        (
+            "pair_keys",
+            DaemonMessage::PairKeys {
+                local: 1,
+                participant: 0xB0,
+                locator: ndds_core::wire::Locator {
+                    addr: [127, 0, 0, 1],
+                    port: 7400,
+                },
+                keys: ndds_core::security::DataKeys {
+                    send: [1; 32],
+                    receive: [2; 32],
+                },
+            },
         ),
         (
             "refused",
