@@ -363,12 +363,61 @@ fn a_host_with_the_key_but_no_permission_for_arm_can_neither_read_nor_write_it()
     let rogue = by_subject(None);
     assert_eq!(rogue["authenticated"], true);
     assert!(rogue["refused_endpoints"].as_u64().unwrap() >= 2, "{rogue}");
-    let text = cluster
+    let shown = cluster
         .ndds(ARM, &["--key-file", &key, "nodes"], WAIT)
         .stdout;
-    assert!(text.contains("subject `viewer`, authenticated"), "{text}");
+    assert!(shown.contains("subject `viewer`, authenticated"), "{shown}");
     assert!(
-        text.contains("no subject of the document, authenticated, 2 endpoints refused"),
-        "{text}"
+        shown.contains("no subject of the document, authenticated, 2 endpoints refused"),
+        "{shown}"
+    );
+
+    // The administrator admits the third host as `logger` (it may read arm/*, write nothing)
+    // and signs a new version; the daemons put it in force without a restart.
+    let admin_dir = official.parent().expect("the admin directory").to_owned();
+    let rogue_key = identity(&ids[ROGUE]);
+    ndds(&[
+        "security",
+        "add",
+        &text(&official),
+        "logger",
+        &rogue_key,
+        "--subscribe",
+        "arm/*",
+    ]);
+    ndds(&[
+        "security",
+        "sign",
+        &text(&official),
+        "--admin",
+        &text(&admin_dir.join("admin.secret")),
+    ]);
+    let deadline = Instant::now() + WAIT;
+    let logger = loop {
+        let nodes = cluster.ndds(ARM, &["--key-file", &key, "nodes", "--json"], WAIT);
+        let listing: serde_json::Value = serde_json::from_str(&nodes.stdout).expect("nodes --json");
+        let found = listing["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["subject"] == "logger")
+            .cloned();
+        if let Some(found) = found {
+            break found;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the new document never took effect: {listing}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(
+        logger["refused_endpoints"], 1,
+        "only its arm/cmd producer: {logger}"
+    );
+    let arm_log = cluster.daemon(ARM).log_text();
+    assert!(
+        arm_log.contains("permissions document changed: the new version is in force"),
+        "{arm_log}"
     );
 }

@@ -244,6 +244,11 @@ impl Daemon {
             (Some(path), Some(keyring)) => Some(KeyWatch::new(path, keyring.clone())),
             _ => None,
         };
+        #[cfg(feature = "cli")]
+        let mut permissions_watch = config
+            .security
+            .as_ref()
+            .map(|security| crate::security::PermissionsWatch::new(security, config.domain));
         let mut key_check = tokio::time::interval(keys::KEY_CHECK);
         key_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         driver.flush().await;
@@ -258,6 +263,13 @@ impl Daemon {
                 _ = key_check.tick(), if key_watch.is_some() => {
                     if let Some(keyring) = key_watch.as_mut().and_then(KeyWatch::poll) {
                         driver.set_keyring(keyring);
+                    }
+                    #[cfg(feature = "cli")]
+                    if let Some(permissions) = permissions_watch
+                        .as_mut()
+                        .and_then(crate::security::PermissionsWatch::poll)
+                    {
+                        driver.set_permissions(permissions);
                     }
                 }
                 input = queue.recv() => match input {

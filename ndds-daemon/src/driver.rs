@@ -205,6 +205,15 @@ impl Driver {
         self.engine.set_keyring(keyring);
     }
 
+    /// A new version of the permissions document: every remote endpoint is judged again.
+    pub fn set_permissions(
+        &mut self,
+        permissions: std::sync::Arc<ndds_core::security::Permissions>,
+    ) {
+        let until = crate::security::valid_until(&permissions);
+        self.engine.set_permissions(permissions, until);
+    }
+
     /// Says `Bye` and stops discovery.
     pub fn close(&mut self) {
         self.engine.close();

@@ -184,7 +184,8 @@ impl KeyWatch {
     }
 }
 
-fn stamp(path: &Path) -> Option<(std::time::SystemTime, u64, u64)> {
+/// What tells a file's versions apart cheaply: its modification time, size and inode.
+pub(crate) fn stamp(path: &Path) -> Option<(std::time::SystemTime, u64, u64)> {
     use std::os::unix::fs::MetadataExt as _;
     let meta = std::fs::metadata(path).ok()?;
     Some((meta.modified().ok()?, meta.len(), meta.ino()))

@@ -276,6 +276,62 @@ pub fn load_permissions(
     Ok(permissions)
 }
 
+/// Watches the permissions document so that a new version (signed, copied to the host) takes
+/// effect without a restart, as key rotation steps do ([`crate::keys::KeyWatch`]). Checked
+/// every [`crate::keys::KEY_CHECK`] by the daemon's loop.
+#[cfg(feature = "cli")]
+#[derive(Debug)]
+pub struct PermissionsWatch {
+    path: PathBuf,
+    admin: PublicId,
+    domain: u16,
+    stamp: Option<(SystemTime, u64, u64)>,
+    current: Arc<Permissions>,
+}
+
+#[cfg(feature = "cli")]
+impl PermissionsWatch {
+    /// Watches the document `security` was read from. The first check reads it again, so a
+    /// version written between loading and watching is not missed.
+    pub fn new(security: &Security, domain: u16) -> Self {
+        PermissionsWatch {
+            path: security.permissions_file.clone(),
+            admin: security.admin,
+            domain,
+            stamp: None,
+            current: security.permissions.clone(),
+        }
+    }
+
+    /// The new document to put in force, when the file changed and holds another valid,
+    /// signed one. A file that cannot be used is logged (once per change), and the document
+    /// in force stays.
+    pub fn poll(&mut self) -> Option<Arc<Permissions>> {
+        let now = crate::keys::stamp(&self.path);
+        if now == self.stamp {
+            return None;
+        }
+        self.stamp = now;
+        match load_permissions(&self.path, &self.admin, self.domain) {
+            Ok(permissions) if permissions == *self.current => None,
+            Ok(permissions) => {
+                tracing::info!(
+                    path = %self.path.display(),
+                    serial = permissions.serial,
+                    subjects = permissions.subjects.len(),
+                    "permissions document changed: the new version is in force"
+                );
+                self.current = Arc::new(permissions);
+                Some(self.current.clone())
+            }
+            Err(err) => {
+                tracing::error!(%err, "permissions document changed but cannot be used; the version in force stays");
+                None
+            }
+        }
+    }
+}
+
 /// The permissions document's TOML form.
 #[cfg(feature = "cli")]
 pub mod document {
