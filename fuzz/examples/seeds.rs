@@ -513,8 +513,12 @@ fn discovery_engine_seeds(corpus: &mut Corpus) {
         ("permissions", flag::KEYED | flag::GUARDED),
     ] {
         let now = Instant::now();
-        let mut remote =
-            Engine::new(discovery::config(1, flags & flag::UNICAST != 0), now).expect("valid");
+        let remote_config = if flags & flag::GUARDED != 0 {
+            discovery::guarded_config(1, flags & flag::UNICAST != 0)
+        } else {
+            discovery::config(1, flags & flag::UNICAST != 0)
+        };
+        let mut remote = Engine::new(remote_config, now).expect("valid");
         if flags & flag::KEYED != 0 {
             remote.seal_with(discovery::seal_setup(flags, 7));
         }

@@ -72,6 +72,26 @@ pub mod flag {
     pub const GUARDED: u8 = 16;
 }
 
+/// The node id of host `index`: fixed, or (`guarded`) one of its identity's, as a domain with
+/// permissions requires.
+pub fn node_id(index: u8, guarded: bool) -> u64 {
+    if guarded {
+        return ndds_core::security::node_id_for(&identity(index).public(), u64::from(index));
+    }
+    match index {
+        0 => 0x1000,
+        i => REMOTE_NODES[usize::from(i - 1) % REMOTE_NODES.len()],
+    }
+}
+
+/// The configuration of host `index` in a domain with permissions (its node id its
+/// identity's).
+pub fn guarded_config(index: u8, unicast_only: bool) -> DiscoveryConfig {
+    let mut config = config(index, unicast_only);
+    config.node_id = Some(node_id(index, true));
+    config
+}
+
 /// The identity of host `index` (0 is the engine under test).
 pub fn identity(index: u8) -> Identity {
     Identity::from_secret([index.wrapping_add(0x10); 32])
@@ -138,11 +158,7 @@ pub struct Pose {
 pub fn config(index: u8, unicast_only: bool) -> DiscoveryConfig {
     let mut config = DiscoveryConfig::new(DOMAIN, fixture::locator(index));
     config.seed = u64::from(index) + 1;
-    config.node_id = Some(if index == 0 {
-        0x1000
-    } else {
-        REMOTE_NODES[usize::from(index - 1) % REMOTE_NODES.len()]
-    });
+    config.node_id = Some(node_id(index, false));
     config.hostname = format!("host{index}");
     if unicast_only {
         config.multicast = false;
@@ -214,7 +230,11 @@ pub fn run(data: &[u8]) {
     let mut input = Input::new(data);
     let flags = input.u8();
     let now = Instant::now();
-    let config = config(0, flags & flag::UNICAST != 0);
+    let config = if flags & flag::GUARDED != 0 {
+        guarded_config(0, flags & flag::UNICAST != 0)
+    } else {
+        config(0, flags & flag::UNICAST != 0)
+    };
     let Ok(mut engine) = Engine::new(config, now) else {
         panic!("the fixture configuration is valid");
     };
@@ -313,9 +333,9 @@ impl Harness {
 
     /// The node id a selector names: a remote host, or the engine itself.
     fn sender(&self, sel: u8) -> u64 {
-        match usize::from(sel % 4) {
+        match sel % 4 {
             3 => self.engine.node_id(),
-            i => REMOTE_NODES[i],
+            i => node_id(i + 1, self.flags & flag::GUARDED != 0),
         }
     }
 

@@ -76,11 +76,21 @@ fn guard(n: u8, permissions: Arc<Permissions>) -> impl FnOnce(&mut Engine) {
 /// lets it do everything.
 fn three_nodes() -> SimNet {
     let mut net = SimNet::new(11);
-    net.add_node_with(config(0, 500, PERIOD, LEASE), guard(0, official()));
-    net.add_node_with(config(1, 501, PERIOD, LEASE), guard(1, official()));
+    net.add_node_with(signing(0, 500), guard(0, official()));
+    net.add_node_with(signing(1, 501), guard(1, official()));
     let own = document(99, vec![subject("rogue", 2, &["*"], &["*"])]);
-    net.add_node_with(config(2, 502, PERIOD, LEASE), guard(2, own));
+    net.add_node_with(signing(2, 502), guard(2, own));
     net
+}
+
+/// The configuration of node `n`, whose node id is one of its identity's.
+fn signing(n: u8, seed: u64) -> ndds_core::discovery::DiscoveryConfig {
+    let mut config = config(usize::from(n), seed, PERIOD, LEASE);
+    config.node_id = Some(ndds_core::security::node_id_for(
+        &identity(n).public(),
+        seed,
+    ));
+    config
 }
 
 fn refused(
@@ -212,7 +222,7 @@ fn a_node_is_bound_to_the_identity_it_signs_with() {
 #[test]
 fn an_unsigned_node_is_seen_and_matches_nothing() {
     let mut net = SimNet::new(12);
-    net.add_node_with(config(0, 600, PERIOD, LEASE), guard(0, official()));
+    net.add_node_with(signing(0, 600), guard(0, official()));
     net.add_node(config(1, 601, PERIOD, LEASE));
     let arm_pose = producer::<Pose>(guid(0, 1), "arm/pose");
     let open_reader = consumer::<Pose>(guid(1, 1), "arm/pose");
@@ -299,5 +309,51 @@ fn a_new_document_and_the_end_of_one_take_effect_at_once() {
             refused(arm_pose.guid, rogue_reader.guid, "document 1")
         )
         .is_some()
+    );
+}
+
+#[test]
+fn nobody_takes_a_daemons_node_id_before_it_is_heard() {
+    // Index 0 runs with identity 1 (`viewer`); the daemon at index 1 (identity 0, `arm`)
+    // starts later.
+    let with_identity = |index: usize, n: u8, seed: u64| {
+        let mut config = config(index, seed, PERIOD, LEASE);
+        config.node_id = Some(ndds_core::security::node_id_for(
+            &identity(n).public(),
+            seed,
+        ));
+        config
+    };
+    let mut net = SimNet::new(13);
+    net.add_node_with(with_identity(0, 1, 701), guard(1, official()));
+    net.run_for(Duration::from_millis(100));
+    // Arm's future id, claimed first by identity 2 (it holds the domain key; it even signs
+    // correctly), from arm's address.
+    let squatted = ndds_core::security::node_id_for(&identity(0).public(), 700);
+    let mut node = net.engine(0).node_info();
+    node.unicast = simnet::locator(1);
+    let mut solicit = Vec::new();
+    wire::encode(
+        simnet::DOMAIN,
+        squatted,
+        &Message::Solicit(wire::Solicit { node }),
+        &mut solicit,
+    )
+    .unwrap();
+    let signed = signed::wrap(&solicit, &identity(2)).unwrap();
+    net.inject(0, simnet::locator(1), &signed);
+    assert!(!net.knows_node(0, squatted), "the squatter took the id");
+    assert_eq!(net.engine(0).stats().dropped(DropReason::Unverified), 1);
+    // Arm then starts with that id, and is heard and matched.
+    let arm_pose = producer::<Pose>(guid(1, 1), "status/arm");
+    let reader = consumer::<Pose>(guid(0, 1), "status/arm");
+    net.add_node_with(with_identity(1, 0, 700), guard(0, official()));
+    net.add_local(1, arm_pose.clone());
+    net.add_local(0, reader.clone());
+    net.run_for(Duration::from_secs(2));
+    assert!(net.knows_node(0, squatted));
+    assert_eq!(
+        count(&net, 0, Duration::ZERO, matched(reader.guid, arm_pose.guid)),
+        1
     );
 }

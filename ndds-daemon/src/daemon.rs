@@ -131,8 +131,14 @@ impl Daemon {
             source,
         })?;
         discovery.probe_secret = Some(secret);
-        // Never from the seed: two hosts given one seed must still have distinct ids.
-        discovery.node_id = Some(fastrand::u64(1..));
+        // Never from the seed: two hosts given one seed must still have distinct ids. With
+        // permissions, its high bits are the identity's (security::node_id_for).
+        discovery.node_id = Some(match &config.security {
+            Some(security) => {
+                ndds_core::security::node_id_for(&security.identity.public(), fastrand::u64(..))
+            }
+            None => fastrand::u64(1..),
+        });
         discovery.hostname = gethostname::gethostname().to_string_lossy().into_owned();
         discovery.pid = std::process::id();
         discovery.unicast = unicast;

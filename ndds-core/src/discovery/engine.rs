@@ -285,6 +285,13 @@ impl Engine {
     /// allows match (see [`crate::security`]). Called right after [`Engine::new`], before any
     /// traffic; [`Engine::set_permissions`] replaces the document later.
     pub fn guard_with(&mut self, guard: Guard) {
+        if !crate::security::owns_node_id(&guard.identity.public(), self.node_id) {
+            tracing::error!(
+                node = format_args!("{:016x}", self.node_id),
+                "this node id is not one of this identity's (security::node_id_for): other \
+                 daemons will refuse everything this one says"
+            );
+        }
         self.guard = Some(guard);
         self.permissions_expired = false;
     }
@@ -502,6 +509,10 @@ impl Engine {
             // Only an engine that enforces permissions checks signatures (and believes them).
             if self.guard.is_some() {
                 view.verify()?;
+                // A node id is its identity's: nobody takes another daemon's id first.
+                if !crate::security::owns_node_id(&view.identity, outer.sender) {
+                    return Err(DropReason::Unverified);
+                }
                 (view.inner, Some((view.identity, view.agreement)))
             } else {
                 (view.inner, None)

@@ -82,3 +82,31 @@ fn direction(shared: &[u8; 32], from: u64, to: u64) -> [u8; 32] {
     let _ = hkdf.expand(&info, &mut out);
     out
 }
+
+/// Bits of a node id that, in a domain with permissions, come from the daemon's identity (the
+/// other 24 are drawn at each start): a datagram signed by one identity cannot name a node id
+/// of another, so nobody can take a daemon's node id before it is heard (finding an identity
+/// whose id bits match would take about 2^40 key generations).
+pub const NODE_ID_IDENTITY_BITS: u32 = 40;
+
+/// The node id of a daemon with `identity`, its start's 24 random bits taken from `random`.
+pub fn node_id_for(identity: &PublicId, random: u64) -> u64 {
+    let low = random & ((1 << (64 - NODE_ID_IDENTITY_BITS)) - 1);
+    (identity_bits(identity) << (64 - NODE_ID_IDENTITY_BITS)) | low.max(1)
+}
+
+/// Whether `node` is a node id of `identity` ([`node_id_for`]).
+pub fn owns_node_id(identity: &PublicId, node: u64) -> bool {
+    node >> (64 - NODE_ID_IDENTITY_BITS) == identity_bits(identity)
+}
+
+fn identity_bits(identity: &PublicId) -> u64 {
+    use sha2::Digest as _;
+    let digest = sha2::Sha256::new()
+        .chain_update(b"ndds-node-id-v1")
+        .chain_update(identity.as_bytes())
+        .finalize();
+    let mut bytes = [0u8; 8];
+    bytes[3..].copy_from_slice(&digest[..5]);
+    u64::from_be_bytes(bytes)
+}
