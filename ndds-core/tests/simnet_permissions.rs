@@ -357,3 +357,58 @@ fn nobody_takes_a_daemons_node_id_before_it_is_heard() {
         1
     );
 }
+
+#[test]
+fn an_endpoint_announced_again_by_another_node_is_judged_as_that_nodes() {
+    let mut net = three_nodes();
+    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
+    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
+    net.add_local(0, arm_status.clone());
+    net.add_local(1, reader.clone());
+    net.run_for(Duration::from_secs(2));
+    assert_eq!(
+        count(
+            &net,
+            1,
+            Duration::ZERO,
+            matched(reader.guid, arm_status.guid)
+        ),
+        1
+    );
+    // Identity 2 (no subject of the official document) announces arm's endpoint, unchanged,
+    // as its own node, from arm's address (a forged source address).
+    let rogue_node = ndds_core::security::node_id_for(&identity(2).public(), 9);
+    let mut node = net.engine(0).node_info();
+    node.unicast = simnet::locator(0);
+    let mut announce = Vec::new();
+    wire::encode(
+        simnet::DOMAIN,
+        rogue_node,
+        &Message::Announce(wire::Announce {
+            node,
+            endpoints: vec![arm_status.clone()],
+            withdrawn: Vec::new(),
+        }),
+        &mut announce,
+    )
+    .unwrap();
+    let signed = signed::wrap(&announce, &identity(2)).unwrap();
+    let since = net.elapsed();
+    net.inject(1, simnet::locator(0), &signed);
+    // Node 1 took the endpoint as the rogue's, and judged it so: no longer matched.
+    assert!(first(&net, 1, since, unmatched(reader.guid, arm_status.guid)).is_some());
+    assert!(
+        first(
+            &net,
+            1,
+            since,
+            refused(reader.guid, arm_status.guid, "is not a subject")
+        )
+        .is_some()
+    );
+    assert!(
+        net.engine(1)
+            .data_keys(&reader.guid, &arm_status.guid)
+            .is_none()
+    );
+}

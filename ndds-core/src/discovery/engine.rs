@@ -809,6 +809,11 @@ impl Engine {
             self.recharge(node);
             if let Some(Origin::Remote(previous)) = owner.filter(|o| *o != Origin::Remote(node)) {
                 self.recharge(previous);
+                // A new owner is judged as itself: the endpoint's pairs get its keys, so it
+                // must be allowed them.
+                let refused = self.judge(node, &info);
+                self.table
+                    .set_refused(&info.guid, refused, &mut self.events);
             }
             return;
         }
