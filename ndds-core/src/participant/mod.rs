@@ -188,6 +188,9 @@ pub struct ParticipantCore {
     withdrawn: AdmissionStats,
     /// Opens what arrives, in a domain with a key.
     opener: Option<Opener>,
+    /// The send key of each destination's pair sealer, so that the same keys given again keep
+    /// the sealer (and its counter) instead of starting a new one at counter 0.
+    pair_sends: std::collections::HashMap<SocketAddrV4, [u8; 32]>,
     /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
     warned: (bool, bool),
 }
@@ -209,6 +212,7 @@ impl ParticipantCore {
             withdrawn: AdmissionStats::default(),
             opener: None,
             warned: (false, false),
+            pair_sends: std::collections::HashMap::new(),
         }
     }
 
@@ -260,6 +264,11 @@ impl ParticipantCore {
             return false;
         };
         let sealers = &mut self.transmits.pair_sealers;
+        if self.pair_sends.get(&at) == Some(&keys.send) && sealers.contains_key(&at) {
+            // The same keys again (another match of the same pair): the sealer keeps its
+            // counter, so no (key, nonce) is ever used twice.
+            return opener.set_pair_key(peer, crate::seal::DomainKey::from_bytes(keys.receive));
+        }
         if !sealers.contains_key(&at) && sealers.len() >= crate::seal::MAX_SENDERS {
             return false;
         }
@@ -277,6 +286,7 @@ impl ParticipantCore {
             sealer.mode(),
         );
         sealers.insert(at, pair);
+        self.pair_sends.insert(at, keys.send);
         true
     }
 

@@ -90,6 +90,10 @@ impl Opener {
     /// with permissions); at most [`super::MAX_SENDERS`] senders have one (more are refused,
     /// false).
     pub fn set_pair_key(&mut self, sender: u64, key: super::DomainKey) -> bool {
+        if self.pair_keys.get(&sender) == Some(&key) {
+            // The same key again (another match of the same pair): its replay state stays.
+            return true;
+        }
         if !self.pair_keys.contains_key(&sender) && self.pair_keys.len() >= super::MAX_SENDERS {
             return false;
         }

@@ -15,8 +15,9 @@
 //! multicast to every daemon at once, and a signature authenticates each of them for every
 //! receiver with no state per pair and nothing to lose on a lossy link. Its cost is one
 //! Ed25519 signature per datagram sent and one verification per datagram received (tens of
-//! microseconds; discovery sends a few datagrams per second). Replays are the seal's to
-//! refuse, so a permissions document requires a domain key.
+//! microseconds; discovery sends a few datagrams per second). The seal refuses replays
+//! by hosts without the domain key, so a permissions document requires one (replays by a
+//! holder of the key are a known gap: docs/security.md).
 
 mod identity;
 mod permissions;

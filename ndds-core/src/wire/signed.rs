@@ -13,8 +13,9 @@
 //! pairs, [`crate::security::DataKeys`]); the signature is the identity's Ed25519 signature of
 //! `ndds-signed-v1`, then `agreement`, then `inner`.
 //! Every datagram a daemon with an identity sends is signed, so a node's endpoints, leases
-//! and `Bye` are believed only from the identity it first spoke with. (Replays of a signed
-//! datagram are what the domain key's seal refuses: permissions require a sealed domain.)
+//! and `Bye` are believed only from the identity it first spoke with. (The domain key's seal
+//! refuses replays by hosts without the key; a host with it can re-seal an old signed
+//! datagram, which nothing refuses yet: docs/security.md, "Known gaps".)
 
 use super::DropReason;
 use super::header::{HEADER_LEN, Header, MessageKind};

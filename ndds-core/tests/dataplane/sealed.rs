@@ -203,3 +203,43 @@ fn with_data_keys_a_host_with_only_the_domain_key_reads_and_writes_nothing() {
     assert_eq!(at_one.dropped(OpenError::BadTag), 1, "{at_one:?}");
     assert!(at_one.opened > 0);
 }
+
+/// The daemon gives a pair's keys again with every match of the pair: a second install keeps
+/// the sealer and its counter (a new one at counter 0 would reuse nonces under the same key)
+/// and the receiver's replay window, so the stream goes on whole and nothing is refused.
+#[test]
+fn data_keys_given_again_reuse_no_nonce() {
+    use crate::sim::{locator, participant_id};
+    use ndds_core::security::DataKeys;
+    let mut net = SimNet::new(10, 2);
+    for node in 0..2 {
+        net.nodes[node]
+            .core
+            .seal_with(setup(7, 1, SealMode::Encrypt));
+        assert!(net.nodes[node].core.require_pair_keys());
+    }
+    let install = |net: &mut SimNet| {
+        for (a, b) in [(0, 1), (1, 0)] {
+            let keys = DataKeys::derive(&[5u8; 32], participant_id(a), participant_id(b));
+            assert!(
+                net.nodes[a]
+                    .core
+                    .set_pair_keys(participant_id(b), locator(b), &keys)
+            );
+        }
+    };
+    install(&mut net);
+    net.add_producer(0, 1, reliable_producer(16));
+    net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
+    net.connect((0, 1), (1, 10));
+    let total = 200;
+    net.add_writer(WriterApp::new(0, 1, total, MS, 0));
+    net.run_for(Duration::from_millis(80));
+    install(&mut net);
+    net.run_for(Duration::from_secs(3));
+    let log = net.consumer(1, 10);
+    assert_eq!(exactly(&log.seqs_from(guid(0, 1)), 1, total), Ok(()));
+    let seal = stats(&net, 1).seal;
+    assert_eq!(seal.dropped(OpenError::Replayed), 0, "{seal:?}");
+    assert_eq!(seal.dropped(OpenError::BadTag), 0, "{seal:?}");
+}
