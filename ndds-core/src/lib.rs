@@ -32,6 +32,7 @@ pub mod discovery;
 pub mod domain;
 pub mod dynamic;
 pub mod fragment;
+mod hex;
 pub mod ipc;
 pub mod participant;
 pub mod ports;

@@ -849,20 +849,8 @@ impl Engine {
     /// Whether the permissions document lets `node` have `info`; the refusal is counted and
     /// logged (at debug level: a refused node repeats itself every announcement).
     fn judge(&mut self, node: u64, info: &EndpointInfo) -> Option<Arc<Refusal>> {
-        let guard = self.guard.as_ref()?;
-        let refusal = if self.permissions_expired {
-            let p = &guard.permissions;
-            Refusal::Expired {
-                serial: p.serial,
-                window: format!("until Unix time {}", p.not_after),
-            }
-        } else {
-            let identity = self.nodes.get(&node).and_then(|n| n.identity);
-            guard
-                .permissions
-                .check(identity.as_ref(), &info.topic, info.kind())
-                .err()?
-        };
+        let identity = self.nodes.get(&node).and_then(|n| n.identity);
+        let refusal = self.verdict(identity.as_ref(), info)?;
         self.stats.refused_endpoints += 1;
         tracing::debug!(
             node = format_args!("{node:016x}"),
@@ -871,6 +859,19 @@ impl Engine {
             "remote endpoint refused"
         );
         Some(Arc::new(refusal))
+    }
+
+    /// Why the document in force does not let `identity` have `info` (`None`: it does, or
+    /// there is no document).
+    fn verdict(&self, identity: Option<&PublicId>, info: &EndpointInfo) -> Option<Refusal> {
+        let permissions = &self.guard.as_ref()?.permissions;
+        if self.permissions_expired {
+            return Some(Refusal::Expired {
+                serial: permissions.serial,
+                window: format!("until Unix time {}", permissions.not_after),
+            });
+        }
+        permissions.check(identity, &info.topic, info.kind()).err()
     }
 
     /// Judges every remote endpoint of `node` again (its identity became known).
@@ -985,23 +986,9 @@ impl Engine {
             return Err(LocalError::Duplicate(info.guid));
         }
         check_endpoint(&info)?;
-        if let Some(guard) = &self.guard {
-            let own = guard.identity.public();
-            let refusal = if self.permissions_expired {
-                Some(Refusal::Expired {
-                    serial: guard.permissions.serial,
-                    window: format!("until Unix time {}", guard.permissions.not_after),
-                })
-            } else {
-                guard
-                    .permissions
-                    .check(Some(&own), &info.topic, info.kind())
-                    .err()
-            };
-            if let Some(refusal) = refusal {
-                self.stats.refused_local += 1;
-                return Err(LocalError::NotPermitted(refusal));
-            }
+        if let Some(refusal) = self.verdict(self.identity().as_ref(), &info) {
+            self.stats.refused_local += 1;
+            return Err(LocalError::NotPermitted(refusal));
         }
         let announce = Message::Announce(Announce {
             node: self.node_info(),

@@ -5,6 +5,8 @@ use std::str::FromStr;
 
 use ed25519_dalek::Signer as _;
 
+use crate::hex::{hex, unhex};
+
 /// The text prefix of a public key (`ed25519:` then 64 hex digits).
 pub const KEY_PREFIX: &str = "ed25519:";
 
@@ -238,26 +240,4 @@ pub enum IdentityFileError {
     /// The `public` line is not the secret's public key.
     #[error("the `public` line is not the public key of the `secret` line (edited by hand?)")]
     Mismatch,
-}
-
-/// Lower-case hex of `bytes`.
-pub(crate) fn hex(bytes: &[u8]) -> String {
-    use std::fmt::Write as _;
-    let mut text = String::with_capacity(bytes.len() * 2);
-    for byte in bytes {
-        let _ = write!(text, "{byte:02x}");
-    }
-    text
-}
-
-/// `N` bytes from exactly `2 N` hex digits.
-pub(crate) fn unhex<const N: usize>(text: &str) -> Option<[u8; N]> {
-    if text.len() != 2 * N || !text.is_ascii() {
-        return None;
-    }
-    let mut out = [0u8; N];
-    for (i, byte) in out.iter_mut().enumerate() {
-        *byte = u8::from_str_radix(&text[2 * i..2 * i + 2], 16).ok()?;
-    }
-    Some(out)
 }

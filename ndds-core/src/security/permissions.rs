@@ -14,7 +14,8 @@ use std::fmt;
 
 use serde::Deserialize;
 
-use super::identity::{Identity, PublicId, hex, unhex};
+use super::identity::{Identity, PublicId};
+use crate::hex::{hex, unhex};
 use crate::wire::EndpointKind;
 
 /// The start of a signed document's last line.
