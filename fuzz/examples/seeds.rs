@@ -358,6 +358,7 @@ fn ipc_seeds(corpus: &mut Corpus) {
             DaemonMessage::Welcome(Welcome {
                 ipc_version: IPC_VERSION,
                 node: 0x1001,
+                participant: 0x2002,
                 domain: DOMAIN,
                 hostname: "host".into(),
                 interface: [127, 0, 0, 1],

@@ -21,7 +21,8 @@
 //!
 //! Sender `sel % 4 == 3` is the engine's own node id (its own datagrams looped back). With
 //! bit 6 of `sel`, FRAMED and SEALED datagrams are signed by the identity of host
-//! `1 + (sel >> 4) % 3` before sealing (its own, or another's). A sealed sender keeps one [`Sealer`] per (node, session) so that counters grow as a real
+//! `1 + (sel >> 4) % 3` before sealing (its own, or another's), numbered in order or, with
+//! bit 3, with an older number (a replay). A sealed sender keeps one [`Sealer`] per (node, session) so that counters grow as a real
 //! sender's do; `sel / 4 % 4` picks the session.
 
 use std::collections::HashMap;
@@ -223,6 +224,8 @@ struct Harness {
     flags: u8,
     now: Instant,
     sealers: HashMap<(u64, u8), Sealer>,
+    /// The number of the last signed datagram the harness made.
+    signed: u64,
 }
 
 /// Runs one script (see the module docs).
@@ -249,6 +252,7 @@ pub fn run(data: &[u8]) {
         flags,
         now,
         sealers: HashMap::new(),
+        signed: 0,
     };
     harness.drain();
     while !input.is_empty() {
@@ -286,8 +290,15 @@ impl Harness {
                 .emit(&mut datagram);
                 datagram.extend_from_slice(chunk.rest());
                 if sel & 0x40 != 0 {
-                    let Ok(signed) =
-                        ndds_core::wire::signed::wrap(&datagram, &identity(1 + (sel >> 4) % 3))
+                    // Numbered in order, or (bit 3) again with an older number: a replay.
+                    self.signed += 1;
+                    let count = if sel & 0x08 != 0 {
+                        self.signed / 2
+                    } else {
+                        self.signed
+                    };
+                    let signer = identity(1 + (sel >> 4) % 3);
+                    let Ok(signed) = ndds_core::wire::signed::wrap(&datagram, &signer, count)
                     else {
                         return;
                     };

@@ -380,20 +380,18 @@ impl Participant {
     }
 
     fn open(settings: Settings) -> Result<Self, ConnectError> {
-        let participant = loop {
-            let id = fastrand::u64(..);
-            if id != 0 {
-                break id;
-            }
-        };
-        let hello = Hello {
+        // The daemon chooses the participant id (in a domain with permissions it must be one
+        // of the daemon's identity); reconnecting, the client asks for it again.
+        let mut hello = Hello {
             ipc_version: IPC_VERSION,
-            participant,
+            participant: 0,
             pid: std::process::id(),
             name: settings.name.clone(),
             role: settings.role,
         };
         let (stream, welcome) = Self::reach_daemon(&settings, hello.clone())?;
+        let participant = welcome.participant;
+        hello.participant = participant;
         let interface = Ipv4Addr::from(welcome.interface);
         let limits = |interface| Limits {
             max_sample: settings.max_sample,

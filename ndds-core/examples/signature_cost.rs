@@ -21,8 +21,8 @@ fn main() {
     const N: u32 = 20_000;
     let started = Instant::now();
     let mut last = Vec::new();
-    for _ in 0..N {
-        last = signed::wrap(&inner, &identity).expect("a valid datagram");
+    for count in 1..=u64::from(N) {
+        last = signed::wrap(&inner, &identity, count).expect("a valid datagram");
     }
     let sign = started.elapsed() / N;
     let view = signed::parse(&last).expect("parses");

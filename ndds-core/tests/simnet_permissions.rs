@@ -1,7 +1,9 @@
 //! Discovery with identities and a permissions document (see `support/simnet.rs` and
 //! `ndds_core::security`): a subject matches what its rules allow and nothing else, both
-//! sides say why, a node is bound to the identity it signs with, an unsigned node is seen but
-//! matches nothing, and a new document (or the old one's end) takes effect at once.
+//! sides say why, a node is bound to the identity it signs with, an unsigned node is not
+//! heard, participants are their daemon's identity's, recorded signed datagrams are taken
+//! once (also after their node is gone), and a new document (or the old one's end) takes
+//! effect at once, for remote and local endpoints.
 
 #[path = "support/fixtures.rs"]
 mod fixtures;
@@ -13,7 +15,9 @@ use std::time::Duration;
 
 use ndds_core::discovery::{Engine, Event, LocalError};
 use ndds_core::security::{Guard, Identity, Pattern, Permissions, Subject};
-use ndds_core::wire::{self, Bye, DropReason, Message, signed};
+use ndds_core::wire::{self, Bye, DropReason, EndpointInfo, Guid, Message, MessageKind, signed};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 use fixtures::*;
 use simnet::{SimNet, config};
@@ -23,6 +27,33 @@ const LEASE: Duration = Duration::from_secs(5);
 
 fn identity(n: u8) -> Identity {
     Identity::from_secret([n + 1; 32])
+}
+
+/// Endpoint `entity` of a participant of identity `n`'s daemon: in a domain with permissions
+/// a participant id is one of its daemon's identity, as node ids are.
+fn guid(n: u8, entity: u32) -> Guid {
+    Guid {
+        participant: ndds_core::security::node_id_for(&identity(n).public(), 0x5000),
+        entity,
+    }
+}
+
+/// `info` located on the host of node `n` (identity `n` runs at index `n` unless a test says
+/// otherwise).
+fn placed(mut info: EndpointInfo) -> EndpointInfo {
+    let n = (0..3u8)
+        .find(|n| guid(*n, 0).participant == info.guid.participant)
+        .map_or(200, usize::from);
+    info.locator = simnet::locator(n);
+    info
+}
+
+fn producer<T: Serialize + DeserializeOwned>(guid: Guid, topic: &str) -> EndpointInfo {
+    placed(fixtures::producer::<T>(guid, topic))
+}
+
+fn consumer<T: Serialize + DeserializeOwned>(guid: Guid, topic: &str) -> EndpointInfo {
+    placed(fixtures::consumer::<T>(guid, topic))
 }
 
 fn patterns(list: &[&str]) -> Vec<Pattern> {
@@ -207,10 +238,10 @@ fn a_node_is_bound_to_the_identity_it_signs_with() {
     let mut bye = Vec::new();
     wire::encode(simnet::DOMAIN, node0, &Message::Bye(Bye {}), &mut bye).unwrap();
     // Unsigned, then signed by another subject of the document, from node 0's own address.
-    let by_viewer = signed::wrap(&bye, &identity(1)).unwrap();
+    let by_viewer = signed::wrap(&bye, &identity(1), u64::MAX).unwrap();
     // Node 0's identity with a signature changed in one bit.
-    let mut tampered = signed::wrap(&bye, &identity(0)).unwrap();
-    tampered[wire::HEADER_LEN + 64 + 10] ^= 1;
+    let mut tampered = signed::wrap(&bye, &identity(0), u64::MAX).unwrap();
+    tampered[wire::HEADER_LEN + 32 + 32 + 8 + 10] ^= 1;
     for datagram in [&bye, &by_viewer, &tampered] {
         net.inject(1, simnet::locator(0), datagram);
     }
@@ -220,7 +251,7 @@ fn a_node_is_bound_to_the_identity_it_signs_with() {
 }
 
 #[test]
-fn an_unsigned_node_is_seen_and_matches_nothing() {
+fn an_unsigned_node_is_not_heard() {
     let mut net = SimNet::new(12);
     net.add_node_with(signing(0, 600), guard(0, official()));
     net.add_node(config(1, 601, PERIOD, LEASE));
@@ -230,20 +261,13 @@ fn an_unsigned_node_is_seen_and_matches_nothing() {
     net.add_local(1, open_reader.clone());
     net.run_for(Duration::from_secs(3));
     let open_id = net.engine(1).node_id();
-    let (_, open) = net
-        .engine(0)
-        .nodes()
-        .find(|(id, _)| *id == open_id)
-        .unwrap();
-    assert_eq!(open.identity, None);
-    assert!(
-        first(
-            &net,
-            0,
-            Duration::ZERO,
-            refused(arm_pose.guid, open_reader.guid, "not authenticated")
-        )
-        .is_some()
+    assert!(!net.knows_node(0, open_id), "an unsigned node was believed");
+    assert!(!net.knows(0, open_reader.guid));
+    let stats = net.engine(0).stats();
+    assert!(stats.dropped(DropReason::Unverified) >= 3, "{stats:?}");
+    assert_eq!(
+        stats.dropped(DropReason::Unverified),
+        stats.received - stats.accepted
     );
     assert_eq!(
         count(
@@ -254,6 +278,9 @@ fn an_unsigned_node_is_seen_and_matches_nothing() {
         ),
         0
     );
+    // The open node, which checks nothing, hears the signed one (and could match it: its
+    // own business; node 0 never sends it samples).
+    assert!(net.knows(1, arm_pose.guid));
 }
 
 #[test]
@@ -340,13 +367,16 @@ fn nobody_takes_a_daemons_node_id_before_it_is_heard() {
         &mut solicit,
     )
     .unwrap();
-    let signed = signed::wrap(&solicit, &identity(2)).unwrap();
+    let signed = signed::wrap(&solicit, &identity(2), 1).unwrap();
     net.inject(0, simnet::locator(1), &signed);
     assert!(!net.knows_node(0, squatted), "the squatter took the id");
     assert_eq!(net.engine(0).stats().dropped(DropReason::Unverified), 1);
     // Arm then starts with that id, and is heard and matched.
-    let arm_pose = producer::<Pose>(guid(1, 1), "status/arm");
-    let reader = consumer::<Pose>(guid(0, 1), "status/arm");
+    // (Identity 0 runs at index 1 here, identity 1 at index 0.)
+    let mut arm_pose = producer::<Pose>(guid(0, 1), "status/arm");
+    arm_pose.locator = simnet::locator(1);
+    let mut reader = consumer::<Pose>(guid(1, 1), "status/arm");
+    reader.locator = simnet::locator(0);
     net.add_node_with(with_identity(1, 0, 700), guard(0, official()));
     net.add_local(1, arm_pose.clone());
     net.add_local(0, reader.clone());
@@ -359,7 +389,7 @@ fn nobody_takes_a_daemons_node_id_before_it_is_heard() {
 }
 
 #[test]
-fn an_endpoint_announced_again_by_another_node_is_judged_as_that_nodes() {
+fn nobody_announces_endpoints_of_another_daemons_participants() {
     let mut net = three_nodes();
     let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
     let reader = consumer::<Pose>(guid(1, 1), "status/arm");
@@ -392,23 +422,156 @@ fn an_endpoint_announced_again_by_another_node_is_judged_as_that_nodes() {
         &mut announce,
     )
     .unwrap();
-    let signed = signed::wrap(&announce, &identity(2)).unwrap();
+    let signed = signed::wrap(&announce, &identity(2), 1).unwrap();
     let since = net.elapsed();
     net.inject(1, simnet::locator(0), &signed);
-    // Node 1 took the endpoint as the rogue's, and judged it so: no longer matched.
+    // The participant is arm's identity's: node 1 ignores the rogue's claim and keeps the pair
+    // with arm, keys and all.
+    assert!(first(&net, 1, since, unmatched(reader.guid, arm_status.guid)).is_none());
+    assert_eq!(net.engine(1).stats().foreign_participants, 1);
+    let keys = net.engine(1).data_keys(&reader.guid, &arm_status.guid);
+    assert!(keys.is_some());
+    net.run_for(Duration::from_secs(3));
+    assert_eq!(
+        net.engine(1).data_keys(&reader.guid, &arm_status.guid),
+        keys,
+        "the pair's keys changed"
+    );
+    // A daemon refuses its own clients' endpoints under ids not its identity's.
+    let foreign = producer::<Pose>(guid(1, 9), "status/x");
+    let refusal = net
+        .try_add_local(0, foreign)
+        .expect_err("a foreign participant");
+    assert!(
+        matches!(refusal, LocalError::ForeignParticipant(p) if p == guid(1, 9).participant),
+        "{refusal}"
+    );
+}
+
+/// The first `upto` signed datagrams node 0 sent while it was recorded, of `kinds`, replayed
+/// as a recording host with the domain key would (re-sealed, from node 0's address).
+fn replay_recorded(net: &mut SimNet, upto: usize, kinds: &[MessageKind]) -> u64 {
+    let recorded: Vec<_> = net.recorded[..upto]
+        .iter()
+        .filter(|(from, kind, _)| *from == 0 && kinds.contains(kind))
+        .map(|(_, _, bytes)| bytes.clone())
+        .collect();
+    for bytes in &recorded {
+        net.inject(1, simnet::locator(0), bytes);
+    }
+    recorded.len() as u64
+}
+
+#[test]
+fn recorded_signed_datagrams_are_taken_once_even_after_their_node_is_gone() {
+    let mut net = SimNet::new(14);
+    net.add_node_with(signing(0, 800), guard(0, official()));
+    net.add_node_with(signing(1, 801), guard(1, official()));
+    net.record(0);
+    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
+    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
+    net.add_local(0, arm_status.clone());
+    net.add_local(1, reader.clone());
+    net.run_for(Duration::from_secs(3));
+    assert_eq!(
+        count(
+            &net,
+            1,
+            Duration::ZERO,
+            matched(reader.guid, arm_status.guid)
+        ),
+        1
+    );
+    // Arm withdraws its endpoint; its announcements from before, replayed, do not bring it
+    // back.
+    let announced = net.recorded.len();
+    net.remove_locals(0, &[arm_status.guid]);
+    net.run_for(Duration::from_secs(1));
+    assert!(!net.knows(1, arm_status.guid));
+    let replayed = replay_recorded(&mut net, announced, &[MessageKind::Announce]);
+    assert!(replayed >= 3, "{replayed} announcements recorded");
+    assert!(
+        !net.knows(1, arm_status.guid),
+        "a withdrawn endpoint came back"
+    );
+    assert_eq!(
+        net.engine(1).stats().dropped(DropReason::Replayed),
+        replayed
+    );
+    // Node 0 goes on being heard (the replays took nothing of its window).
+    net.run_for(Duration::from_secs(8));
+    let node0 = net.engine(0).node_id();
+    assert!(net.knows_node(1, node0), "node 0 was lost");
+    // It says Bye; everything it ever sent, replayed, brings back no ghost.
+    net.close(0);
+    net.run_for(Duration::from_millis(100));
+    assert!(!net.knows_node(1, node0));
+    let before = net.engine(1).stats().dropped(DropReason::Replayed);
+    // (Its withdrawals and its Bye left out: replayed last, they would hide a ghost.)
+    let all = [MessageKind::Solicit, MessageKind::Announce];
+    let everything = net.recorded.len();
+    let replayed = replay_recorded(&mut net, everything, &all);
+    assert!(!net.knows_node(1, node0), "a node that said Bye came back");
+    assert_eq!(
+        net.engine(1).stats().dropped(DropReason::Replayed) - before,
+        replayed
+    );
+}
+
+#[test]
+fn a_new_document_judges_local_endpoints_too() {
+    let mut net = three_nodes();
+    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
+    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
+    net.add_local(0, arm_status.clone());
+    net.add_local(1, reader.clone());
+    net.run_for(Duration::from_secs(2));
+    assert_eq!(
+        count(
+            &net,
+            1,
+            Duration::ZERO,
+            matched(reader.guid, arm_status.guid)
+        ),
+        1
+    );
+    // The viewer's daemon installs a document that no longer lets it read `status/*`.
+    let narrower = document(
+        3,
+        vec![
+            subject("arm", 0, &["arm/*", "status/*"], &["*"]),
+            subject("viewer", 1, &["status/*"], &["other/*"]),
+        ],
+    );
+    let since = net.elapsed();
+    net.command(1, move |engine| engine.set_permissions(narrower, None));
     assert!(first(&net, 1, since, unmatched(reader.guid, arm_status.guid)).is_some());
     assert!(
         first(
             &net,
             1,
             since,
-            refused(reader.guid, arm_status.guid, "is not a subject")
+            refused(
+                reader.guid,
+                arm_status.guid,
+                "`viewer` may not subscribe `status/arm`"
+            )
         )
         .is_some()
     );
+    assert_eq!(net.engine(1).stats().refused_local, 1);
     assert!(
         net.engine(1)
             .data_keys(&reader.guid, &arm_status.guid)
             .is_none()
+    );
+    // Allowed again: matched again, without being declared again.
+    let again = net.elapsed();
+    net.command(1, |engine| engine.set_permissions(official(), None));
+    assert!(first(&net, 1, again, matched(reader.guid, arm_status.guid)).is_some());
+    assert!(
+        net.engine(1)
+            .data_keys(&reader.guid, &arm_status.guid)
+            .is_some()
     );
 }

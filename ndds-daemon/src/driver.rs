@@ -488,7 +488,7 @@ impl Driver {
         }
     }
 
-    fn on_hello(&mut self, client: ClientId, hello: Hello) {
+    fn on_hello(&mut self, client: ClientId, mut hello: Hello) {
         if hello.ipc_version != IPC_VERSION {
             let reason = format!(
                 "client speaks ipc version {}, this daemon speaks {IPC_VERSION}",
@@ -496,9 +496,21 @@ impl Driver {
             );
             return self.refuse(client, reason);
         }
-        if hello.participant == 0 || self.by_participant.contains_key(&hello.participant) {
+        let identity = self.engine.identity();
+        if hello.participant == 0 {
+            hello.participant = self.new_participant_id();
+        } else if self.by_participant.contains_key(&hello.participant) {
+            let reason = format!("participant id {} is in use", hex(hello.participant));
+            return self.refuse(client, reason);
+        } else if let Some(identity) = identity
+            && !ndds_core::security::owns_node_id(&identity, hello.participant)
+        {
+            // A client coming back after a restart of this daemon keeps its id: the identity
+            // is the same. Another daemon's client is not let in under its old id.
             let reason = format!(
-                "participant id {} is zero or in use",
+                "participant id {} is not one of this daemon's identity ({identity}); in a \
+                 domain with permissions the daemon gives each client its id: reconnect \
+                 without one",
                 hex(hello.participant)
             );
             return self.refuse(client, reason);
@@ -515,19 +527,38 @@ impl Driver {
             role = ?hello.role,
             "client connected"
         );
-        self.by_participant.insert(hello.participant, client);
+        let participant = hello.participant;
+        self.by_participant.insert(participant, client);
         if let Some(entry) = self.clients.get_mut(&client) {
             entry.hello = Some(hello);
         }
-        let welcome = self.welcome();
+        let welcome = self.welcome(participant);
         self.send(client, DaemonMessage::Welcome(welcome));
     }
 
-    fn welcome(&self) -> Welcome {
+    /// A participant id for a client that asked for one: unused here, and in a domain with
+    /// permissions one of this daemon's identity (as its node id is), so that other daemons
+    /// believe only this one about the client's endpoints.
+    fn new_participant_id(&self) -> u64 {
+        let identity = self.engine.identity();
+        loop {
+            let drawn = fastrand::u64(..);
+            let id = match &identity {
+                Some(identity) => ndds_core::security::node_id_for(identity, drawn),
+                None => drawn,
+            };
+            if id != 0 && id != self.engine.node_id() && !self.by_participant.contains_key(&id) {
+                return id;
+            }
+        }
+    }
+
+    fn welcome(&self, participant: u64) -> Welcome {
         let config = self.engine.config();
         Welcome {
             ipc_version: IPC_VERSION,
             node: self.engine.node_id(),
+            participant,
             domain: config.domain,
             hostname: config.hostname.clone(),
             interface: config.unicast.addr,

@@ -29,6 +29,7 @@ use std::time::{Duration, Instant};
 use super::config::{ConfigError, DiscoveryConfig, MAX_PEERS};
 use super::event::{Destination, Event, LossReason, Transmit};
 use super::fanout::{Fanout, Via};
+use super::freshness::{Counts, Gone};
 use super::sources::Sources;
 use super::table::{Entry, Origin, Table, entry_cost};
 use crate::seal::{self, Keyring, OpenError, OpenStats, Opener, Route, SealSetup, Sealer};
@@ -86,6 +87,8 @@ pub struct RemoteNode {
     /// The secret this node's daemon and this one share (from their agreement keys), from
     /// which the data keys of their participants' pairs derive.
     shared: Option<Shared>,
+    /// The numbers its signed datagrams were taken with (domains with permissions).
+    counts: Option<Counts>,
 }
 
 /// A shared secret, never printed.
@@ -142,8 +145,12 @@ pub struct Stats {
     /// Remote endpoints the permissions document does not allow (each time one is announced
     /// new or changed, or refused again after the document or the node's identity changed).
     pub refused_endpoints: u64,
-    /// Local declarations the permissions document does not allow this node's subject.
+    /// Local declarations the permissions document does not allow this node's subject (at
+    /// declaration, or when a new document no longer allows them).
     pub refused_local: u64,
+    /// Announced endpoints ignored because their participant id is not one of the announcing
+    /// node's identity (domains with permissions: a daemon speaking for another's clients).
+    pub foreign_participants: u64,
 }
 
 impl Stats {
@@ -182,6 +189,13 @@ pub enum LocalError {
     /// The permissions document does not allow this node's subject the endpoint.
     #[error("not permitted: {0}")]
     NotPermitted(Refusal),
+    /// In a domain with permissions, the endpoint's participant id is not one of this
+    /// daemon's identity ([`crate::security::node_id_for`]): other daemons would refuse it.
+    #[error(
+        "participant id {0:016x} is not one of this daemon's identity (in a domain with \
+         permissions the daemon gives each client its participant id)"
+    )]
+    ForeignParticipant(u64),
     /// The engine was closed.
     #[error("the discovery engine is closed")]
     Closed,
@@ -225,6 +239,12 @@ pub struct Engine {
     opened: Vec<u8>,
     /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
     warned: (bool, bool),
+    /// Unsigned traffic was reported once, in a domain with permissions.
+    warned_unsigned: bool,
+    /// The number of the last signed datagram sent.
+    signed_count: u64,
+    /// The highest datagram numbers of nodes that are gone.
+    gone: Gone,
     /// Identity and permissions, in a domain with a permissions document.
     guard: Option<Guard>,
     /// The permissions document's validity ended.
@@ -275,6 +295,9 @@ impl Engine {
             seal: None,
             opened: Vec::new(),
             warned: (false, false),
+            warned_unsigned: false,
+            signed_count: 0,
+            gone: Gone::default(),
             guard: None,
             permissions_expired: false,
         })
@@ -296,9 +319,10 @@ impl Engine {
         self.permissions_expired = false;
     }
 
-    /// Replaces the permissions document (a new version was installed): every remote endpoint
-    /// is judged again, and matches come and go accordingly. Local endpoints declared under
-    /// the old document stay. Does nothing without [`Engine::guard_with`].
+    /// Replaces the permissions document (a new version was installed): every endpoint, local
+    /// and remote, is judged again, and matches come and go accordingly (a local endpoint the
+    /// new document refuses stays declared but matches nothing; its pairs are told why). Does
+    /// nothing without [`Engine::guard_with`].
     pub fn set_permissions(&mut self, permissions: Arc<Permissions>, valid_until: Option<Instant>) {
         let Some(guard) = &mut self.guard else {
             return;
@@ -306,6 +330,9 @@ impl Engine {
         guard.permissions = permissions;
         guard.valid_until = valid_until;
         self.permissions_expired = valid_until.is_some_and(|at| at <= self.now);
+        let permissions = Arc::clone(&guard.permissions);
+        self.gone
+            .retain(|identity| permissions.subject(identity).is_some());
         self.judge_all();
     }
 
@@ -500,7 +527,7 @@ impl Engine {
         if outer.domain != self.config.domain {
             return Err(DropReason::OtherDomain);
         }
-        let (bytes, identity) = if outer.kind == wire::MessageKind::Signed {
+        let (bytes, identity, count) = if outer.kind == wire::MessageKind::Signed {
             let view = signed::parse(bytes)?;
             if outer.sender == self.node_id {
                 self.check_id_clash(from);
@@ -513,22 +540,38 @@ impl Engine {
                 if !crate::security::owns_node_id(&view.identity, outer.sender) {
                     return Err(DropReason::Unverified);
                 }
-                (view.inner, Some((view.identity, view.agreement)))
+                (
+                    view.inner,
+                    Some((view.identity, view.agreement)),
+                    view.count,
+                )
             } else {
-                (view.inner, None)
+                (view.inner, None, 0)
             }
         } else {
-            (bytes, None)
+            (bytes, None, 0)
         };
         let (header, message) = wire::decode_for_domain(bytes, self.config.domain)?;
         if header.sender == self.node_id {
             self.check_id_clash(from);
             return Err(DropReason::Own);
         }
-        self.check_identity(header.sender, identity)?;
+        // In a domain with permissions every daemon signs everything it sends: an unsigned
+        // datagram is nobody's word.
+        if self.guard.is_some() && identity.is_none() {
+            if !std::mem::replace(&mut self.warned_unsigned, true) {
+                tracing::warn!(
+                    %from,
+                    "unsigned discovery traffic in a domain with permissions: dropped; give that \
+                     daemon the domain's permissions document (--permissions, --admin-key)"
+                );
+            }
+            return Err(DropReason::Unverified);
+        }
         // Node ids travel in clear: a known node speaks only from its own address, so nobody
         // else can say its `Bye`, withdraw its endpoints or shorten its lease. (A node whose
-        // address changes is heard again once its old entry has expired.)
+        // address changes is heard again once its old entry has expired.) Checked before
+        // anything of the datagram is believed, its identity included.
         if self
             .nodes
             .get(&header.sender)
@@ -536,6 +579,46 @@ impl Engine {
         {
             return Err(DropReason::Spoofed);
         }
+        self.check_identity(header.sender, identity)?;
+        // Each signed datagram once: a recorded one re-sealed by a holder of the domain key is
+        // refused (a node that is gone, below the highest number it was heard with).
+        let first_count = match (identity, self.nodes.get_mut(&header.sender)) {
+            (None, _) => None,
+            (Some(_), Some(known)) => match &mut known.counts {
+                Some(counts) => {
+                    if !counts.take(count) {
+                        return Err(DropReason::Replayed);
+                    }
+                    None
+                }
+                None => Some(0),
+            },
+            (Some((said, _)), None) => {
+                let floor = self.gone.floor(&said, header.sender);
+                if count <= floor {
+                    return Err(DropReason::Replayed);
+                }
+                Some(floor)
+            }
+        };
+        self.act(now, (from, via), header, message, identity)?;
+        if let Some(floor) = first_count
+            && let Some(known) = self.nodes.get_mut(&header.sender)
+        {
+            known.counts = Some(Counts::new(floor, count));
+        }
+        Ok(())
+    }
+
+    /// Does what an accepted discovery message says.
+    fn act(
+        &mut self,
+        now: Instant,
+        (from, via): (SocketAddr, Via),
+        header: Header,
+        message: Message,
+        identity: Option<Speaker>,
+    ) -> Result<(), DropReason> {
         match message {
             Message::Solicit(solicit) => {
                 check_node(&solicit.node)?;
@@ -730,6 +813,7 @@ impl Engine {
                 charged: cost,
                 identity: identity.map(|(id, _)| id),
                 shared: identity.and_then(|speaker| self.shared_with(speaker)),
+                counts: None,
             },
         );
         self.sources.add(from.ip(), node, now, cost);
@@ -781,6 +865,20 @@ impl Engine {
         if IpAddr::from(info.locator.addr) != source {
             self.stats.invalid_endpoints += 1;
             tracing::debug!(guid = %info.guid, locator = %info.locator, %source, "ignored endpoint located off its node's host");
+            return;
+        }
+        // In a domain with permissions a participant id is its daemon's identity's, as node ids
+        // are: nobody announces endpoints in another daemon's participants' names (their pairs
+        // would get keys with the wrong daemon).
+        if self.guard.is_some()
+            && !self
+                .nodes
+                .get(&node)
+                .and_then(|n| n.identity)
+                .is_some_and(|id| crate::security::owns_node_id(&id, info.guid.participant))
+        {
+            self.stats.foreign_participants += 1;
+            tracing::debug!(guid = %info.guid, node = format_args!("{node:016x}"), "ignored endpoint of a participant of another identity");
             return;
         }
         let owner = self.table.get(&info.guid).map(|e| e.origin);
@@ -885,11 +983,32 @@ impl Engine {
         }
     }
 
-    /// Judges every remote endpoint again (a new document, or the old one expired).
+    /// Judges every endpoint again, this node's own too (a new document, or the old one
+    /// expired).
     fn judge_all(&mut self) {
         let nodes: Vec<u64> = self.nodes.keys().copied().collect();
         for node in nodes {
             self.judge_node(node);
+        }
+        let identity = self.identity();
+        for guid in self.table.owned_by(Origin::Local) {
+            let Some(entry) = self.table.get(&guid) else {
+                continue;
+            };
+            let refused = self.verdict(identity.as_ref(), &entry.info).map(Arc::new);
+            if entry.refused.is_none()
+                && let Some(refusal) = &refused
+            {
+                self.stats.refused_local += 1;
+                tracing::warn!(
+                    endpoint = %guid,
+                    topic = %entry.info.topic,
+                    %refusal,
+                    "a local endpoint is no longer permitted: it matches nothing until a document \
+                     allows it again"
+                );
+            }
+            self.table.set_refused(&guid, refused, &mut self.events);
         }
     }
 
@@ -965,6 +1084,14 @@ impl Engine {
         }
         if let Some(known) = self.nodes.remove(&node) {
             self.node_expiry.remove(&(known.expires, node));
+            // Its recorded datagrams stay refused after it is gone (identities the document
+            // names: any other is refused everything anyway).
+            if let (Some(identity), Some(counts), Some(guard)) =
+                (known.identity, &known.counts, &self.guard)
+                && guard.permissions.subject(&identity).is_some()
+            {
+                self.gone.insert(identity, node, counts.highest());
+            }
             self.sources
                 .remove(known.source, node, known.last_seen, known.charged);
             let at = known.info.unicast;
@@ -986,6 +1113,11 @@ impl Engine {
             return Err(LocalError::Duplicate(info.guid));
         }
         check_endpoint(&info)?;
+        if let Some(identity) = self.identity()
+            && !crate::security::owns_node_id(&identity, info.guid.participant)
+        {
+            return Err(LocalError::ForeignParticipant(info.guid.participant));
+        }
         if let Some(refusal) = self.verdict(self.identity().as_ref(), &info) {
             self.stats.refused_local += 1;
             return Err(LocalError::NotPermitted(refusal));
@@ -1246,7 +1378,10 @@ impl Engine {
         // Signed before sealing: the signature speaks for the node, the seal for the domain.
         let payload = match &self.guard {
             None => payload,
-            Some(guard) => match signed::wrap(&payload, &guard.identity) {
+            Some(guard) => match signed::wrap(&payload, &guard.identity, {
+                self.signed_count += 1;
+                self.signed_count
+            }) {
                 Ok(signed) if signed.len() <= MAX_DATAGRAM => signed.into(),
                 _ => {
                     self.stats.unsealable += 1;

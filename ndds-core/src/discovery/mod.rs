@@ -3,12 +3,14 @@
 //!
 //! See [`engine`] for the call order and behaviour, [`fanout`] for where datagrams go
 //! (multicast group, static peers, unicast-only nodes), [`table`] for the matching rules,
-//! [`sources`] for how full tables are made room in.
+//! [`sources`] for how full tables are made room in; signed datagrams are taken once each
+//! (`freshness`).
 
 pub mod config;
 pub mod engine;
 pub mod event;
 pub mod fanout;
+mod freshness;
 pub mod sources;
 pub mod table;
 

@@ -19,7 +19,9 @@ pub enum Role {
 pub struct Hello {
     /// Must equal the daemon's [`super::IPC_VERSION`].
     pub ipc_version: u16,
-    /// The participant id the client chose (random, non-zero).
+    /// The participant id the client had before (reconnecting), or 0: the daemon chooses
+    /// one ([`super::Welcome::participant`]; in a domain with permissions it must be one of
+    /// the daemon's identity).
     pub participant: u64,
     /// Client process id.
     pub pid: u32,

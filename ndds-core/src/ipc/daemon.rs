@@ -13,6 +13,9 @@ pub struct Welcome {
     pub ipc_version: u16,
     /// The daemon's node id.
     pub node: u64,
+    /// The client's participant id: the one its `Hello` named, or the one the daemon chose
+    /// for it when `Hello` named none (0).
+    pub participant: u64,
     /// The daemon's domain.
     pub domain: u16,
     /// Host name.

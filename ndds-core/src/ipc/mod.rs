@@ -17,8 +17,10 @@ pub use graph::{ClientSummary, EndpointSummary, Graph, NodeSummary, PeerSummary}
 
 /// Version of the frames in this module; client and daemon must agree. Version 2 added the
 /// unicast discovery fields of [`NodeSummary`] (`peers`, `multicast_seen_ms`, `unicast_copies`);
-/// version 3 the kernel's uid of each client in [`ClientSummary`].
-pub const IPC_VERSION: u16 = 4;
+/// version 3 the kernel's uid of each client in [`ClientSummary`]; version 4 the messages of
+/// domains with permissions (`NotPermitted`, `PairKeys`, identities in [`NodeSummary`]);
+/// version 5 participant ids chosen by the daemon ([`Welcome::participant`]).
+pub const IPC_VERSION: u16 = 5;
 
 /// Largest frame either side sends or accepts, in bytes.
 pub const MAX_FRAME: usize = 16 * 1024 * 1024;

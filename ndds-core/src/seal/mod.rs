@@ -47,7 +47,7 @@
 mod keyring;
 mod opener;
 mod sealer;
-mod window;
+pub(crate) mod window;
 
 pub use keyring::{DomainKey, KeyFileError, Keyring};
 pub use opener::{OpenStats, Opened, Opener, SESSION_IDLE};

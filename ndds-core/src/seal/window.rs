@@ -37,6 +37,11 @@ impl ReplayWindow {
         }
     }
 
+    /// The highest counter accepted.
+    pub(crate) fn highest(&self) -> Option<u64> {
+        self.highest
+    }
+
     /// Marks `counter` accepted (it was [`ReplayWindow::fresh`]).
     pub(crate) fn accept(&mut self, counter: u64) {
         match self.highest {

@@ -76,11 +76,16 @@ pub enum DropReason {
     /// or signed by another identity than the node's (domains with permissions).
     #[error("signature missing, wrong or of another identity")]
     Unverified,
+    /// A signed discovery datagram whose number its node's datagrams were taken with already,
+    /// or one too old to tell (a replay by a holder of the domain key; domains with
+    /// permissions).
+    #[error("signed datagram taken already (a replay)")]
+    Replayed,
 }
 
 impl DropReason {
     /// Every reason, for counter tables.
-    pub const ALL: [DropReason; 11] = [
+    pub const ALL: [DropReason; 12] = [
         DropReason::Truncated,
         DropReason::ForeignMagic,
         DropReason::UnsupportedVersion,
@@ -92,6 +97,7 @@ impl DropReason {
         DropReason::Unexpected,
         DropReason::Spoofed,
         DropReason::Unverified,
+        DropReason::Replayed,
     ];
 
     /// Stable snake-case name used as a counter key.
@@ -108,6 +114,7 @@ impl DropReason {
             DropReason::Unexpected => "unexpected",
             DropReason::Spoofed => "spoofed",
             DropReason::Unverified => "unverified",
+            DropReason::Replayed => "replayed",
         }
     }
 

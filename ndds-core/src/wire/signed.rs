@@ -22,7 +22,7 @@ use super::header::{HEADER_LEN, Header, MessageKind};
 use crate::security::{Identity, PublicId};
 
 /// Bytes a signature adds to a datagram: a header, the identity, the signature.
-pub const SIGNED_OVERHEAD: usize = HEADER_LEN + 32 + 32 + 64;
+pub const SIGNED_OVERHEAD: usize = HEADER_LEN + 32 + 32 + 8 + 64;
 
 /// A signed datagram, not yet verified.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +33,8 @@ pub struct SignedView<'a> {
     pub identity: PublicId,
     /// Its X25519 public key.
     pub agreement: [u8; 32],
+    /// The datagram's number among the node's signed datagrams.
+    pub count: u64,
     /// The signature.
     pub signature: [u8; 64],
     /// The datagram signed.
@@ -50,10 +52,10 @@ impl SignedView<'_> {
         {
             return Err(DropReason::Invalid);
         }
-        if !self
-            .identity
-            .verifies(&message(&self.agreement, self.inner), &self.signature)
-        {
+        if !self.identity.verifies(
+            &message(&self.agreement, self.count, self.inner),
+            &self.signature,
+        ) {
             return Err(DropReason::Unverified);
         }
         Ok(())
@@ -66,23 +68,26 @@ pub fn parse(bytes: &[u8]) -> Result<SignedView<'_>, DropReason> {
     if header.kind != MessageKind::Signed {
         return Err(DropReason::Unexpected);
     }
-    if body.len() < 128 + HEADER_LEN {
+    const FIXED: usize = SIGNED_OVERHEAD - HEADER_LEN;
+    if body.len() < FIXED + HEADER_LEN {
         return Err(DropReason::Malformed);
     }
     let identity = PublicId::from_bytes(body[..32].try_into().expect("32 bytes"));
     let agreement: [u8; 32] = body[32..64].try_into().expect("32 bytes");
-    let signature: [u8; 64] = body[64..128].try_into().expect("64 bytes");
+    let count = u64::from_le_bytes(body[64..72].try_into().expect("8 bytes"));
+    let signature: [u8; 64] = body[72..136].try_into().expect("64 bytes");
     Ok(SignedView {
         header,
         identity,
         agreement,
+        count,
         signature,
-        inner: &body[128..],
+        inner: &body[FIXED..],
     })
 }
 
-/// `inner` (a complete datagram) signed by `identity`.
-pub fn wrap(inner: &[u8], identity: &Identity) -> Result<Vec<u8>, DropReason> {
+/// `inner` (a complete datagram) signed by `identity` as its sender's datagram number `count`.
+pub fn wrap(inner: &[u8], identity: &Identity, count: u64) -> Result<Vec<u8>, DropReason> {
     let (header, _) = Header::parse(inner)?;
     let mut out = Vec::with_capacity(SIGNED_OVERHEAD + inner.len());
     Header {
@@ -93,15 +98,17 @@ pub fn wrap(inner: &[u8], identity: &Identity) -> Result<Vec<u8>, DropReason> {
     let agreement = identity.agreement_public();
     out.extend_from_slice(identity.public().as_bytes());
     out.extend_from_slice(&agreement);
-    out.extend_from_slice(&identity.sign(&message(&agreement, inner)));
+    out.extend_from_slice(&count.to_le_bytes());
+    out.extend_from_slice(&identity.sign(&message(&agreement, count, inner)));
     out.extend_from_slice(inner);
     Ok(out)
 }
 
-fn message(agreement: &[u8; 32], inner: &[u8]) -> Vec<u8> {
-    let mut message = Vec::with_capacity(14 + 32 + inner.len());
-    message.extend_from_slice(b"ndds-signed-v1");
+fn message(agreement: &[u8; 32], count: u64, inner: &[u8]) -> Vec<u8> {
+    let mut message = Vec::with_capacity(14 + 32 + 8 + inner.len());
+    message.extend_from_slice(b"ndds-signed-v2");
     message.extend_from_slice(agreement);
+    message.extend_from_slice(&count.to_le_bytes());
     message.extend_from_slice(inner);
     message
 }

@@ -110,6 +110,10 @@ pub struct SimNet {
     sent: u64,
     /// Every datagram delivered so far.
     pub deliveries: Vec<Delivery>,
+    /// Nodes whose datagrams are kept in `recorded` (a recording attacker's view).
+    recording: HashSet<usize>,
+    /// What the recorded nodes sent, in order: sender, kind, bytes as sent.
+    pub recorded: Vec<(usize, MessageKind, Arc<[u8]>)>,
 }
 
 impl SimNet {
@@ -129,6 +133,8 @@ impl SimNet {
             in_flight: BTreeMap::new(),
             sent: 0,
             deliveries: Vec::new(),
+            recording: HashSet::new(),
+            recorded: Vec::new(),
         }
     }
 
@@ -389,6 +395,9 @@ impl SimNet {
                 .0
                 .kind
         };
+        if self.recording.contains(&from) {
+            self.recorded.push((from, kind, payload.clone()));
+        }
         let targets: Vec<usize> = match destination {
             Destination::Multicast => {
                 assert!(
@@ -433,6 +442,11 @@ impl SimNet {
     }
 
     // ----- inspection ----------------------------------------------------------------------
+    /// Keeps every datagram node `n` sends from now on in [`SimNet::recorded`].
+    pub fn record(&mut self, n: usize) {
+        self.recording.insert(n);
+    }
+
     /// Hands `bytes` to node `to` now, as if unicast from `from` (a forger's datagram).
     pub fn inject(&mut self, to: usize, from: Locator, bytes: &[u8]) {
         let from = SocketAddr::V4(SocketAddrV4::from(from));
