@@ -116,6 +116,11 @@ impl<S> Admission<S> {
         self.matched.len()
     }
 
+    /// The senders matched, and those let go but still believed for a moment.
+    pub fn senders(&self) -> impl Iterator<Item = &Guid> {
+        self.matched.keys().chain(self.departed.keys())
+    }
+
     /// Whether `sender` is matched (at any address).
     pub fn is_matched(&self, sender: &Guid) -> bool {
         self.matched.contains_key(sender)

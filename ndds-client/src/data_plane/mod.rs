@@ -532,7 +532,7 @@ impl DataPlane {
         at: SocketAddrV4,
         keys: &ndds_core::security::DataKeys,
     ) -> bool {
-        self.command(|core, _| core.set_pair_keys(peer, at, keys))
+        self.command(|core, now| core.set_pair_keys(now, peer, at, keys))
     }
 
     /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.

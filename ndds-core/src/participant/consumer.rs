@@ -332,6 +332,11 @@ impl ConsumerCore {
         }
     }
 
+    /// The participants of the endpoints it is matched with (or still believes a moment).
+    pub(crate) fn peers(&self) -> impl Iterator<Item = u64> + '_ {
+        self.admission.senders().map(|guid| guid.participant)
+    }
+
     /// The producers this consumer is matched with now (discovery's view): what was held for
     /// the new ones is acted on.
     pub(crate) fn set_matched(

@@ -30,10 +30,10 @@ mod transmit;
 use std::collections::VecDeque;
 use std::net::SocketAddrV4;
 use std::sync::Arc;
-use std::time::{Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 use bytes::Bytes;
-use foldhash::HashMap;
+use foldhash::{HashMap, HashSet};
 
 pub use consumer::{ConsumerCounters, ConsumerSpec};
 pub use outbox::{BatchConfig, BufferPool, MatchedConsumer};
@@ -58,6 +58,23 @@ use crate::wire::{
     self, DataDatagram, DataSub, DropReason, FeedbackDatagram, FeedbackSub, Guid, MAX_DATAGRAM,
     MessageKind,
 };
+
+/// A peer's data keys (domains with permissions) are dropped once it has been matched with
+/// none of a participant's endpoints for this long: twice [`crate::seal::SESSION_IDLE`], after
+/// which a receiver would take a silent sender's older session anyway.
+pub const PAIR_KEY_IDLE: Duration = Duration::from_secs(120);
+
+/// How often a participant holding data keys looks them over.
+const PAIR_KEY_SWEEP: Duration = Duration::from_secs(30);
+
+/// A peer this participant holds data keys for.
+#[derive(Clone, Copy, Debug)]
+struct PairPeer {
+    /// Its data socket (where its pair sealer sends).
+    at: SocketAddrV4,
+    /// When it was last seen matched (or given keys).
+    matched_at: Instant,
+}
 
 /// What a participant's data plane is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -191,6 +208,14 @@ pub struct ParticipantCore {
     /// The send key of each destination's pair sealer, so that the same keys given again keep
     /// the sealer (and its counter) instead of starting a new one at counter 0.
     pair_sends: std::collections::HashMap<SocketAddrV4, [u8; 32]>,
+    /// The peers this participant holds data keys for: where they are, and when they were
+    /// last matched (their keys are dropped [`PAIR_KEY_IDLE`] after that).
+    pair_peers: HashMap<u64, PairPeer>,
+    /// Pair sealers made so far: each new one seals for a session of its own, so that no
+    /// (key, nonce) is used twice when a pair's keys are dropped and given again.
+    pair_sealers_made: u64,
+    /// When the pair keys are looked over next.
+    next_pair_sweep: Option<Instant>,
     /// What was said in the log once already: (keyless traffic seen, sealed traffic seen).
     warned: (bool, bool),
 }
@@ -213,6 +238,9 @@ impl ParticipantCore {
             opener: None,
             warned: (false, false),
             pair_sends: std::collections::HashMap::new(),
+            pair_peers: HashMap::default(),
+            pair_sealers_made: 0,
+            next_pair_sweep: None,
         }
     }
 
@@ -252,29 +280,56 @@ impl ParticipantCore {
     }
 
     /// The data keys of this participant's pair with `peer`, whose data socket is `at`
-    /// (given by the daemon with the pair's first match). False when this participant seals
-    /// nothing, or already holds keys for [`crate::seal::MAX_SENDERS`] peers.
+    /// (given by the daemon before each match of the pair). False when this participant
+    /// seals nothing, or holds keys for [`crate::seal::MAX_SENDERS`] peers matched within
+    /// [`PAIR_KEY_IDLE`]. A peer's keys are dropped once it has been matched with none of
+    /// this participant's endpoints for [`PAIR_KEY_IDLE`].
     pub fn set_pair_keys(
         &mut self,
+        now: Instant,
         peer: u64,
         at: SocketAddrV4,
         keys: &crate::security::DataKeys,
     ) -> bool {
+        if self.opener.is_none() || self.transmits.sealer.is_none() {
+            return false;
+        }
+        let full = |core: &Self| {
+            !core.pair_peers.contains_key(&peer)
+                && (core.pair_peers.len() >= crate::seal::MAX_SENDERS
+                    || (!core.transmits.pair_sealers.contains_key(&at)
+                        && core.transmits.pair_sealers.len() >= crate::seal::MAX_SENDERS))
+        };
+        if full(self) {
+            self.sweep_pair_keys(now);
+            if full(self) {
+                return false;
+            }
+        }
         let (Some(opener), Some(sealer)) = (&mut self.opener, &self.transmits.sealer) else {
             return false;
         };
+        if !opener.set_pair_key(peer, crate::seal::DomainKey::from_bytes(keys.receive)) {
+            return false;
+        }
+        self.pair_peers.insert(
+            peer,
+            PairPeer {
+                at,
+                matched_at: now,
+            },
+        );
+        self.next_pair_sweep.get_or_insert(now + PAIR_KEY_SWEEP);
         let sealers = &mut self.transmits.pair_sealers;
         if self.pair_sends.get(&at) == Some(&keys.send) && sealers.contains_key(&at) {
             // The same keys again (another match of the same pair): the sealer keeps its
             // counter, so no (key, nonce) is ever used twice.
-            return opener.set_pair_key(peer, crate::seal::DomainKey::from_bytes(keys.receive));
+            return true;
         }
-        if !sealers.contains_key(&at) && sealers.len() >= crate::seal::MAX_SENDERS {
-            return false;
-        }
-        if !opener.set_pair_key(peer, crate::seal::DomainKey::from_bytes(keys.receive)) {
-            return false;
-        }
+        // A new sealer seals for a session no sealer of this participant used before: keys
+        // given again after they were dropped, or another key and then the first one again,
+        // never start a (key, session) over at counter 0.
+        self.pair_sealers_made += 1;
         let epoch = sealer.epoch();
         let keyring = Keyring::new(epoch, crate::seal::DomainKey::from_bytes(keys.send))
             .with_cipher(opener.keyring().cipher());
@@ -282,12 +337,48 @@ impl ParticipantCore {
             &keyring,
             self.config.domain,
             self.config.participant,
-            sealer.session(),
+            sealer.session().wrapping_add(self.pair_sealers_made),
             sealer.mode(),
         );
         sealers.insert(at, pair);
         self.pair_sends.insert(at, keys.send);
         true
+    }
+
+    /// Peers this participant holds data keys for.
+    pub fn pair_peers(&self) -> usize {
+        self.pair_peers.len()
+    }
+
+    /// Drops the data keys of peers matched with none of this participant's endpoints for
+    /// [`PAIR_KEY_IDLE`] (the daemon gives them again with a new match).
+    fn sweep_pair_keys(&mut self, now: Instant) {
+        let matched: HashSet<u64> = self
+            .consumers
+            .values()
+            .flat_map(ConsumerCore::peers)
+            .chain(self.producers.values().flat_map(ProducerCore::peers))
+            .collect();
+        let mut dropped = Vec::new();
+        for (peer, state) in &mut self.pair_peers {
+            if matched.contains(peer) {
+                state.matched_at = now;
+            } else if now.saturating_duration_since(state.matched_at) >= PAIR_KEY_IDLE {
+                dropped.push((*peer, state.at));
+            }
+        }
+        for (peer, at) in dropped {
+            self.pair_peers.remove(&peer);
+            if let Some(opener) = &mut self.opener {
+                opener.remove_pair_key(peer);
+            }
+            // The destination's sealer stays while another peer of ours is there.
+            if !self.pair_peers.values().any(|other| other.at == at) {
+                self.transmits.pair_sealers.remove(&at);
+                self.pair_sends.remove(&at);
+            }
+        }
+        self.next_pair_sweep = (!self.pair_peers.is_empty()).then_some(now + PAIR_KEY_SWEEP);
     }
 
     /// A rotation step: seals with `keyring`'s sending key and accepts its keys only.
@@ -773,6 +864,9 @@ impl ParticipantCore {
     /// Runs every timer due at `now`: deadlines and separation windows, heartbeats,
     /// acknowledgements and repairs, batch flushes, piece requests, admission hold expiry.
     pub fn handle_timeout(&mut self, now: Instant) {
+        if self.next_pair_sweep.is_some_and(|at| at <= now) {
+            self.sweep_pair_keys(now);
+        }
         let config = &self.config;
         if self.repair.poll_timeout().is_some_and(|at| at <= now) {
             self.repair.handle_timeout(
@@ -804,6 +898,7 @@ impl ParticipantCore {
             .filter_map(|c| c.due)
             .chain(self.producers.values().filter_map(|p| p.due))
             .chain(self.repair.poll_timeout())
+            .chain(self.next_pair_sweep)
             .min()
     }
 

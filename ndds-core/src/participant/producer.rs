@@ -153,6 +153,11 @@ impl ProducerCore {
         }
     }
 
+    /// The participants of the endpoints it is matched with (or still believes a moment).
+    pub(crate) fn peers(&self) -> impl Iterator<Item = u64> + '_ {
+        self.believed.senders().map(|guid| guid.participant)
+    }
+
     /// Rebuilds the destinations from the matched consumers; a reliable producer starts
     /// serving the reliable consumers that appeared and forgets those that left.
     pub(crate) fn set_matched(

@@ -103,16 +103,28 @@ impl Opener {
         true
     }
 
+    /// Forgets `sender`'s data key and what was opened from it (its pair was unmatched a
+    /// while ago).
+    pub fn remove_pair_key(&mut self, sender: u64) {
+        if self.pair_keys.remove(&sender).is_some() {
+            self.senders.retain(|(from, _), _| *from != sender);
+        }
+    }
+
     /// Refuses every sender without a data key ([`Opener::set_pair_key`]).
     pub fn require_pair_keys(&mut self) {
         self.require_pairs = true;
     }
 
     /// Takes a new keyring (a rotation step): senders of epochs it no longer holds are
-    /// forgotten, and their datagrams refused from now on.
+    /// forgotten, and their datagrams refused from now on. Senders with a data key open with
+    /// it whatever their epoch: what was opened from them stays (their replay windows with
+    /// it).
     pub fn set_keyring(&mut self, keyring: Keyring) {
-        self.senders
-            .retain(|(_, epoch), _| keyring.key(*epoch).is_some());
+        let pair_keys = &self.pair_keys;
+        self.senders.retain(|(sender, epoch), _| {
+            pair_keys.contains_key(sender) || keyring.key(*epoch).is_some()
+        });
         self.keyring = keyring;
     }
 

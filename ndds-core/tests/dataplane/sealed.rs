@@ -149,12 +149,13 @@ fn with_data_keys_a_host_with_only_the_domain_key_reads_and_writes_nothing() {
         assert!(net.nodes[node].core.require_pair_keys());
     }
     let shared = [42u8; 32];
+    let now = net.now;
     for (a, b) in [(0, 1), (1, 0)] {
         let keys = DataKeys::derive(&shared, participant_id(a), participant_id(b));
         assert!(
             net.nodes[a]
                 .core
-                .set_pair_keys(participant_id(b), locator(b), &keys)
+                .set_pair_keys(now, participant_id(b), locator(b), &keys)
         );
     }
     net.add_producer(0, 1, reliable_producer(16));
@@ -219,12 +220,13 @@ fn data_keys_given_again_reuse_no_nonce() {
         assert!(net.nodes[node].core.require_pair_keys());
     }
     let install = |net: &mut SimNet| {
+        let now = net.now;
         for (a, b) in [(0, 1), (1, 0)] {
             let keys = DataKeys::derive(&[5u8; 32], participant_id(a), participant_id(b));
             assert!(
                 net.nodes[a]
                     .core
-                    .set_pair_keys(participant_id(b), locator(b), &keys)
+                    .set_pair_keys(now, participant_id(b), locator(b), &keys)
             );
         }
     };
@@ -242,4 +244,156 @@ fn data_keys_given_again_reuse_no_nonce() {
     let seal = stats(&net, 1).seal;
     assert_eq!(seal.dropped(OpenError::Replayed), 0, "{seal:?}");
     assert_eq!(seal.dropped(OpenError::BadTag), 0, "{seal:?}");
+}
+
+/// A pair unmatched for [`PAIR_KEY_IDLE`] loses its keys on both sides (the tables shrink);
+/// given again with a new match, they seal for a new session: no (key, session, counter) is
+/// ever sent twice, the receiver refuses nothing, and the stream goes on.
+#[test]
+fn data_keys_of_a_pair_long_unmatched_are_dropped_and_given_again_without_reusing_a_nonce() {
+    use crate::sim::{locator, participant_id};
+    use ndds_core::participant::PAIR_KEY_IDLE;
+    use ndds_core::security::DataKeys;
+    let mut net = SimNet::new(11, 2);
+    net.tap = Some(Vec::new());
+    for node in 0..2 {
+        net.nodes[node]
+            .core
+            .seal_with(setup(7, 1, SealMode::Encrypt));
+        assert!(net.nodes[node].core.require_pair_keys());
+    }
+    let install = |net: &mut SimNet| {
+        let now = net.now;
+        for (a, b) in [(0, 1), (1, 0)] {
+            let keys = DataKeys::derive(&[6u8; 32], participant_id(a), participant_id(b));
+            assert!(
+                net.nodes[a]
+                    .core
+                    .set_pair_keys(now, participant_id(b), locator(b), &keys)
+            );
+        }
+    };
+    install(&mut net);
+    net.add_producer(0, 1, reliable_producer(16));
+    net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
+    net.connect((0, 1), (1, 10));
+    net.add_writer(WriterApp::new(0, 1, 50, MS, 0));
+    net.run_for(Duration::from_secs(1));
+    assert_eq!(
+        exactly(&net.consumer(1, 10).seqs_from(guid(0, 1)), 1, 50),
+        Ok(())
+    );
+    // Matched for a while longer: the keys stay.
+    net.run_for(PAIR_KEY_IDLE + Duration::from_secs(40));
+    assert_eq!(net.nodes[0].core.pair_peers(), 1);
+    net.disconnect((0, 1), (1, 10));
+    net.run_for(PAIR_KEY_IDLE - Duration::from_secs(30));
+    assert_eq!(
+        net.nodes[0].core.pair_peers(),
+        1,
+        "dropped before PAIR_KEY_IDLE"
+    );
+    net.run_for(Duration::from_secs(70));
+    for node in 0..2 {
+        assert_eq!(
+            net.nodes[node].core.pair_peers(),
+            0,
+            "node {node} kept its keys"
+        );
+    }
+    // Matched again: the daemon gives the same keys again.
+    // (Another producer of node 0: the pair is the same pair of participants.)
+    install(&mut net);
+    net.add_producer(0, 2, reliable_producer(16));
+    net.connect((0, 2), (1, 10));
+    net.add_writer(WriterApp::new(0, 2, 50, MS, 0));
+    net.run_for(Duration::from_secs(2));
+    assert_eq!(
+        exactly(&net.consumer(1, 10).seqs_from(guid(0, 2)), 1, 50),
+        Ok(())
+    );
+    let seal = stats(&net, 1).seal;
+    assert_eq!(seal.dropped(OpenError::Replayed), 0, "{seal:?}");
+    assert_eq!(seal.dropped(OpenError::BadTag), 0, "{seal:?}");
+    // Every sealed datagram's (sender, destination, session, counter) once: its nonce under
+    // the pair's key was never used again.
+    let mut nonces = std::collections::HashSet::new();
+    let tap = net.tap.take().unwrap();
+    for (from, to, bytes) in &tap {
+        let session = u64::from_le_bytes(bytes[20..28].try_into().unwrap());
+        let counter = u64::from_le_bytes(bytes[28..36].try_into().unwrap());
+        assert!(
+            nonces.insert((*from, *to, session, counter)),
+            "node {from} sealed counter {counter} of session {session} for {to} twice"
+        );
+    }
+    assert!(tap.len() > 100, "{} datagrams", tap.len());
+}
+
+/// A rotation of the domain key keeps what was opened from senders with data keys: a
+/// datagram of the pair recorded before the rotation, replayed after it, is refused.
+#[test]
+fn a_domain_key_rotation_keeps_the_replay_windows_of_pairs() {
+    use crate::sim::{locator, participant_id};
+    use ndds_core::security::DataKeys;
+    let mut net = SimNet::new(12, 2);
+    net.tap = Some(Vec::new());
+    for node in 0..2 {
+        net.nodes[node]
+            .core
+            .seal_with(setup(7, 1, SealMode::Encrypt));
+        assert!(net.nodes[node].core.require_pair_keys());
+    }
+    let now = net.now;
+    for (a, b) in [(0, 1), (1, 0)] {
+        let keys = DataKeys::derive(&[8u8; 32], participant_id(a), participant_id(b));
+        assert!(
+            net.nodes[a]
+                .core
+                .set_pair_keys(now, participant_id(b), locator(b), &keys)
+        );
+    }
+    net.add_producer(0, 1, reliable_producer(16));
+    net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
+    net.connect((0, 1), (1, 10));
+    net.add_writer(WriterApp::new(0, 1, 20, MS, 0));
+    net.run_for(Duration::from_secs(1));
+    assert_eq!(
+        exactly(&net.consumer(1, 10).seqs_from(guid(0, 1)), 1, 20),
+        Ok(())
+    );
+    let recorded: Vec<Vec<u8>> = net
+        .tap
+        .take()
+        .unwrap()
+        .into_iter()
+        .filter(|(from, to, _)| *from == 0 && *to == locator(1))
+        .map(|(_, _, bytes)| bytes.to_vec())
+        .collect();
+    // (What was still in flight arrives first.)
+    net.run_for(Duration::from_millis(100));
+    // Both rotate to epoch 2, the old epoch no longer accepted.
+    for node in 0..2 {
+        net.nodes[node]
+            .core
+            .set_keyring(Keyring::new(2, DomainKey::from_bytes([9; 32])));
+    }
+    let before = stats(&net, 1).seal;
+    for bytes in &recorded {
+        net.inject(locator(0), 1, bytes.clone());
+    }
+    net.run_for(Duration::from_millis(100));
+    let after = stats(&net, 1).seal;
+    assert_eq!(
+        after.opened, before.opened,
+        "a recorded datagram opened again"
+    );
+    assert_eq!(
+        after.dropped(OpenError::Replayed) - before.dropped(OpenError::Replayed),
+        recorded.len() as u64
+    );
+    assert_eq!(
+        exactly(&net.consumer(1, 10).seqs_from(guid(0, 1)), 1, 20),
+        Ok(())
+    );
 }

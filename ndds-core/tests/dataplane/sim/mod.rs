@@ -187,6 +187,8 @@ pub struct SimNet {
     pub stats: NetStats,
     /// Datagrams sent to addresses no node has: (to, bytes).
     pub outsiders: Vec<(SocketAddrV4, usize)>,
+    /// Every datagram sent, (from, to, bytes), while it is `Some`.
+    pub tap: Option<Vec<(usize, SocketAddrV4, Bytes)>>,
 }
 
 impl SimNet {
@@ -226,6 +228,7 @@ impl SimNet {
             queued_before: HashMap::new(),
             stats: NetStats::default(),
             outsiders: Vec::new(),
+            tap: None,
         }
     }
 
@@ -593,6 +596,9 @@ impl SimNet {
 
     fn send(&mut self, from: usize, to: SocketAddrV4, bytes: Bytes) {
         self.stats.sent += 1;
+        if let Some(tap) = &mut self.tap {
+            tap.push((from, to, bytes.clone()));
+        }
         self.stats.largest = self.stats.largest.max(bytes.len());
         let Some(dest) = self.nodes.iter().position(|n| n.addr == to) else {
             self.stats.unroutable += 1;
