@@ -526,11 +526,12 @@ fn discovery_engine_seeds(corpus: &mut Corpus) {
         if flags & flag::GUARDED != 0 {
             remote.guard_with(discovery::guard(1));
         }
+        let participant = discovery::participant(1, flags & flag::GUARDED != 0);
         remote
-            .add_local(discovery::endpoint(0xB0, 1, true, 1))
+            .add_local(discovery::endpoint(participant, 1, true, 1))
             .expect("declared");
         remote
-            .add_local(discovery::endpoint(0xB0, 2, false, 1))
+            .add_local(discovery::endpoint(participant, 2, false, 1))
             .expect("declared");
         let mut script = Script::new();
         script.u8(flags);

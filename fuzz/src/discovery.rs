@@ -141,6 +141,19 @@ pub fn guard(index: u8) -> Guard {
 pub const REMOTE_NODES: [u64; 3] = [0x1001, 0x1002, 0x1003];
 /// Participant id of the engine's own endpoints.
 pub const LOCAL_PARTICIPANT: u64 = 0xA0;
+
+/// The participant id of host `index`'s client: fixed (0xA0 for the engine under test, 0xB0
+/// for the others), or (`guarded`) one of its identity's, as a domain with permissions
+/// requires.
+pub fn participant(index: u8, guarded: bool) -> u64 {
+    match (guarded, index) {
+        (true, _) => {
+            ndds_core::security::node_id_for(&identity(index).public(), 0x100 + u64::from(index))
+        }
+        (false, 0) => LOCAL_PARTICIPANT,
+        (false, _) => 0xB0,
+    }
+}
 /// The topic every fixture endpoint uses.
 pub const TOPIC: &str = "fuzz/pose";
 
@@ -331,7 +344,8 @@ impl Harness {
             op::LOCALS => {
                 let byte = chunk.u8();
                 let entity = u32::from(byte >> 2 & 7) + 1;
-                let info = endpoint(LOCAL_PARTICIPANT, entity, byte & 1 != 0, 0);
+                let guarded = self.flags & flag::GUARDED != 0;
+                let info = endpoint(participant(0, guarded), entity, byte & 1 != 0, 0);
                 if byte & 2 != 0 {
                     self.engine.remove_locals(&[info.guid]);
                 } else {

@@ -1013,8 +1013,9 @@ impl Engine {
     }
 
     /// In a domain with permissions, a node is bound to the identity it first signed with:
-    /// its datagrams must carry that identity from then on. A node first heard unsigned is
-    /// bound when it first signs (and its endpoints are judged again).
+    /// its datagrams must carry that identity from then on. (A node known unsigned, from
+    /// before the engine enforced a document, is bound when it first signs, and its
+    /// endpoints are judged again.)
     fn check_identity(&mut self, node: u64, identity: Option<Speaker>) -> Result<(), DropReason> {
         if self.guard.is_none() {
             return Ok(());

@@ -16,8 +16,9 @@
 //! receiver with no state per pair and nothing to lose on a lossy link. Its cost is one
 //! Ed25519 signature per datagram sent and one verification per datagram received (tens of
 //! microseconds; discovery sends a few datagrams per second). The seal refuses replays
-//! by hosts without the domain key, so a permissions document requires one (replays by a
-//! holder of the key are a known gap: docs/security.md).
+//! by hosts without the domain key, so a permissions document requires one; replays by a
+//! holder of the key are refused by the count each signed datagram carries
+//! ([`crate::wire::signed`]).
 
 mod identity;
 mod permissions;

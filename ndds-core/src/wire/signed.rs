@@ -2,20 +2,22 @@
 //! domains with a permissions document.
 //!
 //! ```text
-//!  0                16                  48                  80                           144
-//!  +----------------+-------------------+-------------------+----------------------------+------
-//!  | header (kind 7)| identity (32)     | agreement (32)    | signature (64)             | inner
-//!  +----------------+-------------------+-------------------+----------------------------+------
+//!  0                16                48                80          88                  152
+//!  +----------------+-----------------+-----------------+-----------+-------------------+------
+//!  | header (kind 7)| identity (32)   | agreement (32)  | count (8) | signature (64)    | inner
+//!  +----------------+-----------------+-----------------+-----------+-------------------+------
 //! ```
 //!
 //! `inner` is a complete discovery datagram (header and body) of the same domain and sender;
 //! `agreement` is the sender's X25519 public key (for the data keys of its participants'
-//! pairs, [`crate::security::DataKeys`]); the signature is the identity's Ed25519 signature of
-//! `ndds-signed-v1`, then `agreement`, then `inner`.
+//! pairs, [`crate::security::DataKeys`]); `count` (little-endian) numbers the node's signed
+//! datagrams from 1, one more for each; the signature is the identity's Ed25519 signature of
+//! `ndds-signed-v2`, then `agreement`, `count` and `inner`.
 //! Every datagram a daemon with an identity sends is signed, so a node's endpoints, leases
-//! and `Bye` are believed only from the identity it first spoke with. (The domain key's seal
-//! refuses replays by hosts without the key; a host with it can re-seal an old signed
-//! datagram, which nothing refuses yet: docs/security.md, "Known gaps".)
+//! and `Bye` are believed only from its identity; a receiver takes each count of a node once
+//! (a replay window per node, and the highest count of a node that is gone kept for a while),
+//! so a host that holds the domain key and re-seals a recorded signed datagram gets nothing
+//! from it.
 
 use super::DropReason;
 use super::header::{HEADER_LEN, Header, MessageKind};
