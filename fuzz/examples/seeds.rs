@@ -195,7 +195,7 @@ fn wire_seeds(corpus: &mut Corpus) {
     let mut engine = Engine::new(discovery::config(1, false), now).expect("valid config");
     for (entity, producer) in [(1, true), (2, false)] {
         engine
-            .add_local(discovery::endpoint(0xB0, entity, producer, 1))
+            .add_local(now, discovery::endpoint(0xB0, entity, producer, 1))
             .expect("declared");
     }
     engine.remove_locals(&[Guid {
@@ -528,10 +528,10 @@ fn discovery_engine_seeds(corpus: &mut Corpus) {
         }
         let participant = discovery::participant(1, flags & flag::GUARDED != 0);
         remote
-            .add_local(discovery::endpoint(participant, 1, true, 1))
+            .add_local(now, discovery::endpoint(participant, 1, true, 1))
             .expect("declared");
         remote
-            .add_local(discovery::endpoint(participant, 2, false, 1))
+            .add_local(now, discovery::endpoint(participant, 2, false, 1))
             .expect("declared");
         let mut script = Script::new();
         script.u8(flags);

@@ -349,7 +349,7 @@ impl Harness {
                 if byte & 2 != 0 {
                     self.engine.remove_locals(&[info.guid]);
                 } else {
-                    let _ = self.engine.add_local(info);
+                    let _ = self.engine.add_local(self.now, info);
                 }
             }
             _ => self.engine.close(),

@@ -61,7 +61,9 @@ fn life(multicast: bool) -> Vec<(MessageKind, Vec<Destination>)> {
         engine.handle_timeout(now + Duration::from_millis(ms));
         drain(&mut engine);
     }
-    engine.add_local(producer(1)).unwrap();
+    engine
+        .add_local(now + Duration::from_millis(2500), producer(1))
+        .unwrap();
     engine.remove_locals(&[producer(1).guid]);
     engine.close();
     drain(&mut engine);

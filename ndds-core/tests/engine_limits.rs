@@ -204,7 +204,7 @@ fn a_flood_of_forged_nodes_cannot_keep_genuine_nodes_out() {
     };
     let mut consumer = on_topic(1, 1, EndpointQos::Consumer(Default::default()));
     consumer.guid.participant = 0xC0FFEE;
-    engine.add_local(consumer.clone()).unwrap();
+    engine.add_local(now, consumer.clone()).unwrap();
     let genuine = |engine: &mut Engine, host: u8, id: u64| {
         let unicast = locator(host, 7600);
         let announce = Message::Announce(Announce {

@@ -86,6 +86,44 @@ fn late_joiner_matches_without_waiting_for_a_refresh() {
 }
 
 #[test]
+fn a_burst_of_declarations_is_announced_in_a_datagram_per_hold() {
+    let mut net = network(21, 2, PERIOD, LEASE);
+    net.run_for(Duration::from_millis(1500));
+    net.record(0);
+    let since = net.elapsed();
+    // A program declaring its endpoints one by one, 200 µs apart (its daemon's answer each
+    // time), 2 ms in all.
+    let producers: Vec<_> = (1..=10)
+        .map(|entity| producer::<Pose>(guid(0, entity), &format!("arm/joint{entity}")))
+        .collect();
+    for info in &producers {
+        net.add_local(0, info.clone());
+        net.run_for(Duration::from_micros(200));
+    }
+    net.run_for(Duration::from_millis(20));
+    let hold = DiscoveryConfig::new(0, locator(0)).declare_coalesce;
+    // The first went at once, the other nine together when the hold ended.
+    let announces: Vec<_> = net
+        .deliveries
+        .iter()
+        .filter(|d| d.at >= since && d.from == 0 && d.kind == MessageKind::Announce)
+        .map(|d| d.at - since)
+        .collect();
+    assert_eq!(announces.len(), 2, "{announces:?}");
+    assert!(announces[0] <= 2 * MS, "{announces:?}");
+    assert!(announces[1] <= hold + 2 * MS, "{announces:?}");
+    for info in &producers {
+        assert!(net.knows(1, info.guid), "{} not known", info.guid);
+    }
+    // A declaration alone, after the hold, goes at once.
+    net.run_for(Duration::from_millis(100));
+    let alone = producer::<Pose>(guid(0, 11), "arm/gripper");
+    net.add_local(0, alone.clone());
+    net.run_for(2 * MS);
+    assert!(net.knows(1, alone.guid), "a single declaration waited");
+}
+
+#[test]
 fn local_endpoint_matches_on_both_nodes_and_locally() {
     let mut net = network(2, 2, PERIOD, LEASE);
     let t0 = net.elapsed();
@@ -577,7 +615,7 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
     let start = std::time::Instant::now();
     let mut engine = Engine::new(config(0, 1, PERIOD, LEASE), start).unwrap();
     engine
-        .add_local(producer::<Pose>(guid(0, 1), "arm/pose"))
+        .add_local(start, producer::<Pose>(guid(0, 1), "arm/pose"))
         .unwrap();
     engine.handle_timeout(start);
     let own: Vec<Vec<u8>> = std::iter::from_fn(|| engine.poll_transmit())
@@ -594,7 +632,7 @@ fn own_and_foreign_domain_datagrams_are_counted_and_ignored() {
     let mut other =
         Engine::new(DiscoveryConfig::new(simnet::DOMAIN + 1, locator(1)), start).unwrap();
     other
-        .add_local(producer::<Pose>(guid(1, 1), "arm/pose"))
+        .add_local(start, producer::<Pose>(guid(1, 1), "arm/pose"))
         .unwrap();
     let foreign = other.poll_transmit().unwrap().payload;
     engine.handle_datagram(start, from, Via::Multicast, &foreign);

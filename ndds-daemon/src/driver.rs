@@ -610,7 +610,10 @@ impl Driver {
             pid: hello.pid,
             process: hello.name.clone(),
         };
-        let result = self.engine.add_local(info).map_err(|err| err.to_string());
+        let result = self
+            .engine
+            .add_local(Instant::now(), info)
+            .map_err(|err| err.to_string());
         if result.is_ok()
             && let Some(entry) = self.clients.get_mut(&client)
         {
@@ -676,9 +679,11 @@ impl Driver {
         graph
     }
 
-    /// One page of the view: everything but the endpoints, and the endpoints with guids after
-    /// `after`, in guid order, at most [`GRAPH_PAGE`] of them or [`GRAPH_PAGE_BYTES`] (at
-    /// least one); with the guid to continue after, if more remain.
+    /// One page of the view: the endpoints with guids after `after`, in guid order, at most
+    /// [`GRAPH_PAGE`] of them or [`GRAPH_PAGE_BYTES`] (at least one); with the guid to
+    /// continue after, if more remain. The first page (`after` is `None`) also carries the
+    /// nodes and clients; a later one only its endpoints (with the local summary and the
+    /// counters), and costs its own length, not the table's.
     pub fn graph_page(&self, after: Option<Guid>) -> (Graph, Option<Guid>) {
         let now = Instant::now();
         let millis_until = |t: Instant| t.saturating_duration_since(now).as_millis() as u64;
@@ -707,14 +712,21 @@ impl Driver {
             })
             .collect();
         let mut refused: std::collections::HashMap<u64, u32> = std::collections::HashMap::new();
-        for entry in self.engine.endpoints() {
+        let first = after.is_none();
+        for entry in self.engine.endpoints().filter(|_| first) {
             if let (Origin::Remote(node), Some(_)) = (entry.origin, &entry.refused) {
                 *refused.entry(node).or_default() += 1;
             }
         }
+        let hostnames: std::collections::HashMap<u64, &str> = self
+            .engine
+            .nodes()
+            .map(|(node, remote)| (node, remote.info.hostname.as_str()))
+            .collect();
         let mut nodes: Vec<NodeSummary> = self
             .engine
             .nodes()
+            .filter(|_| first)
             .map(|(node, remote)| NodeSummary {
                 node,
                 interface: remote.info.unicast.addr,
@@ -742,30 +754,23 @@ impl Driver {
             Origin::Local => (self.engine.node_id(), local.info.hostname.clone()),
             Origin::Remote(node) => (
                 node,
-                nodes
-                    .iter()
-                    .find(|n| n.node == node)
-                    .map(|n| n.info.hostname.clone())
-                    .unwrap_or_default(),
+                hostnames.get(&node).copied().unwrap_or_default().to_owned(),
             ),
         };
-        let mut page: Vec<&ndds_core::discovery::Entry> = self
-            .engine
-            .endpoints()
-            .filter(|entry| after.is_none_or(|after| entry.info.guid > after))
-            .collect();
-        page.sort_unstable_by_key(|entry| entry.info.guid);
+        let mut listed = self.engine.endpoints_after(after).peekable();
+        let mut page: Vec<&ndds_core::discovery::Entry> = Vec::new();
         let mut bytes = 0;
-        let mut taken = 0;
-        for entry in &page {
-            if taken == GRAPH_PAGE || (taken > 0 && bytes >= GRAPH_PAGE_BYTES) {
-                break;
-            }
+        while let Some(entry) = listed
+            .next_if(|_| page.len() < GRAPH_PAGE && (page.is_empty() || bytes < GRAPH_PAGE_BYTES))
+        {
             bytes += ndds_core::discovery::table::entry_cost(&entry.info);
-            taken += 1;
+            page.push(entry);
         }
-        let next = (taken < page.len()).then(|| page[taken - 1].info.guid);
-        page.truncate(taken);
+        let next = listed
+            .peek()
+            .is_some()
+            .then(|| page.last().map(|entry| entry.info.guid))
+            .flatten();
         let endpoints: Vec<EndpointSummary> = page
             .into_iter()
             .map(|entry| {
@@ -781,7 +786,11 @@ impl Driver {
         let graph = Graph {
             local,
             nodes,
-            clients: self.client_summaries(),
+            clients: if first {
+                self.client_summaries()
+            } else {
+                Vec::new()
+            },
             endpoints,
             counters: self.counters(),
         };

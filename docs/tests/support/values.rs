@@ -250,7 +250,9 @@ fn engine_limits() -> EngineLimits {
             pid: 1,
             process: "probe".to_owned(),
         };
-        engine.add_local(info).expect("probe endpoint accepted");
+        engine
+            .add_local(now, info)
+            .expect("probe endpoint accepted");
     }
     drain(&mut engine);
     engine.remove_locals(&guids);

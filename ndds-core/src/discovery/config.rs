@@ -41,6 +41,12 @@ pub struct DiscoveryConfig {
     pub withdraw_repeats: u8,
     /// Target size of one announcement datagram; larger announcements are split (default 16 KiB).
     pub announce_chunk: usize,
+    /// Declarations that follow an announced one within this time are held and announced
+    /// together when it has passed (default 5 ms; zero announces each at once). A single
+    /// declaration goes out at once; a burst (a program declaring its endpoints one by one)
+    /// costs a datagram per window instead of one per endpoint, and in a domain with
+    /// permissions a signature per window.
+    pub declare_coalesce: Duration,
     /// Whether to use the domain's multicast group (default true). When false the engine never
     /// produces a [`Destination::Multicast`](super::Destination::Multicast) transmit: discovery
     /// then relies on `peers` and on the nodes that list this one as their peer.
@@ -77,6 +83,7 @@ impl DiscoveryConfig {
             period_jitter: 0.1,
             withdraw_repeats: 3,
             announce_chunk: 16 * 1024,
+            declare_coalesce: Duration::from_millis(5),
             multicast: true,
             peers: Vec::new(),
         }
@@ -104,6 +111,12 @@ impl DiscoveryConfig {
         }
         if self.reply_jitter > MAX_DELAY {
             return Err(ConfigError::ReplyJitter(self.reply_jitter));
+        }
+        if self.declare_coalesce >= self.announce_period {
+            return Err(ConfigError::Coalesce {
+                coalesce: self.declare_coalesce,
+                period: self.announce_period,
+            });
         }
         if !(MIN_CHUNK..=MAX_CHUNK).contains(&self.announce_chunk) {
             return Err(ConfigError::Chunk(self.announce_chunk));
@@ -158,6 +171,17 @@ pub enum ConfigError {
     /// Reply jitter longer than a minute.
     #[error("reply jitter {0:?} is longer than 60 s")]
     ReplyJitter(Duration),
+    /// Declarations held longer than a refresh period.
+    #[error(
+        "declarations may be held ({coalesce:?}) only for less than the announce period \
+         ({period:?})"
+    )]
+    Coalesce {
+        /// Configured hold.
+        coalesce: Duration,
+        /// Configured period.
+        period: Duration,
+    },
     /// Announcement chunk size out of range.
     #[error("announcement chunk of {0} bytes is outside {MIN_CHUNK}..={MAX_CHUNK}")]
     Chunk(usize),
@@ -203,6 +227,20 @@ mod tests {
             assert_eq!(err, ConfigError::Peer(bad));
             assert!(err.to_string().contains(&bad.to_string()), "{err}");
         }
+    }
+
+    #[test]
+    fn declarations_are_held_for_less_than_a_period() {
+        let mut config = DiscoveryConfig::new(0, loc([10, 0, 0, 1], 7850));
+        config.declare_coalesce = Duration::ZERO;
+        assert_eq!(config.validate(), Ok(()));
+        config.declare_coalesce = config.announce_period;
+        let err = config.validate().unwrap_err();
+        assert!(matches!(err, ConfigError::Coalesce { .. }), "{err}");
+        assert!(
+            err.to_string().contains("less than the announce period"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -245,6 +245,11 @@ pub struct Engine {
     signed_count: u64,
     /// The highest datagram numbers of nodes that are gone.
     gone: Gone,
+    /// Local endpoints declared within `declare_coalesce` of an announced declaration, to be
+    /// announced together at `declared_hold`.
+    declared: Vec<Guid>,
+    /// Until when declarations are held after one was announced.
+    declared_hold: Option<Instant>,
     /// Identity and permissions, in a domain with a permissions document.
     guard: Option<Guard>,
     /// The permissions document's validity ended.
@@ -298,6 +303,8 @@ impl Engine {
             warned_unsigned: false,
             signed_count: 0,
             gone: Gone::default(),
+            declared: Vec::new(),
+            declared_hold: None,
             guard: None,
             permissions_expired: false,
         })
@@ -432,6 +439,12 @@ impl Engine {
     /// Every known endpoint, local and remote.
     pub fn endpoints(&self) -> impl Iterator<Item = &Entry> {
         self.table.iter()
+    }
+
+    /// The endpoints with guids after `after` (all for `None`), in guid order: a page of a
+    /// listing costs its own length, not the table's.
+    pub fn endpoints_after(&self, after: Option<Guid>) -> impl Iterator<Item = &Entry> {
+        self.table.after(after)
     }
 
     /// The entry of one endpoint.
@@ -1105,11 +1118,14 @@ impl Engine {
         }
     }
 
-    /// Declares a local endpoint: matches it at once and announces it to the domain.
-    pub fn add_local(&mut self, info: EndpointInfo) -> Result<(), LocalError> {
+    /// Declares a local endpoint at `now`: matches it at once and announces it to the domain
+    /// (at once, or with the declarations that follow it within `declare_coalesce` of an
+    /// announced one).
+    pub fn add_local(&mut self, now: Instant, info: EndpointInfo) -> Result<(), LocalError> {
         if self.closed {
             return Err(LocalError::Closed);
         }
+        self.now = self.now.max(now);
         if self.table.get(&info.guid).is_some() {
             return Err(LocalError::Duplicate(info.guid));
         }
@@ -1147,6 +1163,7 @@ impl Engine {
         }
         // A guid declared again must no longer be listed as withdrawn.
         self.withdrawn.retain(|(guid, _)| *guid != info.guid);
+        let guid = info.guid;
         let entry = Entry {
             info,
             origin: Origin::Local,
@@ -1154,9 +1171,51 @@ impl Engine {
             refused: None,
         };
         self.table.insert(entry, &mut self.events);
-        let destinations = self.fanout();
-        self.push_transmits(&destinations, payload.into());
+        if self.declared_hold.is_some_and(|until| now < until) {
+            // A burst: announced with the rest of it when the hold ends.
+            self.declared.push(guid);
+        } else if !self.declared.is_empty() {
+            // The hold ended before the engine's timer ran: everything held goes now.
+            self.declared.push(guid);
+            self.flush_declared(now);
+        } else {
+            let destinations = self.fanout();
+            self.push_transmits(&destinations, payload.into());
+            self.hold_declarations(now);
+        }
         Ok(())
+    }
+
+    /// Holds declarations for `declare_coalesce` after one was announced.
+    fn hold_declarations(&mut self, now: Instant) {
+        let hold = self.config.declare_coalesce;
+        self.declared_hold = (!hold.is_zero()).then_some(now + hold);
+    }
+
+    /// Announces the declarations held, together.
+    fn flush_declared(&mut self, now: Instant) {
+        let held = std::mem::take(&mut self.declared);
+        let infos: Vec<EndpointInfo> = held
+            .iter()
+            .filter_map(|guid| self.table.get(guid))
+            .filter(|entry| entry.origin == Origin::Local)
+            .map(|entry| entry.info.clone())
+            .collect();
+        if infos.is_empty() {
+            return;
+        }
+        let refs: Vec<&EndpointInfo> = infos.iter().collect();
+        let destinations = self.fanout();
+        for (endpoints, _, _) in self.chunk_endpoints(&refs) {
+            let message = Message::Announce(Announce {
+                node: self.node_info(),
+                endpoints,
+                withdrawn: Vec::new(),
+            });
+            self.encode_and_push(&destinations, &message);
+        }
+        // A burst that goes on is held again.
+        self.hold_declarations(now);
     }
 
     /// Removes local endpoints (a client closed them or disconnected) and withdraws them.
@@ -1235,8 +1294,13 @@ impl Engine {
         for to in due {
             self.announce_all(&[Destination::Unicast(to)], false);
         }
+        if !self.declared.is_empty() && self.declared_hold.is_some_and(|at| at <= now) {
+            self.flush_declared(now);
+        }
         if self.next_announce <= now {
             let destinations = self.fanout();
+            // Everything local goes: the declarations held with it.
+            self.declared.clear();
             self.announce_all(&destinations, true);
             let jittered = self.jittered_period();
             self.next_announce = now + jittered;
@@ -1288,6 +1352,7 @@ impl Engine {
             .copied()
             .into_iter()
             .chain(self.replies.iter().map(|(at, _)| *at))
+            .chain(self.declared_hold.filter(|_| !self.declared.is_empty()))
             .chain(self.next_expiry)
             .chain(
                 self.guard

@@ -13,7 +13,7 @@
 //! also keeps the estimated bytes each owner's entries hold ([`entry_cost`]), for the engine's
 //! memory bound.
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -140,11 +140,12 @@ impl TopicEntry {
     }
 }
 
-/// All endpoints, indexed by topic (for matching), by owner (for forgetting a node) and by
-/// expiry (for decay), so no operation scans the whole table.
+/// All endpoints, in guid order (for listing them a page at a time), indexed by topic (for
+/// matching), by owner (for forgetting a node) and by expiry (for decay), so no operation
+/// scans the whole table.
 #[derive(Debug, Default)]
 pub struct Table {
-    entries: HashMap<Guid, Entry>,
+    entries: BTreeMap<Guid, Entry>,
     by_topic: HashMap<String, TopicEntry>,
     by_origin: HashMap<Origin, BTreeSet<Guid>>,
     by_expiry: BTreeSet<(Instant, Guid)>,
@@ -184,9 +185,18 @@ impl Table {
         self.bytes.get(&origin).copied().unwrap_or(0)
     }
 
-    /// All entries.
+    /// All entries, in guid order.
     pub fn iter(&self) -> impl Iterator<Item = &Entry> {
         self.entries.values()
+    }
+
+    /// The entries with guids after `after` (all of them for `None`), in guid order.
+    pub fn after(&self, after: Option<Guid>) -> impl Iterator<Item = &Entry> {
+        use std::ops::Bound;
+        let from = after.map_or(Bound::Unbounded, Bound::Excluded);
+        self.entries
+            .range((from, Bound::Unbounded))
+            .map(|(_, entry)| entry)
     }
 
     /// Number of entries.

@@ -65,7 +65,8 @@ pub enum ClientMessage {
     QueryGraph {
         /// Echoed in the answer.
         request: u32,
-        /// The page: endpoints with guids after this one (`None`: the first page).
+        /// The page: endpoints with guids after this one (`None`: the first page, which also
+        /// carries the nodes, clients and counters; a later page carries endpoints only).
         after: Option<Guid>,
     },
 }

@@ -230,9 +230,10 @@ impl SimNet {
 
     /// Declares a local endpoint on node `n`.
     pub fn add_local(&mut self, n: usize, info: EndpointInfo) {
+        let now = self.now;
         self.nodes[n]
             .engine
-            .add_local(info)
+            .add_local(now, info)
             .expect("endpoint accepted");
         self.flush();
     }
@@ -243,7 +244,8 @@ impl SimNet {
         n: usize,
         info: EndpointInfo,
     ) -> Result<(), ndds_core::discovery::LocalError> {
-        let result = self.nodes[n].engine.add_local(info);
+        let now = self.now;
+        let result = self.nodes[n].engine.add_local(now, info);
         self.flush();
         result
     }
