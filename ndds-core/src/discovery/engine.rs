@@ -87,6 +87,8 @@ pub struct RemoteNode {
     /// The secret this node's daemon and this one share (from their agreement keys), from
     /// which the data keys of their participants' pairs derive.
     shared: Option<Shared>,
+    /// The agreement key `shared` was computed with (computed again only when it changes).
+    agreement: Option<[u8; 32]>,
     /// The numbers its signed datagrams were taken with (domains with permissions).
     counts: Option<Counts>,
 }
@@ -826,6 +828,7 @@ impl Engine {
                 charged: cost,
                 identity: identity.map(|(id, _)| id),
                 shared: identity.and_then(|speaker| self.shared_with(speaker)),
+                agreement: identity.map(|(_, agreement)| agreement),
                 counts: None,
             },
         );
@@ -1033,21 +1036,31 @@ impl Engine {
         if self.guard.is_none() {
             return Ok(());
         }
-        let shared = identity.and_then(|speaker| self.shared_with(speaker));
-        let Some(known) = self.nodes.get_mut(&node) else {
+        let Some(known) = self.nodes.get(&node) else {
             return Ok(());
         };
         match (known.identity, identity) {
-            (Some(bound), Some((said, _))) if bound == said => {
-                // The agreement key is signed with the identity: the newest one counts.
-                known.shared = shared;
+            (Some(bound), Some((said, agreement))) if bound == said => {
+                // The agreement key is signed with the identity: the newest one counts. (The
+                // secret costs a Diffie-Hellman: only for a key not seen before.)
+                if known.agreement != Some(agreement) {
+                    let shared = self.shared_with((said, agreement));
+                    if let Some(known) = self.nodes.get_mut(&node) {
+                        known.shared = shared;
+                        known.agreement = Some(agreement);
+                    }
+                }
                 Ok(())
             }
             (Some(_), _) => Err(DropReason::Unverified),
             (None, None) => Ok(()),
-            (None, Some((said, _))) => {
-                known.identity = Some(said);
-                known.shared = shared;
+            (None, Some((said, agreement))) => {
+                let shared = self.shared_with((said, agreement));
+                if let Some(known) = self.nodes.get_mut(&node) {
+                    known.identity = Some(said);
+                    known.shared = shared;
+                    known.agreement = Some(agreement);
+                }
                 self.judge_node(node);
                 Ok(())
             }
