@@ -194,7 +194,8 @@ pub fn group(name: &str) -> Result<u32, LocalError> {
 /// directory of this user that nobody else can write. With `group`, the group may search it.
 ///
 /// `private` is false for the parent of a `--socket` path the user chose: there, a directory
-/// shared with a sticky bit (`/tmp`) is accepted and the directory is left as it is.
+/// shared with a sticky bit (`/tmp`) or one of this user or root is accepted and left as it
+/// is; one another user owns is refused (that user could replace the socket in it).
 pub fn prepare_dir(dir: &Path, group: Option<u32>, private: bool) -> Result<(), LocalError> {
     if !dir.exists() {
         if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -222,6 +223,9 @@ pub fn prepare_dir(dir: &Path, group: Option<u32>, private: bool) -> Result<(), 
                 path: dir.to_owned(),
                 mode,
             });
+        }
+        if !sticky && meta.uid() != 0 {
+            owned_by_me(dir, meta.uid())?;
         }
         return Ok(());
     }
@@ -313,6 +317,31 @@ mod tests {
             prepare_dir(&dir, None, false),
             Err(LocalError::Shared { .. })
         ));
+    }
+
+    #[test]
+    fn a_chosen_directory_of_another_user_is_refused() {
+        // Root can hand the directory to another user; others cannot make this case.
+        if !Uid::effective().is_root() {
+            return;
+        }
+        let base = tempfile::tempdir().unwrap();
+        let dir = base.path().join("theirs");
+        fs::create_dir(&dir).unwrap();
+        fs::set_permissions(&dir, fs::Permissions::from_mode(0o755)).unwrap();
+        nix::unistd::chown(&dir, Some(Uid::from_raw(4242)), None).unwrap();
+        match prepare_dir(&dir, None, false) {
+            Err(err @ LocalError::Squatted { .. }) => {
+                assert!(err.to_string().contains("uid 4242"), "{err}");
+            }
+            other => panic!("expected Squatted, got {other:?}"),
+        }
+        // Root's own directories (/run) and sticky shared ones (/tmp) are fine.
+        nix::unistd::chown(&dir, Some(Uid::from_raw(0)), None).unwrap();
+        prepare_dir(&dir, None, false).unwrap();
+        nix::unistd::chown(&dir, Some(Uid::from_raw(4242)), None).unwrap();
+        fs::set_permissions(&dir, fs::Permissions::from_mode(0o1777)).unwrap();
+        prepare_dir(&dir, None, false).unwrap();
     }
 
     #[test]
