@@ -124,6 +124,26 @@ fn signing(n: u8, seed: u64) -> ndds_core::discovery::DiscoveryConfig {
     config
 }
 
+/// Arm's producer of `status/arm` (node 0) and the viewer's consumer of it (node 1), declared
+/// and matched.
+fn status_pair(net: &mut SimNet) -> (EndpointInfo, EndpointInfo) {
+    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
+    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
+    net.add_local(0, arm_status.clone());
+    net.add_local(1, reader.clone());
+    net.run_for(Duration::from_secs(2));
+    assert_eq!(
+        count(
+            &net,
+            1,
+            Duration::ZERO,
+            matched(reader.guid, arm_status.guid)
+        ),
+        1
+    );
+    (arm_status, reader)
+}
+
 fn refused(
     local: ndds_core::wire::Guid,
     other: ndds_core::wire::Guid,
@@ -391,20 +411,7 @@ fn nobody_takes_a_daemons_node_id_before_it_is_heard() {
 #[test]
 fn nobody_announces_endpoints_of_another_daemons_participants() {
     let mut net = three_nodes();
-    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
-    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
-    net.add_local(0, arm_status.clone());
-    net.add_local(1, reader.clone());
-    net.run_for(Duration::from_secs(2));
-    assert_eq!(
-        count(
-            &net,
-            1,
-            Duration::ZERO,
-            matched(reader.guid, arm_status.guid)
-        ),
-        1
-    );
+    let (arm_status, reader) = status_pair(&mut net);
     // Identity 2 (no subject of the official document) announces arm's endpoint, unchanged,
     // as its own node, from arm's address (a forged source address).
     let rogue_node = ndds_core::security::node_id_for(&identity(2).public(), 9);
@@ -468,20 +475,8 @@ fn recorded_signed_datagrams_are_taken_once_even_after_their_node_is_gone() {
     net.add_node_with(signing(0, 800), guard(0, official()));
     net.add_node_with(signing(1, 801), guard(1, official()));
     net.record(0);
-    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
-    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
-    net.add_local(0, arm_status.clone());
-    net.add_local(1, reader.clone());
-    net.run_for(Duration::from_secs(3));
-    assert_eq!(
-        count(
-            &net,
-            1,
-            Duration::ZERO,
-            matched(reader.guid, arm_status.guid)
-        ),
-        1
-    );
+    let (arm_status, _reader) = status_pair(&mut net);
+    net.run_for(Duration::from_secs(1));
     // Arm withdraws its endpoint; its announcements from before, replayed, do not bring it
     // back.
     let announced = net.recorded.len();
@@ -521,20 +516,7 @@ fn recorded_signed_datagrams_are_taken_once_even_after_their_node_is_gone() {
 #[test]
 fn a_new_document_judges_local_endpoints_too() {
     let mut net = three_nodes();
-    let arm_status = producer::<Pose>(guid(0, 1), "status/arm");
-    let reader = consumer::<Pose>(guid(1, 1), "status/arm");
-    net.add_local(0, arm_status.clone());
-    net.add_local(1, reader.clone());
-    net.run_for(Duration::from_secs(2));
-    assert_eq!(
-        count(
-            &net,
-            1,
-            Duration::ZERO,
-            matched(reader.guid, arm_status.guid)
-        ),
-        1
-    );
+    let (arm_status, reader) = status_pair(&mut net);
     // The viewer's daemon installs a document that no longer lets it read `status/*`.
     let narrower = document(
         3,

@@ -24,6 +24,34 @@ fn stats(net: &SimNet, node: usize) -> CoreStats {
     net.nodes[node].core.stats()
 }
 
+/// Nodes 0 and 1 sealed with the domain key and requiring data keys (a domain with
+/// permissions).
+fn pairwise(seed: u64) -> SimNet {
+    let mut net = SimNet::new(seed, 2);
+    for node in 0..2 {
+        net.nodes[node]
+            .core
+            .seal_with(setup(7, 1, SealMode::Encrypt));
+        assert!(net.nodes[node].core.require_pair_keys());
+    }
+    net
+}
+
+/// Gives nodes 0 and 1 the data keys of their pair, from `shared`, as their daemons would.
+fn install_pair_keys(net: &mut SimNet, shared: u8) {
+    use crate::sim::{locator, participant_id};
+    use ndds_core::security::DataKeys;
+    let now = net.now;
+    for (a, b) in [(0, 1), (1, 0)] {
+        let keys = DataKeys::derive(&[shared; 32], participant_id(a), participant_id(b));
+        assert!(
+            net.nodes[a]
+                .core
+                .set_pair_keys(now, participant_id(b), locator(b), &keys)
+        );
+    }
+}
+
 #[test]
 fn sealed_reliable_streams_are_whole_through_loss_reordering_and_duplicates() {
     for mode in [SealMode::Encrypt, SealMode::IntegrityOnly] {
@@ -210,34 +238,15 @@ fn with_data_keys_a_host_with_only_the_domain_key_reads_and_writes_nothing() {
 /// and the receiver's replay window, so the stream goes on whole and nothing is refused.
 #[test]
 fn data_keys_given_again_reuse_no_nonce() {
-    use crate::sim::{locator, participant_id};
-    use ndds_core::security::DataKeys;
-    let mut net = SimNet::new(10, 2);
-    for node in 0..2 {
-        net.nodes[node]
-            .core
-            .seal_with(setup(7, 1, SealMode::Encrypt));
-        assert!(net.nodes[node].core.require_pair_keys());
-    }
-    let install = |net: &mut SimNet| {
-        let now = net.now;
-        for (a, b) in [(0, 1), (1, 0)] {
-            let keys = DataKeys::derive(&[5u8; 32], participant_id(a), participant_id(b));
-            assert!(
-                net.nodes[a]
-                    .core
-                    .set_pair_keys(now, participant_id(b), locator(b), &keys)
-            );
-        }
-    };
-    install(&mut net);
+    let mut net = pairwise(10);
+    install_pair_keys(&mut net, 5);
     net.add_producer(0, 1, reliable_producer(16));
     net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
     net.connect((0, 1), (1, 10));
     let total = 200;
     net.add_writer(WriterApp::new(0, 1, total, MS, 0));
     net.run_for(Duration::from_millis(80));
-    install(&mut net);
+    install_pair_keys(&mut net, 5);
     net.run_for(Duration::from_secs(3));
     let log = net.consumer(1, 10);
     assert_eq!(exactly(&log.seqs_from(guid(0, 1)), 1, total), Ok(()));
@@ -251,29 +260,10 @@ fn data_keys_given_again_reuse_no_nonce() {
 /// ever sent twice, the receiver refuses nothing, and the stream goes on.
 #[test]
 fn data_keys_of_a_pair_long_unmatched_are_dropped_and_given_again_without_reusing_a_nonce() {
-    use crate::sim::{locator, participant_id};
     use ndds_core::participant::PAIR_KEY_IDLE;
-    use ndds_core::security::DataKeys;
-    let mut net = SimNet::new(11, 2);
+    let mut net = pairwise(11);
     net.tap = Some(Vec::new());
-    for node in 0..2 {
-        net.nodes[node]
-            .core
-            .seal_with(setup(7, 1, SealMode::Encrypt));
-        assert!(net.nodes[node].core.require_pair_keys());
-    }
-    let install = |net: &mut SimNet| {
-        let now = net.now;
-        for (a, b) in [(0, 1), (1, 0)] {
-            let keys = DataKeys::derive(&[6u8; 32], participant_id(a), participant_id(b));
-            assert!(
-                net.nodes[a]
-                    .core
-                    .set_pair_keys(now, participant_id(b), locator(b), &keys)
-            );
-        }
-    };
-    install(&mut net);
+    install_pair_keys(&mut net, 6);
     net.add_producer(0, 1, reliable_producer(16));
     net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
     net.connect((0, 1), (1, 10));
@@ -303,7 +293,7 @@ fn data_keys_of_a_pair_long_unmatched_are_dropped_and_given_again_without_reusin
     }
     // Matched again: the daemon gives the same keys again.
     // (Another producer of node 0: the pair is the same pair of participants.)
-    install(&mut net);
+    install_pair_keys(&mut net, 6);
     net.add_producer(0, 2, reliable_producer(16));
     net.connect((0, 2), (1, 10));
     net.add_writer(WriterApp::new(0, 2, 50, MS, 0));
@@ -334,25 +324,10 @@ fn data_keys_of_a_pair_long_unmatched_are_dropped_and_given_again_without_reusin
 /// datagram of the pair recorded before the rotation, replayed after it, is refused.
 #[test]
 fn a_domain_key_rotation_keeps_the_replay_windows_of_pairs() {
-    use crate::sim::{locator, participant_id};
-    use ndds_core::security::DataKeys;
-    let mut net = SimNet::new(12, 2);
+    use crate::sim::locator;
+    let mut net = pairwise(12);
     net.tap = Some(Vec::new());
-    for node in 0..2 {
-        net.nodes[node]
-            .core
-            .seal_with(setup(7, 1, SealMode::Encrypt));
-        assert!(net.nodes[node].core.require_pair_keys());
-    }
-    let now = net.now;
-    for (a, b) in [(0, 1), (1, 0)] {
-        let keys = DataKeys::derive(&[8u8; 32], participant_id(a), participant_id(b));
-        assert!(
-            net.nodes[a]
-                .core
-                .set_pair_keys(now, participant_id(b), locator(b), &keys)
-        );
-    }
+    install_pair_keys(&mut net, 8);
     net.add_producer(0, 1, reliable_producer(16));
     net.add_consumer(1, 10, reliable_consumer(None), App::Eager);
     net.connect((0, 1), (1, 10));
