@@ -134,7 +134,7 @@ fn status_pair(net: &mut SimNet) -> (EndpointInfo, EndpointInfo) {
     net.run_for(Duration::from_secs(2));
     assert_eq!(
         count(
-            &net,
+            net,
             1,
             Duration::ZERO,
             matched(reader.guid, arm_status.guid)
