@@ -177,6 +177,39 @@ fn local_endpoint_matches_on_both_nodes_and_locally() {
 }
 
 #[test]
+fn of_two_local_endpoints_the_consumer_hears_of_the_pair_first() {
+    // A producer may write the moment it hears of a consumer; the consumer, told first,
+    // already admits it (it drops what unmatched senders send).
+    for producer_first in [true, false] {
+        let mut net = network(3, 1, PERIOD, LEASE);
+        let t0 = net.elapsed();
+        let writer = producer::<Pose>(guid(0, 1), "arm/pose");
+        let reader = consumer::<Pose>(guid(0, 2), "arm/pose");
+        let order = if producer_first {
+            [writer.clone(), reader.clone()]
+        } else {
+            [reader.clone(), writer.clone()]
+        };
+        for info in order {
+            net.add_local(0, info);
+        }
+        net.run_for(Duration::from_millis(10));
+        let told: Vec<Guid> = net
+            .events_since(0, t0)
+            .filter_map(|(_, e)| match e {
+                Event::Matched { local, .. } => Some(*local),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            told,
+            [reader.guid, writer.guid],
+            "declared producer first: {producer_first}"
+        );
+    }
+}
+
+#[test]
 fn different_fingerprints_are_incompatible_on_both_sides() {
     let mut net = network(3, 2, PERIOD, LEASE);
     let t0 = net.elapsed();

@@ -5,7 +5,7 @@
 //! fingerprints are equal, and the producer offers reliability if the consumer requests it;
 //! otherwise, on one topic, they are *incompatible* (see [`incompatibility`]). Events are
 //! produced only for the local side of a pair; a pair of two local endpoints produces an event
-//! for each.
+//! for each, the consumer's first.
 //!
 //! Cost: each side of a topic keeps its local and remote endpoints apart, so adding or removing
 //! a remote endpoint visits only the local endpoints of the opposite side: a burst of `n`
@@ -219,12 +219,16 @@ impl Table {
             let Some(other) = self.entries.get(other_guid) else {
                 continue;
             };
-            if entry.origin == Origin::Local {
-                events.extend([pair_event(&entry, other)]);
+            let mut told = [
+                (entry.origin == Origin::Local).then(|| pair_event(&entry, other)),
+                (other.origin == Origin::Local).then(|| pair_event(other, &entry)),
+            ];
+            // Of two local endpoints the consumer hears of the pair first: a producer that
+            // writes the moment it is told then finds a consumer that already admits it.
+            if kind == EndpointKind::Producer {
+                told.reverse();
             }
-            if other.origin == Origin::Local {
-                events.extend([pair_event(other, &entry)]);
-            }
+            events.extend(told.into_iter().flatten());
         }
         topic.side(kind).of(entry.origin).insert(guid);
         index(&mut self.by_origin, &mut self.by_expiry, &entry);
