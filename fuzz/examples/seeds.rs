@@ -14,7 +14,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::Bytes;
+use bytes::BytesMut;
 use ndds_core::discovery::{Destination, Engine};
 use ndds_core::ipc::{
     ClientMessage, DaemonMessage, EndpointDecl, Hello, IPC_VERSION, Role, Welcome, encode_body,
@@ -629,7 +629,12 @@ fn participant_seeds(corpus: &mut Corpus) {
             for (_, bytes) in harness.take_sent() {
                 dropped += 1;
                 if !dropped.is_multiple_of(7) {
-                    peer.handle_datagram(harness.now, received, local_addr, Bytes::from(bytes));
+                    peer.handle_datagram(
+                        harness.now,
+                        received,
+                        local_addr,
+                        BytesMut::from(&bytes[..]),
+                    );
                 }
             }
             // The peer's datagrams reach LOCAL, except every fifth.

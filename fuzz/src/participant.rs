@@ -28,7 +28,7 @@ use std::net::SocketAddrV4;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::Bytes;
+use bytes::BytesMut;
 use ndds_core::arbitration::Rules;
 use ndds_core::participant::{
     ConsumerSpec, CoreConfig, MatchedConsumer, ParticipantCore, ProducerSpec,
@@ -324,7 +324,7 @@ impl Harness {
     fn deliver(&mut self, from: SocketAddrV4, datagram: Vec<u8>) {
         let received = SystemTime::UNIX_EPOCH + Duration::from_secs(1_700_000_000);
         self.core
-            .handle_datagram(self.now, received, from, Bytes::from(datagram));
+            .handle_datagram(self.now, received, from, BytesMut::from(&datagram[..]));
     }
 
     /// Takes every transmit and event; learns LOCAL's address token from its data.

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use ndds_core::discovery::engine::{
     MAX_ENDPOINTS_PER_NODE, MAX_NODES, MAX_REMOTE_BYTES, MAX_REMOTE_ENDPOINTS,
 };
-use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event, Origin, Via};
+use ndds_core::discovery::{Destination, DiscoveryConfig, Engine, Event, LocalError, Origin, Via};
 
 #[path = "support/probe.rs"]
 mod probe;
@@ -185,6 +185,32 @@ fn remote_endpoints_are_bounded_per_node_and_in_all() {
     assert_eq!(engine.endpoints().count(), 0);
     assert_eq!(engine.nodes().count(), 0);
     assert_eq!(engine.remote_bytes(), 0);
+}
+
+#[test]
+fn a_node_declares_no_more_endpoints_than_other_nodes_take_from_it() {
+    let now = Instant::now();
+    let mut engine = engine(now);
+    let local = |n: u64| {
+        let mut info = endpoint(n, 1);
+        info.locator = locator(1, 9);
+        info
+    };
+    for n in 1..=MAX_ENDPOINTS_PER_NODE as u64 {
+        engine.add_local(now, local(n)).unwrap();
+    }
+    let over = local(MAX_ENDPOINTS_PER_NODE as u64 + 1);
+    let refused = engine.add_local(now, over.clone()).unwrap_err();
+    assert!(matches!(refused, LocalError::TooMany), "{refused:?}");
+    assert!(refused.to_string().contains("withdraw some"), "{refused}");
+    assert_eq!(engine.endpoint(&over.guid).map(|e| e.origin), None);
+    // One withdrawn makes room for one.
+    engine.remove_locals(&[local(1).guid]);
+    engine.add_local(now, over.clone()).unwrap();
+    assert_eq!(
+        engine.endpoint(&over.guid).map(|e| e.origin),
+        Some(Origin::Local)
+    );
 }
 
 /// The flood: 5000 forged nodes with one-hour leases and 300 000 endpoints, all on the

@@ -107,6 +107,11 @@ pub const GRAPH_PAGE: usize = 1024;
 pub const GRAPH_PAGE_BYTES: usize = 2 << 20;
 /// Answers a client may leave unread beyond its outbox before it counts as not reading.
 pub const MAX_BACKLOG_ANSWERS: usize = 1024;
+/// Pairs whose news all clients' backlogs may hold together (about 64 bytes each, so about
+/// 64 MiB); beyond it the client holding the most is disconnected as not reading. Only a
+/// client that stops reading while it or others declare thousands of endpoints on its topics
+/// comes near it: a pair waits once however often it changes.
+pub const MAX_BACKLOG_PAIRS: usize = 1 << 20;
 /// How long a client may read nothing while frames wait before it is disconnected.
 pub const SLOW_CLIENT: Duration = Duration::from_secs(10);
 /// How often a backlog is retried.
@@ -132,6 +137,9 @@ pub struct Driver {
     by_participant: HashMap<u64, ClientId>,
     counters: Arc<Counters>,
     slow_client: Duration,
+    /// Pairs waiting in all clients' backlogs, and the most that may.
+    backlog_pairs: usize,
+    max_backlog_pairs: usize,
 }
 
 impl Driver {
@@ -153,7 +161,14 @@ impl Driver {
             by_participant: HashMap::new(),
             counters,
             slow_client: SLOW_CLIENT,
+            backlog_pairs: 0,
+            max_backlog_pairs: MAX_BACKLOG_PAIRS,
         }
+    }
+
+    /// The most pairs all clients' backlogs may hold together ([`MAX_BACKLOG_PAIRS`]).
+    pub fn set_max_backlog_pairs(&mut self, pairs: usize) {
+        self.max_backlog_pairs = pairs;
     }
 
     /// How long a client may read nothing while frames wait for it ([`SLOW_CLIENT`]).
@@ -364,15 +379,37 @@ impl Driver {
             DaemonMessage::Matched { local, remote }
             | DaemonMessage::Incompatible { local, remote }
             | DaemonMessage::NotPermitted { local, remote, .. } => {
-                entry.backlog.pairs.insert((local, remote.guid));
+                self.backlog_pairs += usize::from(entry.backlog.pairs.insert((local, remote.guid)));
             }
             DaemonMessage::Unmatched { local, remote } => {
-                entry.backlog.pairs.insert((local, remote));
+                self.backlog_pairs += usize::from(entry.backlog.pairs.insert((local, remote)));
             }
             answer if entry.backlog.answers.len() < MAX_BACKLOG_ANSWERS => {
                 entry.backlog.answers.push_back(answer);
             }
             _ => self.drop_slow(client),
+        }
+        if self.backlog_pairs > self.max_backlog_pairs {
+            self.drop_hoarder();
+        }
+    }
+
+    /// Disconnects the client whose backlog holds the most pairs, when all together hold
+    /// more than the bound.
+    fn drop_hoarder(&mut self) {
+        let hoarder = self
+            .clients
+            .iter()
+            .max_by_key(|(_, c)| c.backlog.pairs.len())
+            .map(|(id, c)| (*id, c.backlog.pairs.len()));
+        if let Some((client, pairs)) = hoarder {
+            tracing::warn!(
+                client,
+                pairs,
+                bound = self.max_backlog_pairs,
+                "the match news waiting for clients that do not read passed the daemon's bound"
+            );
+            self.drop_slow(client);
         }
     }
 
@@ -428,6 +465,7 @@ impl Driver {
             let message = if let Some(answer) = entry.backlog.answers.pop_front() {
                 answer
             } else if let Some((entity, remote)) = entry.backlog.pairs.pop_first() {
+                self.backlog_pairs -= 1;
                 let local = Guid {
                     participant,
                     entity,
@@ -643,6 +681,7 @@ impl Driver {
         let Some(entry) = self.clients.remove(&client) else {
             return;
         };
+        self.backlog_pairs -= entry.backlog.pairs.len();
         let Some(hello) = entry.hello else {
             return;
         };

@@ -246,6 +246,25 @@ async fn a_client_that_reads_nothing_is_dropped_after_the_slow_client_time() {
 }
 
 #[tokio::test]
+async fn backlogs_past_the_daemons_bound_cost_the_biggest_one_its_connection() {
+    for (bound, dropped) in [(BURST as usize, false), (BURST as usize / 5, true)] {
+        let (mut driver, _inbox, cancel, counters) = setup().await;
+        driver.set_max_backlog_pairs(bound);
+        announce_burst(&mut driver);
+        driver.flush().await;
+        // Long before the slow-client time (10 s): only the bound can have dropped it.
+        assert_eq!(cancel.is_cancelled(), dropped, "bound {bound}");
+        assert_eq!(
+            counters
+                .slow_clients
+                .load(std::sync::atomic::Ordering::Relaxed),
+            u64::from(dropped),
+            "bound {bound}"
+        );
+    }
+}
+
+#[tokio::test]
 async fn the_graph_of_a_large_table_comes_in_bounded_pages() {
     let (mut driver, _inbox, _cancel, _counters) = setup().await;
     let remote = 2 * GRAPH_PAGE as u64 + 300;

@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, RwLock};
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::{Bytes, BytesMut};
+use bytes::BytesMut;
 use ndds_core::arbitration::Notification;
 use ndds_core::participant::{
     ConsumerCounters, ConsumerSpec, CoreConfig, Event, MatchedConsumer, ParticipantCore,
@@ -729,7 +729,7 @@ impl DataPlane {
     pub(crate) fn run(&self) {
         IO_THREAD.with(|t| t.set(true));
         let mut buf = BytesMut::new();
-        let mut batch: Vec<(Bytes, SocketAddrV4)> = Vec::with_capacity(RECV_BATCH);
+        let mut batch: Vec<(BytesMut, SocketAddrV4)> = Vec::with_capacity(RECV_BATCH);
         let mut events: VecDeque<Event> = VecDeque::with_capacity(1024);
         let mut credits: Vec<(u32, usize)> = Vec::new();
         let mut local = LocalConsumers::default();
@@ -815,7 +815,7 @@ impl DataPlane {
     }
 
     /// Waits (with the socket's receive timeout) for one datagram.
-    fn receive_blocking(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) {
+    fn receive_blocking(&self, buf: &mut BytesMut, batch: &mut Vec<(BytesMut, SocketAddrV4)>) {
         let _ = self.receive_one(buf, batch, 0);
     }
 
@@ -823,7 +823,7 @@ impl DataPlane {
     fn receive_one(
         &self,
         buf: &mut BytesMut,
-        batch: &mut Vec<(Bytes, SocketAddrV4)>,
+        batch: &mut Vec<(BytesMut, SocketAddrV4)>,
         flags: libc::c_int,
     ) -> io::Result<()> {
         // Room for the largest datagram; a region is reused once every sample cut from it
@@ -837,7 +837,7 @@ impl DataPlane {
         // SAFETY: `recv_from_with_flags` initialised the first `len` bytes of the spare
         // capacity it was given.
         unsafe { buf.set_len(len) };
-        let datagram = buf.split_to(len).freeze();
+        let datagram = buf.split_to(len);
         if let Some(from) = from.as_socket_ipv4() {
             batch.push((datagram, from));
         }
@@ -846,7 +846,7 @@ impl DataPlane {
 
     /// Receives up to [`RECV_BATCH`] datagrams without waiting; true if it stopped before the
     /// socket was empty (more may wait).
-    fn receive(&self, buf: &mut BytesMut, batch: &mut Vec<(Bytes, SocketAddrV4)>) -> bool {
+    fn receive(&self, buf: &mut BytesMut, batch: &mut Vec<(BytesMut, SocketAddrV4)>) -> bool {
         let mut errors = 0;
         let mut bytes: usize = batch.iter().map(|(d, _)| d.len()).sum();
         while batch.len() < RECV_BATCH {

@@ -198,6 +198,13 @@ pub enum LocalError {
          permissions the daemon gives each client its participant id)"
     )]
     ForeignParticipant(u64),
+    /// The node declares [`MAX_ENDPOINTS_PER_NODE`] endpoints already: other daemons would
+    /// ignore any more.
+    #[error(
+        "this daemon declares {MAX_ENDPOINTS_PER_NODE} endpoints already, the most other daemons \
+         take from one node: withdraw some, or spread the programs over more hosts"
+    )]
+    TooMany,
     /// The engine was closed.
     #[error("the discovery engine is closed")]
     Closed,
@@ -1143,6 +1150,9 @@ impl Engine {
             return Err(LocalError::Duplicate(info.guid));
         }
         check_endpoint(&info)?;
+        if self.table.count_owned(Origin::Local) >= MAX_ENDPOINTS_PER_NODE {
+            return Err(LocalError::TooMany);
+        }
         if let Some(identity) = self.identity()
             && !crate::security::owns_node_id(&identity, info.guid.participant)
         {

@@ -32,7 +32,7 @@ use std::net::SocketAddrV4;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::Bytes;
+use bytes::{Bytes, BytesMut};
 use foldhash::{HashMap, HashSet};
 
 pub use consumer::{ConsumerCounters, ConsumerSpec};
@@ -591,13 +591,14 @@ impl ParticipantCore {
     // ---- input ----
 
     /// A datagram arrived from `from` at `received` (the wall clock, for the samples' info).
-    /// Whatever it causes is queued: transmits, events, timers.
+    /// Whatever it causes is queued: transmits, events, timers. A sealed datagram is opened
+    /// in place (so the buffer is mutable; samples keep shares of it).
     pub fn handle_datagram(
         &mut self,
         now: Instant,
         received: SystemTime,
         from: SocketAddrV4,
-        datagram: Bytes,
+        datagram: BytesMut,
     ) {
         self.stats.received += 1;
         let Some(datagram) = self.unseal(now, from, datagram) else {
@@ -625,12 +626,17 @@ impl ParticipantCore {
         }
     }
 
-    /// The plain datagram: opened in a domain with a key (a copy: the received bytes are
-    /// shared), as it came otherwise; `None`, counted (and said once in the log, naming the
-    /// sender's address), when it must be dropped.
-    fn unseal(&mut self, now: Instant, from: SocketAddrV4, datagram: Bytes) -> Option<Bytes> {
+    /// The plain datagram: opened in place in a domain with a key, as it came otherwise;
+    /// `None`, counted (and said once in the log, naming the sender's address), when it must
+    /// be dropped.
+    fn unseal(
+        &mut self,
+        now: Instant,
+        from: SocketAddrV4,
+        mut datagram: BytesMut,
+    ) -> Option<Bytes> {
         match seal::route(&datagram, self.opener.is_some()) {
-            Route::Plain => return Some(datagram),
+            Route::Plain => return Some(datagram.freeze()),
             Route::Junk(reason) => {
                 self.stats.dropped[reason.index()] += 1;
                 return None;
@@ -649,8 +655,7 @@ impl ParticipantCore {
             Route::Open => {}
         }
         let opener = self.opener.as_mut()?;
-        let mut buffer = bytes::BytesMut::from(&datagram[..]);
-        let len = match opener.open(now, &mut buffer) {
+        let len = match opener.open(now, &mut datagram) {
             Ok(plain) => plain.len(),
             Err(error) => {
                 if error == OpenError::NotSealed && !std::mem::replace(&mut self.warned.0, true) {
@@ -663,7 +668,7 @@ impl ParticipantCore {
                 return None;
             }
         };
-        Some(buffer.freeze().slice(SEAL_HEAD_LEN..SEAL_HEAD_LEN + len))
+        Some(datagram.freeze().slice(SEAL_HEAD_LEN..SEAL_HEAD_LEN + len))
     }
 
     fn count_drop(&mut self, reason: DropReason) {

@@ -130,26 +130,36 @@ impl Transmits {
                 Vec::with_capacity(needed.max(MIN_HEAD).next_power_of_two())
             }
         };
-        buffer.clear();
-        buffer.extend_from_slice(head);
-        let tail = match tail {
-            Some((bytes, range)) if sealed || range.len() <= COPIED_TAIL => {
-                buffer.extend_from_slice(bytes.get(range).unwrap_or_default());
-                None
-            }
-            tail => tail.map(|(bytes, range)| (Arc::clone(bytes), range)),
-        };
         let sealer = match self.pair_sealers.get_mut(&to) {
             Some(sealer) => Some(sealer),
             None => self.sealer.as_mut(),
         };
-        if let Some(sealer) = sealer
-            && sealer.seal(&mut buffer).is_err()
-        {
-            self.unsealable += 1;
-            self.free.push(buffer);
-            return;
-        }
+        let tail = match sealer {
+            // Sealed: head and payload written once, with room for the seal head.
+            Some(sealer) => {
+                let payload = tail
+                    .as_ref()
+                    .and_then(|(bytes, range)| bytes.get(range.clone()))
+                    .unwrap_or_default();
+                if sealer.seal_into(&mut buffer, &[head, payload]).is_err() {
+                    self.unsealable += 1;
+                    self.free.push(buffer);
+                    return;
+                }
+                None
+            }
+            None => {
+                buffer.clear();
+                buffer.extend_from_slice(head);
+                match tail {
+                    Some((bytes, range)) if range.len() <= COPIED_TAIL => {
+                        buffer.extend_from_slice(bytes.get(range).unwrap_or_default());
+                        None
+                    }
+                    tail => tail.map(|(bytes, range)| (Arc::clone(bytes), range)),
+                }
+            }
+        };
         let transmit = Transmit {
             to,
             head: buffer,

@@ -1,5 +1,5 @@
 //! Sealed domains: every datagram of a domain that has a key is authenticated (and, by
-//! default, encrypted) with ChaCha20-Poly1305 before anything parses it.
+//! default, encrypted) with an AEAD, the domain's [`Cipher`], before anything parses it.
 //!
 //! A sealed datagram keeps the fixed header in clear (receivers still sort by magic, version,
 //! kind and domain before any cryptography), with the top bit of the kind byte set, and puts a
@@ -39,10 +39,13 @@
 //! that sender. State is kept per sender only once a tag verified, so forged traffic costs a
 //! receiver no memory; the number of senders remembered is bounded ([`MAX_SENDERS`]).
 //!
-//! ChaCha20-Poly1305 rather than AES-GCM: it is constant-time in software on every processor
-//! a robot may carry (AES-GCM is fast and safe only with AES and carry-less multiply
-//! instructions, which many ARM boards lack), and its 96-bit nonce takes our per-sender
-//! counter directly.
+//! The cipher is the domain's, named in its key file: ChaCha20-Poly1305 by default (it is
+//! constant-time in software on every processor a robot may carry; AES-GCM is fast and safe
+//! only with AES and carry-less multiply instructions, which many ARM boards lack), or
+//! AES-256-GCM. Both take the per-sender counter as their 96-bit nonce directly. With the
+//! `ring` feature (the daemon and the SDK turn it on) both come from ring, whose assembly is
+//! several times faster than RustCrypto's pure Rust; without it, from RustCrypto. The two seal
+//! the same bytes, so hosts built either way share a domain.
 
 mod keyring;
 mod opener;
@@ -220,11 +223,60 @@ impl Cipher {
 pub(crate) enum SessionKey {
     ChaCha(chacha20poly1305::ChaCha20Poly1305),
     Aes(Box<aes_gcm::Aes256Gcm>),
+    /// Either cipher, through ring.
+    #[cfg(feature = "ring")]
+    Ring(ring::aead::LessSafeKey),
 }
 
 type Tag = chacha20poly1305::Tag;
 
+/// Whose implementation of the ciphers a key uses. Both seal the same bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Backend {
+    /// RustCrypto's `chacha20poly1305` and `aes-gcm` (pure Rust).
+    RustCrypto,
+    /// ring's (assembly; the `ring` feature).
+    #[cfg(feature = "ring")]
+    Ring,
+}
+
+impl Backend {
+    /// The fastest one built in.
+    #[cfg(feature = "ring")]
+    pub(crate) const PREFERRED: Backend = Backend::Ring;
+    /// The fastest one built in.
+    #[cfg(not(feature = "ring"))]
+    pub(crate) const PREFERRED: Backend = Backend::RustCrypto;
+}
+
 impl SessionKey {
+    /// The key `bytes` of `cipher`, with `backend`'s implementation.
+    pub(crate) fn new(cipher: Cipher, bytes: &[u8; 32], backend: Backend) -> SessionKey {
+        use chacha20poly1305::KeyInit;
+        match backend {
+            Backend::RustCrypto => match cipher {
+                Cipher::ChaCha20Poly1305 => {
+                    SessionKey::ChaCha(chacha20poly1305::ChaCha20Poly1305::new(&(*bytes).into()))
+                }
+                Cipher::Aes256Gcm => {
+                    SessionKey::Aes(Box::new(aes_gcm::Aes256Gcm::new(&(*bytes).into())))
+                }
+            },
+            #[cfg(feature = "ring")]
+            Backend::Ring => {
+                let algorithm = match cipher {
+                    Cipher::ChaCha20Poly1305 => &ring::aead::CHACHA20_POLY1305,
+                    Cipher::Aes256Gcm => &ring::aead::AES_256_GCM,
+                };
+                match ring::aead::UnboundKey::new(algorithm, bytes) {
+                    Ok(key) => SessionKey::Ring(ring::aead::LessSafeKey::new(key)),
+                    // Both take 32-byte keys: ring refuses none; RustCrypto's stands in.
+                    Err(_) => SessionKey::new(cipher, bytes, Backend::RustCrypto),
+                }
+            }
+        }
+    }
+
     /// Encrypts `body` in place (empty for integrity only), authenticating `aad` with it.
     fn seal(&self, counter: u64, aad: &[u8], body: &mut [u8]) -> Option<Tag> {
         use chacha20poly1305::AeadInOut;
@@ -232,6 +284,14 @@ impl SessionKey {
         match self {
             SessionKey::ChaCha(key) => key.encrypt_inout_detached(&nonce, aad, body.into()).ok(),
             SessionKey::Aes(key) => key.encrypt_inout_detached(&nonce, aad, body.into()).ok(),
+            #[cfg(feature = "ring")]
+            SessionKey::Ring(key) => {
+                let nonce = ring::aead::Nonce::assume_unique_for_key(nonce.into());
+                let tag = key
+                    .seal_in_place_separate_tag(nonce, ring::aead::Aad::from(aad), body)
+                    .ok()?;
+                Tag::try_from(tag.as_ref()).ok()
+            }
         }
     }
 
@@ -246,6 +306,13 @@ impl SessionKey {
             SessionKey::Aes(key) => key
                 .decrypt_inout_detached(&nonce, aad, body.into(), tag)
                 .is_ok(),
+            #[cfg(feature = "ring")]
+            SessionKey::Ring(key) => {
+                let nonce = ring::aead::Nonce::assume_unique_for_key(nonce.into());
+                let tag = ring::aead::Tag::from(<[u8; TAG_LEN]>::from(*tag));
+                key.open_in_place_separate_tag(nonce, ring::aead::Aad::from(aad), tag, body, 0..)
+                    .is_ok()
+            }
         }
     }
 }
@@ -287,7 +354,6 @@ fn derive(
     sender: u64,
     session: u64,
 ) -> SessionKey {
-    use chacha20poly1305::KeyInit;
     let hkdf = hkdf::Hkdf::<sha2::Sha256>::new(Some(b"ndds-seal-v1"), key.bytes());
     let mut info = [0u8; 1 + 2 + 4 + 8 + 8];
     info[0] = cipher.id();
@@ -298,12 +364,7 @@ fn derive(
     let mut okm = [0u8; 32];
     // 32 bytes is far below HKDF-SHA256's limit of 8160: this cannot fail.
     let _ = hkdf.expand(&info, &mut okm);
-    let session_key = match cipher {
-        Cipher::ChaCha20Poly1305 => {
-            SessionKey::ChaCha(chacha20poly1305::ChaCha20Poly1305::new(&okm.into()))
-        }
-        Cipher::Aes256Gcm => SessionKey::Aes(Box::new(aes_gcm::Aes256Gcm::new(&okm.into()))),
-    };
+    let session_key = SessionKey::new(cipher, &okm, Backend::PREFERRED);
     okm.fill(0);
     session_key
 }

@@ -103,23 +103,55 @@ impl Sealer {
     /// Seals `datagram` (a plain one: header and body) in place: the seal head goes after
     /// the header, the body is encrypted (or left in clear, integrity only), the tag appended.
     pub fn seal(&mut self, datagram: &mut Vec<u8>) -> Result<(), SealError> {
-        if datagram.len() < HEADER_LEN {
+        self.ready(datagram.len())?;
+        datagram.splice(HEADER_LEN..HEADER_LEN, [0; super::SEAL_HEAD_LEN]);
+        self.seal_spaced(datagram)
+    }
+
+    /// Writes the plain datagram `parts` (pieces in order; the header may span them) into
+    /// `out` (cleared first), sealed: the same bytes as [`Sealer::seal`] of their
+    /// concatenation, without moving the body to make room for the seal head.
+    pub fn seal_into(&mut self, out: &mut Vec<u8>, parts: &[&[u8]]) -> Result<(), SealError> {
+        let len: usize = parts.iter().map(|part| part.len()).sum();
+        self.ready(len)?;
+        out.clear();
+        out.reserve(len + super::OVERHEAD);
+        let mut header_left = HEADER_LEN;
+        for part in parts {
+            let (header, rest) = part.split_at(header_left.min(part.len()));
+            out.extend_from_slice(header);
+            header_left -= header.len();
+            if header_left == 0 && !header.is_empty() {
+                out.extend_from_slice(&[0; super::SEAL_HEAD_LEN]);
+            }
+            out.extend_from_slice(rest);
+        }
+        self.seal_spaced(out)
+    }
+
+    /// Whether a plain datagram of `len` bytes can be sealed now.
+    fn ready(&self, len: usize) -> Result<(), SealError> {
+        if len < HEADER_LEN {
             return Err(SealError::NotADatagram);
         }
         if self.counter == u64::MAX {
             return Err(SealError::Exhausted);
         }
+        Ok(())
+    }
+
+    /// Seals a plain datagram whose header is already followed by room for the seal head.
+    fn seal_spaced(&mut self, datagram: &mut Vec<u8>) -> Result<(), SealError> {
         let counter = self.counter;
         self.counter += 1;
         datagram[KIND_BYTE] |= SEALED;
         if self.mode == SealMode::IntegrityOnly {
             datagram[KIND_BYTE] |= CLEAR;
         }
-        let mut head = [0u8; super::SEAL_HEAD_LEN];
+        let head = &mut datagram[HEADER_LEN..SEALED_HEAD];
         head[..4].copy_from_slice(&self.epoch.to_le_bytes());
         head[4..12].copy_from_slice(&self.session.to_le_bytes());
         head[12..].copy_from_slice(&counter.to_le_bytes());
-        datagram.splice(HEADER_LEN..HEADER_LEN, head);
         let tag = match self.mode {
             SealMode::Encrypt => {
                 let (aad, body) = datagram.split_at_mut(SEALED_HEAD);

@@ -34,7 +34,7 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use bytes::Bytes;
+use bytes::{Bytes, BytesMut};
 use ndds_core::participant::{
     ConsumerSpec, CoreConfig, Event, MatchedConsumer, ParticipantCore, ProducerSpec,
 };
@@ -486,8 +486,12 @@ impl SimNet {
             let node = &mut self.nodes[datagram.to];
             if node.up {
                 self.stats.delivered += 1;
-                node.core
-                    .handle_datagram(now, wall, datagram.from, datagram.bytes);
+                node.core.handle_datagram(
+                    now,
+                    wall,
+                    datagram.from,
+                    BytesMut::from(&datagram.bytes[..]),
+                );
             } else {
                 self.stats.at_down_node += 1;
             }
