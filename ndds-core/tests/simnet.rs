@@ -179,7 +179,7 @@ fn local_endpoint_matches_on_both_nodes_and_locally() {
 #[test]
 fn of_two_local_endpoints_the_consumer_hears_of_the_pair_first() {
     // A producer may write the moment it hears of a consumer; the consumer, told first,
-    // already admits it (it drops what unmatched senders send).
+    // already holds the pair's data keys where a domain has permissions.
     for producer_first in [true, false] {
         let mut net = network(3, 1, PERIOD, LEASE);
         let t0 = net.elapsed();

@@ -223,8 +223,10 @@ impl Table {
                 (entry.origin == Origin::Local).then(|| pair_event(&entry, other)),
                 (other.origin == Origin::Local).then(|| pair_event(other, &entry)),
             ];
-            // Of two local endpoints the consumer hears of the pair first: a producer that
-            // writes the moment it is told then finds a consumer that already admits it.
+            // Of two local endpoints the consumer hears of the pair first (in a domain with
+            // permissions its data keys come with it, and a sealed sample from a producer it
+            // holds no key for is dropped before admission). The daemon keeps this order per
+            // client; across clients, processes and threads it is not a guarantee.
             if kind == EndpointKind::Producer {
                 told.reverse();
             }

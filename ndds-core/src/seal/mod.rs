@@ -225,7 +225,7 @@ pub(crate) enum SessionKey {
     Aes(Box<aes_gcm::Aes256Gcm>),
     /// Either cipher, through ring.
     #[cfg(feature = "ring")]
-    Ring(ring::aead::LessSafeKey),
+    Ring(Box<ring::aead::LessSafeKey>),
 }
 
 type Tag = chacha20poly1305::Tag;
@@ -269,7 +269,7 @@ impl SessionKey {
                     Cipher::Aes256Gcm => &ring::aead::AES_256_GCM,
                 };
                 match ring::aead::UnboundKey::new(algorithm, bytes) {
-                    Ok(key) => SessionKey::Ring(ring::aead::LessSafeKey::new(key)),
+                    Ok(key) => SessionKey::Ring(Box::new(ring::aead::LessSafeKey::new(key))),
                     // Both take 32-byte keys: ring refuses none; RustCrypto's stands in.
                     Err(_) => SessionKey::new(cipher, bytes, Backend::RustCrypto),
                 }
