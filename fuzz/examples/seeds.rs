@@ -421,8 +421,8 @@ fn ipc_seeds(corpus: &mut Corpus) {
 }
 
 fn seal_seeds(corpus: &mut Corpus) {
-    for (name, flags) in [("chacha", 0u8), ("aes", 1)] {
-        let keys = keyring(fixture::cipher(flags & 1 != 0));
+    for (name, flags) in [("chacha", 0u8), ("aes", 1), ("aes128", 9)] {
+        let keys = keyring(fixture::cipher(flags & 1 != 0, flags & 8 != 0));
         add(corpus, "keyfile", name, keys.to_file_text().into_bytes());
         let mut script = Script::new();
         script.u8(flags);
@@ -447,6 +447,7 @@ fn seal_seeds(corpus: &mut Corpus) {
         ("chacha_encrypt", 0u8),
         ("aes_integrity", 3),
         ("required", 6),
+        ("aes128_encrypt", 9),
     ] {
         let mut script = Script::new();
         script.u8(flags);

@@ -19,12 +19,13 @@ pub fn keyring(cipher: Cipher) -> Keyring {
     keyring
 }
 
-/// The cipher a flag bit selects.
-pub fn cipher(aes: bool) -> Cipher {
-    if aes {
-        Cipher::Aes256Gcm
-    } else {
-        Cipher::ChaCha20Poly1305
+/// The cipher two flag bits select: ChaCha20-Poly1305, or AES-GCM with a 256-bit key (a
+/// 128-bit one if `short`).
+pub fn cipher(aes: bool, short: bool) -> Cipher {
+    match (aes, short) {
+        (false, _) => Cipher::ChaCha20Poly1305,
+        (true, false) => Cipher::Aes256Gcm,
+        (true, true) => Cipher::Aes128Gcm,
     }
 }
 

@@ -22,8 +22,9 @@ enum Action {
     New {
         /// Where to write it.
         file: PathBuf,
-        /// The domain's cipher: chacha20-poly1305 (any processor) or aes-256-gcm (several
-        /// times faster on processors with AES instructions; see docs/security.md).
+        /// The domain's cipher: chacha20-poly1305 (any processor), aes-256-gcm or
+        /// aes-128-gcm (several times faster on processors with AES instructions; see
+        /// docs/security.md).
         #[arg(long, default_value = "chacha20-poly1305", value_parser = parse_cipher)]
         cipher: Cipher,
     },

@@ -12,8 +12,8 @@
 //!
 //! Every `key EPOCH HEX` (a 256-bit key in 64 hex digits) is accepted from other senders;
 //! `send EPOCH` names the one this host seals with (by default the highest epoch);
-//! `cipher NAME` the AEAD of the whole domain (`chacha20-poly1305`, the default, or
-//! `aes-256-gcm`: see [`Cipher`]). Rotation
+//! `cipher NAME` the AEAD of the whole domain (`chacha20-poly1305`, the default,
+//! `aes-256-gcm` or `aes-128-gcm`: see [`Cipher`]). Rotation
 //! is three edits of every host's file: add the new key, then make it the one sent, then
 //! remove the old one; between the first and the last, both are accepted.
 
@@ -81,7 +81,7 @@ pub enum KeyFileError {
         line: usize,
     },
     /// A cipher this version does not know.
-    #[error("line {line}: unknown cipher `{name}` (chacha20-poly1305 or aes-256-gcm)")]
+    #[error("line {line}: unknown cipher `{name}` (chacha20-poly1305, aes-256-gcm or aes-128-gcm)")]
     UnknownCipher {
         /// The line.
         line: usize,
@@ -327,10 +327,15 @@ mod tests {
 
     #[test]
     fn the_cipher_is_a_setting_of_the_file() {
-        let ring = Keyring::new(1, key(5)).with_cipher(Cipher::Aes256Gcm);
-        let text = ring.to_file_text();
-        assert!(text.contains("cipher aes-256-gcm"), "{text}");
-        assert_eq!(Keyring::parse(&text).unwrap().cipher(), Cipher::Aes256Gcm);
+        for cipher in Cipher::ALL {
+            let ring = Keyring::new(1, key(5)).with_cipher(cipher);
+            let text = ring.to_file_text();
+            assert!(
+                text.contains(&format!("cipher {}\n", cipher.name())),
+                "{text}"
+            );
+            assert_eq!(Keyring::parse(&text).unwrap().cipher(), cipher);
+        }
         let plain = format!("ndds-key v1\nkey 1 {}\n", "11".repeat(32));
         assert_eq!(
             Keyring::parse(&plain).unwrap().cipher(),

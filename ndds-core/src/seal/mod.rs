@@ -41,11 +41,11 @@
 //!
 //! The cipher is the domain's, named in its key file: ChaCha20-Poly1305 by default (it is
 //! constant-time in software on every processor a robot may carry; AES-GCM is fast and safe
-//! only with AES and carry-less multiply instructions, which many ARM boards lack), or
-//! AES-256-GCM. Both take the per-sender counter as their 96-bit nonce directly. With the
-//! `ring` feature (the daemon and the SDK turn it on) both come from ring, whose assembly is
-//! several times faster than RustCrypto's pure Rust; without it, from RustCrypto. The two seal
-//! the same bytes, so hosts built either way share a domain.
+//! only with AES and carry-less multiply instructions, which many ARM boards lack),
+//! AES-256-GCM or AES-128-GCM. All take the per-sender counter as their 96-bit nonce
+//! directly. With the `ring` feature (the daemon and the SDK turn it on) they come from ring,
+//! whose assembly is several times faster than RustCrypto's pure Rust; without it, from
+//! RustCrypto. The two seal the same bytes, so hosts built either way share a domain.
 
 mod keyring;
 mod opener;
@@ -191,17 +191,28 @@ pub enum Cipher {
     /// instructions (x86 with AES-NI, ARMv8 with the crypto extension), slow without them
     /// (`aes-256-gcm`).
     Aes256Gcm,
+    /// AES-128-GCM: the same with a 128-bit key and 10 rounds instead of 14 (`aes-128-gcm`;
+    /// TLS 1.3's mandatory suite, and one of DDS Security's two AES-GCM transformations): a
+    /// tenth faster at 8 KiB on the x86 of docs/benchmarks.md, where GHASH costs as much as
+    /// the rounds. The domain key stays 256 bits; each sender's session key is the first 16
+    /// bytes of its derivation.
+    Aes128Gcm,
 }
 
 impl Cipher {
     /// Every cipher.
-    pub const ALL: [Cipher; 2] = [Cipher::ChaCha20Poly1305, Cipher::Aes256Gcm];
+    pub const ALL: [Cipher; 3] = [
+        Cipher::ChaCha20Poly1305,
+        Cipher::Aes256Gcm,
+        Cipher::Aes128Gcm,
+    ];
 
     /// Its name in key files.
     pub fn name(self) -> &'static str {
         match self {
             Cipher::ChaCha20Poly1305 => "chacha20-poly1305",
             Cipher::Aes256Gcm => "aes-256-gcm",
+            Cipher::Aes128Gcm => "aes-128-gcm",
         }
     }
 
@@ -215,6 +226,7 @@ impl Cipher {
         match self {
             Cipher::ChaCha20Poly1305 => 1,
             Cipher::Aes256Gcm => 2,
+            Cipher::Aes128Gcm => 3,
         }
     }
 }
@@ -223,6 +235,7 @@ impl Cipher {
 pub(crate) enum SessionKey {
     ChaCha(chacha20poly1305::ChaCha20Poly1305),
     Aes(Box<aes_gcm::Aes256Gcm>),
+    Aes128(Box<aes_gcm::Aes128Gcm>),
     /// Either cipher, through ring.
     #[cfg(feature = "ring")]
     Ring(Box<ring::aead::LessSafeKey>),
@@ -250,7 +263,8 @@ impl Backend {
 }
 
 impl SessionKey {
-    /// The key `bytes` of `cipher`, with `backend`'s implementation.
+    /// The key `bytes` of `cipher`, with `backend`'s implementation (AES-128-GCM takes the
+    /// first 16 of them).
     pub(crate) fn new(cipher: Cipher, bytes: &[u8; 32], backend: Backend) -> SessionKey {
         use chacha20poly1305::KeyInit;
         match backend {
@@ -261,16 +275,22 @@ impl SessionKey {
                 Cipher::Aes256Gcm => {
                     SessionKey::Aes(Box::new(aes_gcm::Aes256Gcm::new(&(*bytes).into())))
                 }
+                Cipher::Aes128Gcm => {
+                    let short: [u8; 16] = short_key(bytes);
+                    SessionKey::Aes128(Box::new(aes_gcm::Aes128Gcm::new(&short.into())))
+                }
             },
             #[cfg(feature = "ring")]
             Backend::Ring => {
-                let algorithm = match cipher {
-                    Cipher::ChaCha20Poly1305 => &ring::aead::CHACHA20_POLY1305,
-                    Cipher::Aes256Gcm => &ring::aead::AES_256_GCM,
+                let (algorithm, key): (_, &[u8]) = match cipher {
+                    Cipher::ChaCha20Poly1305 => (&ring::aead::CHACHA20_POLY1305, bytes),
+                    Cipher::Aes256Gcm => (&ring::aead::AES_256_GCM, bytes),
+                    Cipher::Aes128Gcm => (&ring::aead::AES_128_GCM, &bytes[..16]),
                 };
-                match ring::aead::UnboundKey::new(algorithm, bytes) {
+                match ring::aead::UnboundKey::new(algorithm, key) {
                     Ok(key) => SessionKey::Ring(Box::new(ring::aead::LessSafeKey::new(key))),
-                    // Both take 32-byte keys: ring refuses none; RustCrypto's stands in.
+                    // Every key has its algorithm's length: ring refuses none; RustCrypto's
+                    // stands in.
                     Err(_) => SessionKey::new(cipher, bytes, Backend::RustCrypto),
                 }
             }
@@ -284,6 +304,7 @@ impl SessionKey {
         match self {
             SessionKey::ChaCha(key) => key.encrypt_inout_detached(&nonce, aad, body.into()).ok(),
             SessionKey::Aes(key) => key.encrypt_inout_detached(&nonce, aad, body.into()).ok(),
+            SessionKey::Aes128(key) => key.encrypt_inout_detached(&nonce, aad, body.into()).ok(),
             #[cfg(feature = "ring")]
             SessionKey::Ring(key) => {
                 let nonce = ring::aead::Nonce::assume_unique_for_key(nonce.into());
@@ -304,6 +325,9 @@ impl SessionKey {
                 .decrypt_inout_detached(&nonce, aad, body.into(), tag)
                 .is_ok(),
             SessionKey::Aes(key) => key
+                .decrypt_inout_detached(&nonce, aad, body.into(), tag)
+                .is_ok(),
+            SessionKey::Aes128(key) => key
                 .decrypt_inout_detached(&nonce, aad, body.into(), tag)
                 .is_ok(),
             #[cfg(feature = "ring")]
@@ -367,6 +391,13 @@ fn derive(
     let session_key = SessionKey::new(cipher, &okm, Backend::PREFERRED);
     okm.fill(0);
     session_key
+}
+
+/// The first 16 bytes of a derived key: an AES-128 key.
+fn short_key(bytes: &[u8; 32]) -> [u8; 16] {
+    let mut short = [0u8; 16];
+    short.copy_from_slice(&bytes[..16]);
+    short
 }
 
 /// The nonce of `counter`.
