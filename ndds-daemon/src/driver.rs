@@ -171,6 +171,11 @@ impl Driver {
         self.max_backlog_pairs = pairs;
     }
 
+    /// Pairs waiting in all clients' backlogs now.
+    pub fn backlog_pairs(&self) -> usize {
+        self.backlog_pairs
+    }
+
     /// How long a client may read nothing while frames wait for it ([`SLOW_CLIENT`]).
     pub fn set_slow_client(&mut self, after: Duration) {
         self.slow_client = after;
@@ -613,7 +618,9 @@ impl Driver {
         tracing::warn!(client, %reason, "session refused");
         self.send(client, DaemonMessage::Refused { reason });
         // Dropping the link ends the connection once `Refused` is written.
-        self.clients.remove(&client);
+        if let Some(entry) = self.clients.remove(&client) {
+            self.backlog_pairs -= entry.backlog.pairs.len();
+        }
     }
 
     fn protocol_error(&mut self, client: ClientId, what: &str) {

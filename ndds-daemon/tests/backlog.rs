@@ -177,6 +177,7 @@ async fn a_burst_larger_than_the_outbox_reaches_a_client_that_reads() {
         !cancel.is_cancelled(),
         "the client was dropped by the burst"
     );
+    assert!(driver.backlog_pairs() > 0, "the burst waits in the backlog");
 
     let mut matched = std::collections::BTreeMap::new();
     let mut frames = 0;
@@ -207,6 +208,8 @@ async fn a_burst_larger_than_the_outbox_reaches_a_client_that_reads() {
     assert!(gone.iter().all(|g| matched.get(g) != Some(&true)));
     // Coalesced: no more frames than the outbox held plus one per pair.
     assert!(frames <= OUTBOX + BURST as usize, "{frames} frames");
+    // Every pair that waited was counted out as it went.
+    assert_eq!(driver.backlog_pairs(), 0);
     assert!(!cancel.is_cancelled());
     assert_eq!(
         counters
@@ -223,12 +226,14 @@ async fn a_client_that_reads_nothing_is_dropped_after_the_slow_client_time() {
     announce_burst(&mut driver);
     driver.flush().await;
     assert!(!cancel.is_cancelled(), "not yet: it may still read");
+    assert!(driver.backlog_pairs() > 0);
     tokio::time::sleep(Duration::from_millis(80)).await;
     driver.flush().await;
     assert!(
         cancel.is_cancelled(),
         "dropped once it read nothing for the slow-client time"
     );
+    assert_eq!(driver.backlog_pairs(), 0, "its backlog went with it");
     assert_eq!(
         counters
             .slow_clients
@@ -254,6 +259,8 @@ async fn backlogs_past_the_daemons_bound_cost_the_biggest_one_its_connection() {
         driver.flush().await;
         // Long before the slow-client time (10 s): only the bound can have dropped it.
         assert_eq!(cancel.is_cancelled(), dropped, "bound {bound}");
+        // A dropped client's pairs leave the count with it; a kept one's still wait.
+        assert_eq!(driver.backlog_pairs() == 0, dropped, "bound {bound}");
         assert_eq!(
             counters
                 .slow_clients
