@@ -107,12 +107,31 @@ replay() {
 minimize() {
     local target=$1 queue=$out_root/$1/default/queue
     [[ -d $queue ]] || { echo "no queue $queue: run the target first" >&2; return 2; }
-    local tmp
+    # `cargo afl cmin` runs AFL++'s Python afl-cmin, which narrows the queue of these
+    # persistent-mode targets down to 0 files ("Found 0 unique tuples"); its awk version,
+    # installed beside it, reads their traces. The newest AFL++ that cargo-afl built is used.
+    local cmin
+    cmin=$(ls -t "$HOME"/.local/share/afl.rs/*/*/afl/bin/afl-cmin.awk 2>/dev/null | head -n 1)
+    [[ -n $cmin ]] || { echo "no afl-cmin.awk under ~/.local/share/afl.rs: run scripts/fuzz.sh build" >&2; return 2; }
+    local tmp kept
     tmp=$(mktemp -d)
-    cargo afl cmin -i "$queue" -o "$tmp/min" -- "$bin_dir/$target"
+    PATH=$(dirname "$cmin"):$PATH "$cmin" -i "$queue" -o "$tmp/min" -- "$bin_dir/$target" >"$tmp/log" 2>&1 || {
+        tail -n 20 "$tmp/log" >&2
+        rm -rf "$tmp"
+        return 1
+    }
+    kept=$(find "$tmp/min" -type f | wc -l)
+    if [[ $kept -eq 0 ]]; then
+        # Never trade a corpus for nothing.
+        echo "afl-cmin kept no input of $queue; fuzz/corpus/$target is unchanged" >&2
+        tail -n 20 "$tmp/log" >&2
+        rm -rf "$tmp"
+        return 1
+    fi
     rm -rf "$fuzz_dir/corpus/$target"
     mv "$tmp/min" "$fuzz_dir/corpus/$target"
     rm -rf "$tmp"
+    echo "$target: $kept inputs kept of $(find "$queue" -maxdepth 1 -type f | wc -l)"
     du -sh "$fuzz_dir/corpus/$target"
 }
 
