@@ -1,9 +1,12 @@
 //! Port-directed communication (Shin, 1985) without IO: the pieces of the port primitives that
-//! are pure logic. So far: [`select`], the priority select over several ports, and
-//! [`schedule`], a module's work schedule (`perform`, `more`, `reinstate`).
+//! are pure logic. So far: [`select`], the priority select over several ports;
+//! [`schedule`], a module's work schedule (`perform`, `more`, `reinstate`); and [`order`],
+//! which of a module's sections may interrupt which.
 
+pub mod order;
 pub mod schedule;
 pub mod select;
 
+pub use order::{Order, OrderError, Sections};
 pub use schedule::{Performed, ScheduleError, WorkSchedule};
 pub use select::{Full, PrioritySelect, SelectError};
