@@ -697,7 +697,13 @@ fn pub_uses_the_topic_type_from_discovery() {
     let run = world.ndds(&["pub", "arm/target", &value, "--wait", "10"]);
     assert!(run.success(), "{run}");
     assert!(run.stderr.contains("published 1 sample(s)"), "{run}");
-    let sample = consumer.recv_timeout(SETTLE).expect("the sample arrives");
+    let sample = consumer.recv_timeout(SETTLE).unwrap_or_else(|err| {
+        panic!(
+            "the first sample did not arrive ({err:?}); consumer {:?}; participant {:?}; {run}",
+            consumer.stats(),
+            participant.stats()
+        )
+    });
     assert_eq!(sample.value, pose(2));
 
     // Missing optional fields stand for None.
@@ -705,7 +711,13 @@ fn pub_uses_the_topic_type_from_discovery() {
     partial.as_object_mut().unwrap().remove("note");
     let run = world.ndds(&["pub", "arm/target", &partial.to_string(), "--wait", "10"]);
     assert!(run.success(), "{run}");
-    let sample = consumer.recv_timeout(SETTLE).expect("the sample arrives");
+    let sample = consumer.recv_timeout(SETTLE).unwrap_or_else(|err| {
+        panic!(
+            "the second sample did not arrive ({err:?}); consumer {:?}; participant {:?}; {run}",
+            consumer.stats(),
+            participant.stats()
+        )
+    });
     assert_eq!(sample.value, pose(1));
 }
 

@@ -73,16 +73,39 @@ impl Peers {
     /// Applies the recorded changes in order; `apply` sees the matched endpoints after them
     /// and runs before anyone waiting for matches is woken, so a woken writer finds its
     /// destinations set. Returns the peers that were matched and went away.
-    pub(crate) fn publish(&self, apply: impl FnOnce(Matched<'_>)) -> Vec<Guid> {
+    ///
+    /// A burst is applied once, except where a peer matched in it also goes away in it (a
+    /// producer that wrote one sample and exited): the set with that peer is applied first,
+    /// then the rest, so what the peer sent while it was matched is believed (a consumer
+    /// holds samples of producers it has not heard matched yet, and releases them at the
+    /// match); it is then lost as any other peer.
+    pub(crate) fn publish(&self, mut apply: impl FnMut(Matched<'_>)) -> Vec<Guid> {
         let mut maps = lock(&self.maps);
-        // Lost: matched before and not after (a peer unmatched and matched again within one
-        // burst is not lost; one that became incompatible is).
-        let before: Vec<Guid> = maps.matched.keys().copied().collect();
+        // Every peer the data plane has been told is matched: those that are not at the end
+        // are lost (a peer unmatched and matched again within one burst is not lost; one that
+        // became incompatible is).
+        let mut told: BTreeSet<Guid> = maps.matched.keys().copied().collect();
+        // Matched in this burst and not applied yet.
+        let mut fresh: BTreeSet<Guid> = BTreeSet::new();
         for change in std::mem::take(&mut maps.pending) {
+            let leaving = match &change {
+                Change::Matched(_) => None,
+                Change::Incompatible(remote) => Some(remote.guid),
+                Change::Unmatched(remote) => Some(*remote),
+            };
+            if let Some(guid) = leaving
+                && fresh.contains(&guid)
+                && maps.matched.contains_key(&guid)
+            {
+                self.apply(&maps, &mut apply);
+                told.extend(maps.matched.keys().copied());
+                fresh.clear();
+            }
             match change {
                 Change::Matched(remote) => {
                     maps.incompatible.remove(&remote.guid);
                     maps.stale.remove(&remote.guid);
+                    fresh.insert(remote.guid);
                     maps.matched.insert(remote.guid, remote);
                 }
                 Change::Incompatible(remote) => {
@@ -95,7 +118,7 @@ impl Peers {
                 }
             }
         }
-        let lost: Vec<Guid> = before
+        let lost: Vec<Guid> = told
             .into_iter()
             .filter(|guid| !maps.matched.contains_key(guid))
             .collect();
@@ -128,7 +151,7 @@ impl Peers {
         Poll::Pending
     }
 
-    fn apply(&self, maps: &Maps, apply: impl FnOnce(Matched<'_>)) {
+    fn apply(&self, maps: &Maps, mut apply: impl FnMut(Matched<'_>)) {
         apply(maps.matched.values());
         self.changed.notify_all();
     }
@@ -164,7 +187,7 @@ impl Peers {
     }
 
     /// Drops the matches still unconfirmed; returns them. `apply` as in [`Peers::matched`].
-    pub(crate) fn sweep_stale(&self, apply: impl FnOnce(Matched<'_>)) -> Vec<Guid> {
+    pub(crate) fn sweep_stale(&self, apply: impl FnMut(Matched<'_>)) -> Vec<Guid> {
         let mut maps = lock(&self.maps);
         let stale = std::mem::take(&mut maps.stale);
         for guid in &stale {
@@ -299,5 +322,35 @@ mod tests {
         let lost = peers.publish(|all| seen.extend(all.map(|info| info.guid)));
         assert_eq!(lost, [two.guid]);
         assert_eq!(seen, [one.guid]);
+    }
+
+    #[test]
+    fn a_peer_matched_and_gone_in_one_burst_is_applied_matched_first_then_lost() {
+        // A producer that wrote one sample and exited: its match and its leaving arrive
+        // together. The data plane must see the match (to release what it sent), then not.
+        let type_desc = TypeDescription::of::<u32>();
+        let peers = Peers::new("t", type_desc.clone());
+        let (one, two, three) = (
+            consumer(1, &type_desc),
+            consumer(2, &type_desc),
+            consumer(3, &type_desc),
+        );
+        peers.record_matched(one.clone());
+        assert!(peers.publish(|_| {}).is_empty());
+        peers.record_matched(two.clone());
+        peers.record_matched(three.clone());
+        peers.record_unmatched(two.guid);
+        let mut applied: Vec<Vec<u32>> = Vec::new();
+        let lost = peers.publish(|all| applied.push(all.map(|info| info.guid.entity).collect()));
+        assert_eq!(applied, [vec![1, 2, 3], vec![1, 3]]);
+        assert_eq!(lost, [two.guid]);
+        // A burst of matches alone is still applied once.
+        let many: Vec<EndpointInfo> = (10..20).map(|e| consumer(e, &type_desc)).collect();
+        for info in &many {
+            peers.record_matched(info.clone());
+        }
+        let mut calls = 0;
+        assert!(peers.publish(|_| calls += 1).is_empty());
+        assert_eq!(calls, 1);
     }
 }
