@@ -327,9 +327,13 @@ fn select_takes_the_highest_priority_port_first_and_fifo_within_a_port() {
     let low = PortOwner::<u32, u32>::declare(&p, "log", "server").unwrap();
     let mid = PortOwner::<u32, u32>::declare(&p, "status", "server").unwrap();
     let high = PortOwner::<u32, u32>::declare(&p, "estop", "server").unwrap();
-    low.set_priority(0);
-    mid.set_priority(5);
+    // `log` has no priority: it comes after every port with one, a negative one too.
+    mid.set_priority(-5);
     high.set_priority(9);
+    assert_eq!(
+        [low.priority(), mid.priority(), high.priority()],
+        [None, Some(-5), Some(9)]
+    );
     let users: Vec<Arc<PortUser<u32, u32>>> = ["log", "status", "estop"]
         .iter()
         .map(|port| Arc::new(PortUser::declare(&p, port, "client").unwrap()))

@@ -138,8 +138,8 @@ fn print(view: &PortView) -> anyhow::Result<()> {
         if let Some(ms) = r.timeout_ms {
             parts.push(format!("timeout {ms} ms"));
         }
-        if r.priority != 0 {
-            parts.push(format!("priority {}", r.priority));
+        if let Some(priority) = r.priority {
+            parts.push(format!("priority {priority}"));
         }
         if let Some(filter) = &r.filter {
             parts.push(format!("filter {filter:?}"));

@@ -61,8 +61,8 @@ use crate::{
 pub trait Selectable {
     /// The port's name.
     fn port(&self) -> &str;
-    /// Its priority (higher first).
-    fn priority(&self) -> i32;
+    /// Its priority (higher first; `None` after every port with one).
+    fn priority(&self) -> Option<i32>;
     /// Requests waiting now (taking them off the network into the owner's buffer).
     fn waiting(&self) -> usize;
     /// Resolves once a request may be waiting (it may be taken into the owner's buffer on

@@ -5,7 +5,7 @@ use std::collections::{HashMap, VecDeque};
 use std::future::Future;
 use std::marker::PhantomData;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -22,6 +22,9 @@ use super::{
     check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error, topic,
 };
 use crate::{Consumer, Participant, Producer, TypeDescription};
+
+/// A port without a priority, as stored (no `i32` is this).
+const UNPRIORITISED: i64 = i64::MIN;
 
 pub(crate) struct OwnerShared {
     pub(crate) port: String,
@@ -113,7 +116,8 @@ pub struct PortOwner<Q, R> {
     /// `None` when a filter thread reads the topic.
     requests: Option<Consumer<Request>>,
     filter: Option<JoinHandle<()>>,
-    priority: AtomicI32,
+    /// The port's priority, or [`UNPRIORITISED`].
+    priority: AtomicI64,
     incarnation: u64,
     declaration: Option<JoinHandle<()>>,
     _types: PhantomData<fn(Q) -> R>,
@@ -221,7 +225,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             shared,
             requests,
             filter,
-            priority: AtomicI32::new(priority),
+            priority: AtomicI64::new(priority.map_or(UNPRIORITISED, i64::from)),
             incarnation,
             declaration: Some(declaration),
             _types: PhantomData,
@@ -314,9 +318,13 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         &self.shared.restrictions
     }
 
-    /// Sets the port's priority for [`select`](super::select) (higher first; default 0).
-    pub fn set_priority(&self, priority: i32) {
-        self.priority.store(priority, Ordering::Relaxed);
+    /// Sets the port's priority for [`select`](super::select) (higher first); `None` ranks
+    /// it below every port with a priority (the default, unless its restrictions give one).
+    pub fn set_priority(&self, priority: impl Into<Option<i32>>) {
+        self.priority.store(
+            priority.into().map_or(UNPRIORITISED, i64::from),
+            Ordering::Relaxed,
+        );
     }
 
     /// The other owner of this port, while one is present (its declaration matched).
@@ -491,8 +499,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
         &self.shared.port
     }
 
-    fn priority(&self) -> i32 {
-        self.priority.load(Ordering::Relaxed)
+    fn priority(&self) -> Option<i32> {
+        let stored = self.priority.load(Ordering::Relaxed);
+        (stored != UNPRIORITISED).then_some(stored as i32)
     }
 
     fn waiting(&self) -> usize {

@@ -49,8 +49,9 @@ pub struct Restrictions {
     pub max_users: Option<u32>,
     /// Operations on the port time out after this long at most (milliseconds).
     pub timeout_ms: Option<u64>,
-    /// The port's priority (for `select` and response handlers).
-    pub priority: i32,
+    /// The port's priority for `select` (higher first); `None`, the default, ranks below
+    /// every port with a priority, as the paper gives ports without one.
+    pub priority: Option<i32>,
     /// A filter spliced in at the owner's end.
     pub filter: Option<Filter>,
 }

@@ -1,8 +1,10 @@
 //! [`PrioritySelect`]: messages waiting on several ports, taken highest port priority first and
 //! in arrival order within a port.
 //!
-//! Deterministic: among ports of equal priority, the one added first wins. Each port holds at
-//! most its capacity; a push beyond it is refused and the message handed back.
+//! Deterministic: among ports of equal priority, the one added first wins. A port without a
+//! priority (`None`) ranks below every port with one, whatever its number, as the paper gives
+//! unprioritised ports "a default priority lower than any user-specifiable priorities". Each
+//! port holds at most its capacity; a push beyond it is refused and the message handed back.
 
 use std::fmt;
 
@@ -52,7 +54,7 @@ impl<T> std::error::Error for Full<T> {}
 
 struct Port<T> {
     name: String,
-    priority: i32,
+    priority: Option<i32>,
     capacity: usize,
     queue: std::collections::VecDeque<T>,
 }
@@ -79,14 +81,15 @@ impl<T> PrioritySelect<T> {
         Self::default()
     }
 
-    /// Adds port `name` with `priority` (higher is served first) and room for `capacity`
-    /// messages.
+    /// Adds port `name` with `priority` (higher is served first; a number, or `None` for a
+    /// port without one, served after every port with one) and room for `capacity` messages.
     pub fn add_port(
         &mut self,
         name: &str,
-        priority: i32,
+        priority: impl Into<Option<i32>>,
         capacity: usize,
     ) -> Result<(), SelectError> {
+        let priority = priority.into();
         if self.ports.iter().any(|p| p.name == name) {
             return Err(SelectError::Duplicate(name.to_owned()));
         }
@@ -222,6 +225,19 @@ mod tests {
     }
 
     #[test]
+    fn a_port_without_a_priority_comes_after_every_port_with_one() {
+        let mut s = PrioritySelect::new();
+        s.add_port("plain", None, 8).unwrap();
+        s.add_port("low", -1000, 8).unwrap();
+        s.add_port("also plain", None, 8).unwrap();
+        for port in ["also plain", "plain", "low"] {
+            s.push(port, port).unwrap();
+        }
+        let order: Vec<&str> = std::iter::from_fn(|| s.pop().map(|(_, m)| m)).collect();
+        assert_eq!(order, ["low", "plain", "also plain"]);
+    }
+
+    #[test]
     fn full_and_unknown_ports_hand_the_message_back() {
         let mut s = PrioritySelect::new();
         s.add_port("p", 0, 1).unwrap();
@@ -248,7 +264,7 @@ mod tests {
         /// port (first added among equals), over a random mix of pushes and pops.
         #[test]
         fn pops_follow_priority_then_arrival(
-            priorities in prop::collection::vec(-3i32..4, 1..6),
+            priorities in prop::collection::vec(prop::option::of(-3i32..4), 1..6),
             ops in prop::collection::vec((any::<bool>(), 0usize..6), 0..200),
         ) {
             let mut s = PrioritySelect::new();

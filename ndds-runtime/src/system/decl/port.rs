@@ -88,7 +88,7 @@ fn restrictions(r: &Reader<'_>, p: &mut Diagnostics) -> Restrictions {
         .map(|n| n as u32);
     restrictions.timeout_ms = r.seconds("timeout", p).map(|t| t.as_millis() as u64);
     if let Some(prio) = r.integer("priority", (i32::MIN as i64, i32::MAX as i64), p) {
-        restrictions.priority = prio as i32;
+        restrictions.priority = Some(prio as i32);
     }
     restrictions
 }
