@@ -603,25 +603,31 @@ fn a_bounded_buffer_filter_makes_sends_non_blocking_until_it_is_full() {
     for n in 1..=3 {
         user.send(&n, WAIT).unwrap();
     }
-    // The fourth waits for room: with nobody receiving, it times out.
+    // The fourth waits for room: with nobody receiving, it times out, and its sender
+    // withdraws it, so the buffer never takes it.
     let err = user.send(&4, Duration::from_millis(500)).unwrap_err();
     assert!(matches!(err, PortError::Timeout { .. }), "{err}");
-    // The owner takes one: the waiting request 4 (its sender gave up) takes the room.
+    assert!(common::eventually(WAIT, || owner.withdrawn() == 1));
+    // The owner takes one: the room stays empty.
     let (first, reply) = owner.receive(WAIT).unwrap();
     reply.reply(&()).unwrap();
     assert_eq!(first, 1);
-    assert!(common::eventually(WAIT, || {
+    {
         use ndds_client::ports::Selectable;
-        owner.waiting() == 3
-    }));
+        assert_eq!(owner.waiting(), 2);
+    }
     // One more taken: room for a new send, which returns at once; arrival order is kept.
     assert_eq!(owner.receive(WAIT).unwrap().0, 2);
     user.send(&5, WAIT).unwrap();
     let mut rest = Vec::new();
-    for _ in 0..3 {
+    for _ in 0..2 {
         rest.push(owner.receive(WAIT).unwrap().0);
     }
-    assert_eq!(rest, [3, 4, 5]);
+    assert_eq!(rest, [3, 5]);
+    assert!(matches!(
+        owner.receive(Duration::from_millis(200)),
+        Err(PortError::Timeout { .. })
+    ));
     // A filter that answers at once needs a reply type of ().
     let bad = PortOwner::<u32, u32>::declare_with(
         &p,
@@ -695,4 +701,89 @@ fn every_primitive_has_an_async_form() {
     });
     assert_eq!(first.unwrap(), ("client".to_owned(), 90));
     assert_eq!(answered.unwrap(), 9);
+}
+
+#[test]
+fn a_send_that_timed_out_is_never_received_later() {
+    use ndds_client::ports::Responder;
+    use std::sync::Mutex;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "withdraw");
+    let owner = PortOwner::<u32, u32>::declare(&p, "slow.cmd", "server").unwrap();
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "slow.cmd", "client").unwrap());
+    // Warm up: the user knows the owner, so the next request goes out at once.
+    let warm = {
+        let user = Arc::clone(&user);
+        std::thread::spawn(move || user.send(&0, WAIT))
+    };
+    let (value, reply) = owner.receive(WAIT).unwrap();
+    reply.reply(&value).unwrap();
+    assert_eq!(warm.join().unwrap().unwrap(), 0);
+
+    // The owner is busy elsewhere: the send times out, and its request is withdrawn.
+    let err = user.send(&7, Duration::from_millis(300)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    // Once the withdrawal is there (it follows the request within the network's delay; an
+    // owner that takes the request before that has it), the request is gone and counted.
+    assert!(common::eventually(WAIT, || {
+        use ndds_client::ports::Selectable;
+        owner.waiting();
+        owner.withdrawn() == 1
+    }));
+    assert!(matches!(
+        owner.receive(Duration::from_millis(200)),
+        Err(PortError::Timeout { .. })
+    ));
+    // The port goes on as before.
+    let next = {
+        let user = Arc::clone(&user);
+        std::thread::spawn(move || user.send(&8, WAIT))
+    };
+    let (value, reply) = owner.receive(WAIT).unwrap();
+    assert_eq!(value, 8);
+    assert!(!reply.is_withdrawn());
+    reply.reply(&80).unwrap();
+    assert_eq!(next.join().unwrap().unwrap(), 80);
+
+    // A query that times out while it waits behind a long handler is not answered later.
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let mut responder = Responder::new(&p, "server").unwrap();
+    {
+        let seen = Arc::clone(&seen);
+        responder
+            .handle("slow.query", 0, move |n: u32| {
+                seen.lock().unwrap().push(n);
+                if n == 1 {
+                    std::thread::sleep(Duration::from_millis(800));
+                }
+                n
+            })
+            .unwrap();
+    }
+    let asker = |task: &str| {
+        Arc::new(
+            PortUser::<u32, u32>::declare_with(&p, "slow.query", task, &[Usage::Query]).unwrap(),
+        )
+    };
+    let (first, second) = (asker("first"), asker("second"));
+    assert_eq!(first.query(&10, WAIT).unwrap(), 10);
+    assert_eq!(second.query(&20, WAIT).unwrap(), 20);
+    let long = {
+        let first = Arc::clone(&first);
+        std::thread::spawn(move || first.query(&1, WAIT))
+    };
+    assert!(common::eventually(WAIT, || seen
+        .lock()
+        .unwrap()
+        .contains(&1)));
+    let err = second.query(&2, Duration::from_millis(200)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    assert_eq!(long.join().unwrap().unwrap(), 1);
+    assert_eq!(second.query(&3, WAIT).unwrap(), 3);
+    assert_eq!(
+        *seen.lock().unwrap(),
+        [10, 20, 1, 3],
+        "query 2 was never run"
+    );
 }

@@ -40,6 +40,11 @@ pub(crate) struct OwnerShared {
     /// Requests taken off the topic (by [`select`](super::select) or the filter) and not
     /// received yet.
     pending: Mutex<VecDeque<Request>>,
+    /// Requests withdrawn by their senders after they were received (the most recent
+    /// [`WITHDRAWALS_KEPT`]), for [`ReplyHandle::is_withdrawn`].
+    withdrawn_late: Mutex<VecDeque<(String, u64)>>,
+    /// Requests dropped unreceived because their senders stopped waiting.
+    withdrawn: AtomicU64,
 }
 
 impl OwnerShared {
@@ -53,6 +58,47 @@ impl OwnerShared {
 
     pub(crate) fn queue_len(&self) -> usize {
         self.pending().len()
+    }
+
+    /// Takes `request`, just read off the topic, into `pending`; a withdrawal drops the
+    /// request it names from there, or is remembered if that request was received already.
+    fn absorb(&self, pending: &mut VecDeque<Request>, request: Request) {
+        if !request.withdraw {
+            pending.push_back(request);
+            return;
+        }
+        if !self.drop_withdrawn(pending, &request) {
+            let mut late = self
+                .withdrawn_late
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            if late.len() >= WITHDRAWALS_KEPT {
+                late.pop_front();
+            }
+            late.push_back((request.user, request.id));
+        }
+    }
+
+    /// Drops from `queue` the request `withdrawal` names; whether it was there.
+    fn drop_withdrawn(&self, queue: &mut VecDeque<Request>, withdrawal: &Request) -> bool {
+        let found = queue
+            .iter()
+            .position(|r| !r.withdraw && r.id == withdrawal.id && r.user == withdrawal.user);
+        if let Some(at) = found {
+            queue.remove(at);
+            self.withdrawn.fetch_add(1, Ordering::Relaxed);
+        }
+        found.is_some()
+    }
+
+    /// Whether the sender of request `id` of user handle `user` withdrew it after it was
+    /// received.
+    fn withdrawn_after_receipt(&self, user: &str, id: u64) -> bool {
+        self.withdrawn_late
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .any(|(u, i)| *i == id && u == user)
     }
 
     /// Drops the reply stream of a user that went away.
@@ -178,6 +224,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             restrictions,
             presence: Mutex::new(Presence::default()),
             pending: Mutex::new(VecDeque::new()),
+            withdrawn_late: Mutex::new(VecDeque::new()),
+            withdrawn: AtomicU64::new(0),
         });
         let (requests, filter) = match shared.restrictions.filter {
             None => (Some(requests), None),
@@ -306,6 +354,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// Users matched on the broadcast topic now (who a `sendall` reaches).
     pub fn users(&self) -> usize {
         self.broadcast.matched().len()
+    }
+
+    /// Requests dropped because their senders stopped waiting (their timeouts passed while
+    /// the requests waited here, or queued for a [`Responder`](super::Responder)'s handler).
+    pub fn withdrawn(&self) -> u64 {
+        self.shared.withdrawn.load(Ordering::Relaxed)
     }
 
     /// The users refused so far by the port's restrictions, in words.
@@ -437,25 +491,31 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     None
                 }
             };
-            if let Some(request) = arrived
-                && self.admit(&request)
-            {
-                return Ok(request);
+            // Through the queue, so that a withdrawal right behind it is seen first.
+            if let Some(request) = arrived {
+                self.shared.absorb(&mut self.shared.pending(), request);
             }
         }
     }
 
-    /// A request waiting now, buffered or on the topic, from an admitted user.
+    /// A request waiting now, buffered or on the topic, from an admitted user. What waits on
+    /// the topic is read first (up to the buffer's bound), so that a request whose sender
+    /// withdrew it is never received.
     fn take_request(&self) -> Option<Request> {
         loop {
-            let buffered = self.shared.pending().pop_front();
-            let request = match buffered {
-                Some(request) => {
-                    self.shared.changed.notify();
-                    request
+            let request = {
+                let mut pending = self.shared.pending();
+                if let Some(requests) = &self.requests {
+                    while pending.len() < PENDING_LIMIT {
+                        match requests.try_recv() {
+                            Ok(sample) => self.shared.absorb(&mut pending, sample.value),
+                            Err(_) => break,
+                        }
+                    }
                 }
-                None => self.requests.as_ref()?.try_recv().ok()?.value,
+                pending.pop_front()?
             };
+            self.shared.changed.notify();
             if self.admit(&request) {
                 return Some(request);
             }
@@ -511,7 +571,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
             // Taken off the topic up to a bound; the rest waits there (flow control).
             while pending.len() < PENDING_LIMIT {
                 match requests.try_recv() {
-                    Ok(sample) => pending.push_back(sample.value),
+                    Ok(sample) => self.shared.absorb(&mut pending, sample.value),
                     Err(_) => break,
                 }
             }
@@ -536,7 +596,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
                     );
                     match arrived.await {
                         Either::Left(Some(sample)) => {
-                            self.shared.pending().push_back(sample.value);
+                            self.shared.absorb(&mut self.shared.pending(), sample.value);
                             self.shared.changed.notify();
                         }
                         Either::Left(None) => self.shared.changed.changed(seen).await,
@@ -564,6 +624,8 @@ impl<Q, R> Drop for PortOwner<Q, R> {
 
 /// Requests `select` takes off the topic ahead of `receive`, at most.
 const PENDING_LIMIT: usize = 1024;
+/// Withdrawals of requests already received that an owner remembers, at most.
+const WITHDRAWALS_KEPT: usize = 1024;
 /// Users whose reply streams an owner keeps at most (the least recently used goes first).
 const REPLY_STREAMS: usize = 1024;
 
@@ -584,6 +646,17 @@ impl<R: Serialize> ReplyHandle<R> {
     /// The task that sent the request.
     pub fn sender(&self) -> &str {
         &self.task
+    }
+
+    /// Whether the sender stopped waiting for the reply (its timeout passed after this
+    /// request was received): a reply now reaches nobody. A responder skips such queries.
+    pub fn is_withdrawn(&self) -> bool {
+        self.shared.withdrawn_after_receipt(&self.user, self.id)
+    }
+
+    /// Counts this request among those dropped for their senders (a responder skipped it).
+    pub(crate) fn count_withdrawn(&self) {
+        self.shared.withdrawn.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Replies (does not wait for the sender).
@@ -649,14 +722,33 @@ fn send_reply(
     result
 }
 
-/// The bounded-buffer filter: takes requests off the topic while the buffer has room and
-/// answers each at once (so the sender goes on); when the buffer is full, it stops taking
-/// them, and senders wait for room. It sleeps on the topic and on the owner's changes.
+/// The bounded-buffer filter: takes requests into the buffer while it has room and answers
+/// each at once (so the sender goes on); when the buffer is full, senders wait for room. The
+/// requests that wait are read off the topic all the same (up to [`PENDING_LIMIT`], then
+/// they wait there), so that a sender that stops waiting withdraws its request before the
+/// buffer takes it. It sleeps on the topic and on the owner's changes.
 fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: usize) {
     let empty = postcard::to_stdvec(&()).unwrap_or_default();
+    // Read and not yet taken into the buffer (not answered either).
+    let mut waiting: VecDeque<Request> = VecDeque::new();
     while !shared.stop.load(Ordering::Acquire) {
         let seen = shared.changed.generation();
-        if shared.queue_len() >= capacity {
+        while shared.queue_len() < capacity
+            && let Some(request) = waiting.pop_front()
+        {
+            if let Err(err) = send_reply(
+                shared,
+                &request.user,
+                &request.task,
+                request.id,
+                empty.clone(),
+            ) {
+                tracing::warn!(port = %shared.port, error = %err, "filter could not answer a sender");
+            }
+            shared.pending().push_back(request);
+            shared.changed.notify();
+        }
+        if waiting.len() >= PENDING_LIMIT {
             wait::block_on(shared.changed.changed(seen));
             continue;
         }
@@ -664,28 +756,26 @@ fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: 
             wait::next_sample(requests),
             shared.changed.changed(seen),
         ));
-        let sample = match arrived {
-            Either::Left(Some(sample)) => sample,
+        let request = match arrived {
+            Either::Left(Some(sample)) => sample.value,
             Either::Left(None) => {
                 wait::block_on(shared.changed.changed(seen));
                 continue;
             }
             Either::Right(()) => continue,
         };
-        let request = sample.value;
+        if request.withdraw {
+            // Not answered yet: dropped here. Answered (the answer and the sender's timeout
+            // crossed): dropped from the buffer, if the owner has not received it.
+            if !shared.drop_withdrawn(&mut waiting, &request) {
+                shared.absorb(&mut shared.pending(), request);
+                shared.changed.notify();
+            }
+            continue;
+        }
         if !shared.admitted(&request.user) {
             continue; // refused users get no answer: their own side reports the refusal
         }
-        if let Err(err) = send_reply(
-            shared,
-            &request.user,
-            &request.task,
-            request.id,
-            empty.clone(),
-        ) {
-            tracing::warn!(port = %shared.port, error = %err, "filter could not answer a sender");
-        }
-        shared.pending().push_back(request);
-        shared.changed.notify();
+        waiting.push_back(request);
     }
 }

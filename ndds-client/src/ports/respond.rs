@@ -72,6 +72,11 @@ where
             }
         };
         Some(Box::new(move || {
+            // Its sender stopped waiting while it queued behind other handlers: not run.
+            if reply.is_withdrawn() {
+                reply.count_withdrawn();
+                return;
+            }
             let answer = (self.handler.lock().unwrap_or_else(|p| p.into_inner()))(query);
             if let Err(err) = reply.reply(&answer) {
                 tracing::warn!(port = %self.owner.port(), error = %err, "response not sent");

@@ -320,20 +320,39 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 user: self.user.clone(),
                 task: self.task.clone(),
                 payload,
+                withdraw: false,
             })
             .map_err(|source| PortError::Write {
                 port: self.port.clone(),
                 what: "a request".to_owned(),
                 source,
             })?;
-        let reply = wait::timeout_at(deadline, self.reply_to(id))
-            .await
-            .ok_or_else(|| timed_out(Some(owner)))?;
+        let Some(reply) = wait::timeout_at(deadline, self.reply_to(id)).await else {
+            self.withdraw(id);
+            return Err(timed_out(Some(owner)));
+        };
         postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a reply",
             reason: e.to_string(),
         })
+    }
+
+    /// Tells the owner that nobody waits for request `id` any more: it drops the request if
+    /// it has not received it yet, so a send that timed out is not acted on later. Best
+    /// effort: the owner may have received the request already (then its reply is dropped
+    /// here), and a withdrawal that cannot be written is only logged.
+    fn withdraw(&self, id: u64) {
+        let withdrawal = Request {
+            id,
+            user: self.user.clone(),
+            task: self.task.clone(),
+            payload: Vec::new(),
+            withdraw: true,
+        };
+        if let Err(err) = self.requests.write(&withdrawal) {
+            tracing::debug!(port = %self.port, error = %err, "withdrawal of a timed-out request not sent");
+        }
     }
 
     /// Takes the next message the owner sent to all users (`sendall`), waiting at most

@@ -15,6 +15,10 @@ pub struct Request {
     /// The message, postcard-encoded.
     #[serde(with = "serde_bytes")]
     pub payload: Vec<u8>,
+    /// A withdrawal, not a request: the sender of request `id` stopped waiting (its timeout
+    /// passed), so the owner drops that request if it has not received it yet (the payload
+    /// is empty).
+    pub withdraw: bool,
 }
 
 /// A reply from the owner.
