@@ -787,3 +787,85 @@ fn a_send_that_timed_out_is_never_received_later() {
         "query 2 was never run"
     );
 }
+
+#[test]
+fn sendall_reaches_only_the_users_the_restrictions_allow() {
+    use ndds_client::ports::{Broadcast, BroadcastReply, PortWire};
+    use ndds_client::{ConsumerQos, ProducerQos, Reliability};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "sendall-restricted");
+    let owner = PortOwner::<u32, String>::declare_with(
+        &p,
+        "crew",
+        "foreman",
+        Restrictions {
+            users: vec!["alice".into()],
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let member = |task: &str| {
+        PortUser::<u32, String>::declare_with(&p, "crew", task, &[Usage::ReceiveAll]).unwrap()
+    };
+    let (alice, mallory) = (member("alice"), member("mallory"));
+    // A process that bypasses its own checks: it reads the broadcast and answers first.
+    let reliable = Reliability::Reliable { depth: 16 };
+    let eavesdrop = p
+        .consumer_with_type::<Broadcast>(
+            "port/crew/all",
+            Broadcast::description(),
+            ConsumerQos {
+                reliability: reliable,
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let forge = p
+        .producer_with_type::<BroadcastReply>(
+            "port/crew/all-reply",
+            BroadcastReply::description(),
+            ProducerQos {
+                reliability: reliable,
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    assert!(common::eventually(WAIT, || owner.users() == 3));
+    let refused_member = std::thread::spawn(move || {
+        mallory.receive_all(Duration::from_secs(3), |v| format!("mallory has {v}"))
+    });
+    let forger = std::thread::spawn(move || {
+        let broadcast = eavesdrop.recv_timeout(WAIT).unwrap().value;
+        forge
+            .write(&BroadcastReply {
+                owner: broadcast.owner,
+                id: broadcast.id,
+                task: "mallory".into(),
+                user: "0000000000000bad".into(),
+                payload: postcard::to_stdvec(&"forged".to_owned()).unwrap(),
+            })
+            .unwrap();
+    });
+    let allowed = std::thread::spawn(move || {
+        // Late, so that the forged reply comes first.
+        alice.receive_all(WAIT, |v| {
+            std::thread::sleep(Duration::from_millis(300));
+            format!("alice has {v}")
+        })
+    });
+    let replies = owner.sendall(&7, WAIT).unwrap();
+    assert_eq!(
+        replies.first(),
+        &("alice".to_owned(), "alice has 7".to_owned())
+    );
+    assert!(replies.next(Duration::from_millis(500)).is_none());
+    assert_eq!(owner.refused_replies(), 1, "the forged reply");
+    forger.join().unwrap();
+    assert_eq!(allowed.join().unwrap().unwrap(), 7);
+    let (who, restriction) = refused(refused_member.join().unwrap());
+    assert_eq!(
+        (who.as_str(), restriction),
+        ("crew/foreman/mallory", "user list")
+    );
+}

@@ -45,6 +45,8 @@ pub(crate) struct OwnerShared {
     withdrawn_late: Mutex<VecDeque<(String, u64)>>,
     /// Requests dropped unreceived because their senders stopped waiting.
     withdrawn: AtomicU64,
+    /// Replies to `sendall` dropped because the restrictions refuse their users.
+    refused_replies: AtomicU64,
 }
 
 impl OwnerShared {
@@ -141,6 +143,22 @@ impl OwnerShared {
             .collect()
     }
 
+    /// Whether a reply to a `sendall` comes from a user the restrictions allow and admitted;
+    /// one that does not is dropped and counted.
+    pub(crate) fn accepts_broadcast_reply(&self, reply: &BroadcastReply) -> bool {
+        let refused = self
+            .restrictions
+            .refusal(&reply.task, &[super::wire::Usage::ReceiveAll])
+            .is_some()
+            || !self.admitted(&reply.user);
+        if refused {
+            self.refused_replies.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!(port = %self.port, user = %reply.task,
+                "reply to a sendall from a user the port's restrictions refuse: dropped");
+        }
+        !refused
+    }
+
     /// Whether a request from user handle `user` may be served.
     fn admitted(&self, user: &str) -> bool {
         !self.restrictions.restricted() || self.admitted_users().iter().any(|u| u == user)
@@ -226,6 +244,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             pending: Mutex::new(VecDeque::new()),
             withdrawn_late: Mutex::new(VecDeque::new()),
             withdrawn: AtomicU64::new(0),
+            refused_replies: AtomicU64::new(0),
         });
         let (requests, filter) = match shared.restrictions.filter {
             None => (Some(requests), None),
@@ -329,8 +348,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         let first = super::sendall::next_reply(
             port,
             &self.broadcast_replies,
-            self.incarnation,
-            id,
+            &self.shared,
+            (self.incarnation, id),
             wait::deadline(start, timeout),
         )
         .await
@@ -346,14 +365,21 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             id,
             owner: self.incarnation,
             source: &self.broadcast_replies,
+            shared: &self.shared,
             first,
             _reply: PhantomData,
         })
     }
 
-    /// Users matched on the broadcast topic now (who a `sendall` reaches).
+    /// Users matched on the broadcast topic now (who a `sendall` reaches; those the
+    /// restrictions refuse do not answer, and their replies would be dropped).
     pub fn users(&self) -> usize {
         self.broadcast.matched().len()
+    }
+
+    /// Replies to `sendall` dropped because their users are refused or not admitted.
+    pub fn refused_replies(&self) -> u64 {
+        self.shared.refused_replies.load(Ordering::Relaxed)
     }
 
     /// Requests dropped because their senders stopped waiting (their timeouts passed while

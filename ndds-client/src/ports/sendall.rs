@@ -36,6 +36,8 @@ pub struct BroadcastReply {
     pub id: u64,
     /// The replying user's task.
     pub task: String,
+    /// The replying user handle (what the owner's admission counts).
+    pub user: String,
     /// The reply, postcard-encoded.
     #[serde(with = "serde_bytes")]
     pub payload: Vec<u8>,
@@ -47,6 +49,7 @@ pub struct Replies<'a, R> {
     pub(crate) id: u64,
     pub(crate) owner: u64,
     pub(crate) source: &'a crate::Consumer<BroadcastReply>,
+    pub(crate) shared: &'a super::owner::OwnerShared,
     pub(crate) first: (String, R),
     pub(crate) _reply: PhantomData<fn() -> R>,
 }
@@ -60,23 +63,30 @@ impl<R: DeserializeOwned> Replies<'_, R> {
     /// The next later reply, waiting at most `timeout`; `None` when none came.
     pub fn next(&self, timeout: Duration) -> Option<Result<(String, R), PortError>> {
         let at = super::wait::deadline(Instant::now(), timeout);
-        super::wait::block_on(next_reply(self.port, self.source, self.owner, self.id, at))
+        super::wait::block_on(next_reply(
+            self.port,
+            self.source,
+            self.shared,
+            (self.owner, self.id),
+            at,
+        ))
     }
 }
 
-/// The next reply to broadcast `id` of `owner` on `source`, by `at` (replies to other
-/// broadcasts are dropped).
+/// The next reply to broadcast `id` of `owner` on `source`, by `at`. Replies to other
+/// broadcasts are dropped, and so are replies from users the port's restrictions refuse or
+/// have not admitted (`shared` judges them; they are counted there).
 pub(crate) async fn next_reply<R: DeserializeOwned>(
     port: &str,
     source: &crate::Consumer<BroadcastReply>,
-    owner: u64,
-    id: u64,
+    shared: &super::owner::OwnerShared,
+    (owner, id): (u64, u64),
     at: Option<Instant>,
 ) -> Option<Result<(String, R), PortError>> {
     let reply = super::wait::timeout_at(at, async {
         loop {
             let reply = super::wait::next_sample(source).await?.value;
-            if reply.owner == owner && reply.id == id {
+            if reply.owner == owner && reply.id == id && shared.accepts_broadcast_reply(&reply) {
                 return Some(reply);
             }
         }

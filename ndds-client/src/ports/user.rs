@@ -371,6 +371,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
         self.require(Usage::ReceiveAll)?;
+        // A user the owner's restrictions refuse takes no part (known owners only: one not
+        // heard yet is judged when its message comes).
+        self.owner(&mut self.demux())?;
         let start = Instant::now();
         let deadline = wait::deadline(start, timeout);
         let broadcast = wait::timeout_at(deadline, wait::next_sample(&self.broadcasts))
@@ -384,6 +387,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 waited: start.elapsed(),
             })?
             .value;
+        // The owner is known now (its message came): refused, the message is not answered.
+        self.owner(&mut self.demux())?;
         let value: Q = postcard::from_bytes(&broadcast.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a broadcast",
@@ -404,6 +409,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 owner: broadcast.owner,
                 id: broadcast.id,
                 task: self.task.clone(),
+                user: self.user.clone(),
                 payload,
             })
             .map_err(|source| PortError::Write {
