@@ -869,3 +869,47 @@ fn sendall_reaches_only_the_users_the_restrictions_allow() {
         ("crew/foreman/mallory", "user list")
     );
 }
+
+#[test]
+fn a_responders_port_takes_restrictions_like_any_owners() {
+    use ndds_client::ports::Responder;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "responder-restricted");
+    let mut responder = Responder::new(&p, "parts-db").unwrap();
+    responder
+        .handle_with(
+            "parts.query",
+            Restrictions {
+                users: vec!["planner".into()],
+                timeout_ms: Some(300),
+                ..Restrictions::default()
+            },
+            |n: u32| {
+                if n == 0 {
+                    std::thread::sleep(Duration::from_secs(1));
+                }
+                n + 1
+            },
+        )
+        .unwrap();
+    let asker = |task: &str| {
+        PortUser::<u32, u32>::declare_with(&p, "parts.query", task, &[Usage::Query]).unwrap()
+    };
+    let (who, what) = refused(asker("intruder").query(&1, Duration::from_secs(3)));
+    assert_eq!(
+        (who.as_str(), what),
+        ("parts.query/parts-db/intruder", "user list")
+    );
+    let planner = asker("planner");
+    assert_eq!(planner.query(&1, WAIT).unwrap(), 2);
+    // The port's timeout bounds a query, whatever its caller allowed.
+    let started = std::time::Instant::now();
+    let err = planner.query(&0, WAIT).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    assert!(
+        started.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        started.elapsed()
+    );
+}

@@ -24,6 +24,7 @@ use super::Selectable;
 use super::error::PortError;
 use super::owner::PortOwner;
 use super::wait::{self, Notify};
+use super::wire::Restrictions;
 use crate::Participant;
 
 type Job = Box<dyn FnOnce() + Send>;
@@ -160,7 +161,31 @@ impl Responder {
         R: Serialize + DeserializeOwned + Send + 'static,
         F: FnMut(Q) -> R + Send + 'static,
     {
-        let owner = PortOwner::<Q, R>::declare(&self.participant, port, &self.task)?;
+        let restrictions = Restrictions {
+            priority: Some(priority),
+            ..Restrictions::default()
+        };
+        self.handle_with(port, restrictions, handler)
+    }
+
+    /// Owns `port` with `restrictions` and answers each query on it with `handler`: users the
+    /// user list, usages or maximum of active users refuse are refused as by any owner, a
+    /// timeout restriction bounds the users' queries, and the priority orders this port's
+    /// queries against the responder's other ports (without one, after every port with one).
+    pub fn handle_with<Q, R, F>(
+        &mut self,
+        port: &str,
+        restrictions: Restrictions,
+        handler: F,
+    ) -> Result<(), PortError>
+    where
+        Q: Serialize + DeserializeOwned + Send + 'static,
+        R: Serialize + DeserializeOwned + Send + 'static,
+        F: FnMut(Q) -> R + Send + 'static,
+    {
+        let priority = restrictions.priority;
+        let owner =
+            PortOwner::<Q, R>::declare_with(&self.participant, port, &self.task, restrictions)?;
         let mut queue = self.shared.queue();
         queue
             .select
