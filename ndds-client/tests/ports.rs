@@ -913,3 +913,65 @@ fn a_responders_port_takes_restrictions_like_any_owners() {
         started.elapsed()
     );
 }
+
+#[test]
+fn a_replacement_takes_over_the_port_of_a_hung_owner() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "takeover");
+    let hung = PortOwner::<u32, u32>::declare(&p, "gripper", "grip-server").unwrap();
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "gripper", "planner").unwrap());
+    // The owner still announces itself but never receives: the user's sends time out.
+    let err = user.send(&1, Duration::from_millis(500)).unwrap_err();
+    assert!(
+        matches!(&err, PortError::Timeout { owner: Some(o), .. } if o == "grip-server"),
+        "{err}"
+    );
+    // A replacement under another name, in the same process.
+    let new = PortOwner::<u32, u32>::take_over(
+        &p,
+        "gripper",
+        "grip-server-2",
+        Restrictions::default(),
+        WAIT,
+    )
+    .unwrap();
+    assert_eq!((hung.claim(), new.claim()), (0, 1));
+    // The old owner is told, and serves no more; the replacement sees no conflict.
+    assert!(common::eventually(WAIT, || hung
+        .superseded_by()
+        .is_some_and(|by| by.starts_with("grip-server-2"))));
+    assert!(matches!(
+        hung.receive(Duration::from_millis(100)),
+        Err(PortError::Superseded { .. })
+    ));
+    assert_eq!(new.conflict(), None);
+    // Users send to the replacement.
+    let sender = {
+        let user = Arc::clone(&user);
+        std::thread::spawn(move || user.send(&2, WAIT))
+    };
+    let (value, reply) = new.receive(WAIT).unwrap();
+    assert_eq!(value, 2);
+    reply.reply(&20).unwrap();
+    assert_eq!(sender.join().unwrap().unwrap(), 20);
+    // Two declared owners of one claim are still a conflict, reported as before.
+    let rival = PortOwner::<u32, u32>::declare(&p, "gripper", "rival").unwrap();
+    assert_eq!(rival.claim(), 0);
+    assert!(common::eventually(WAIT, || hung.conflict().is_some()));
+    assert_eq!(
+        new.conflict(),
+        None,
+        "a lower claim does not contest the port"
+    );
+    // A second takeover claims above every claim it heard.
+    let third = PortOwner::<u32, u32>::take_over(
+        &p,
+        "gripper",
+        "grip-server-3",
+        Restrictions::default(),
+        WAIT,
+    )
+    .unwrap();
+    assert_eq!(third.claim(), 2);
+    assert!(common::eventually(WAIT, || new.superseded_by().is_some()));
+}

@@ -108,13 +108,22 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
 
 fn print(view: &PortView) -> anyhow::Result<()> {
     outln!("{}", view.port)?;
-    match view.owners.as_slice() {
+    // The highest takeover claim owns the port; lower ones were replaced.
+    let top = view.owners.iter().map(|o| o.claim).max();
+    let (current, replaced): (Vec<&OwnerInfo>, Vec<&OwnerInfo>) =
+        view.owners.iter().partition(|o| Some(o.claim) == top);
+    match current.as_slice() {
         [] => outln!("  owner     (none heard)")?,
         [owner] => outln!(
-            "  owner     {} (pid {}), queue {}",
+            "  owner     {} (pid {}), queue {}{}",
             owner.task,
             owner.pid,
-            owner.queue
+            owner.queue,
+            if owner.claim > 0 {
+                format!(", took the port over (claim {})", owner.claim)
+            } else {
+                String::new()
+            }
         )?,
         owners => {
             let all: Vec<String> = owners
@@ -124,7 +133,14 @@ fn print(view: &PortView) -> anyhow::Result<()> {
             outln!("  owner     CONFLICT: {}", all.join(" and "))?;
         }
     }
-    if let Some(r) = view.owners.first().map(|o| &o.restrictions) {
+    for old in &replaced {
+        outln!(
+            "  replaced  {} (pid {}), still announcing",
+            old.task,
+            old.pid
+        )?;
+    }
+    if let Some(r) = current.first().map(|o| &o.restrictions) {
         let mut parts = Vec::new();
         if !r.usages.is_empty() {
             parts.push(format!("usages {:?}", r.usages));

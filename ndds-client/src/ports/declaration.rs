@@ -35,8 +35,9 @@ const ACTIVE_LIMIT: usize = 1024;
 pub(crate) struct Presence {
     /// Users whose declaration's producer is matched, in the order first heard.
     pub(crate) active: Vec<(UserInfo, Guid)>,
-    /// Other owners of the port (their declaration's producer -> who, in words).
-    pub(crate) others: HashMap<Guid, String>,
+    /// Other owners of the port (their declaration's producer -> who, in words, and their
+    /// takeover claim).
+    pub(crate) others: HashMap<Guid, (String, u64)>,
     /// Refusals so far, in words.
     pub(crate) refused: Vec<String>,
 }
@@ -60,7 +61,7 @@ impl Declaration {
                 on_user(shared, event);
             }
             while let Ok(event) = self.owners.try_recv_event() {
-                on_owner(shared, self.info.incarnation, event);
+                on_owner(shared, &self.info, event);
             }
             let admitted = shared.admitted_users();
             let queue = u32::try_from(shared.queue_len()).unwrap_or(u32::MAX);
@@ -96,7 +97,7 @@ impl Declaration {
             match woke.await {
                 Some(Either::Left(Either::Left(Some(event)))) => on_user(shared, event),
                 Some(Either::Left(Either::Right(Some(event)))) => {
-                    on_owner(shared, self.info.incarnation, event);
+                    on_owner(shared, &self.info, event);
                 }
                 Some(Either::Left(_)) => {
                     // A topic closed: only a change or the deadline can help now.
@@ -147,24 +148,30 @@ fn on_user(shared: &OwnerShared, event: Event<UserInfo>) {
     }
 }
 
-fn on_owner(shared: &OwnerShared, incarnation: u64, event: Event<OwnerInfo>) {
+fn on_owner(shared: &OwnerShared, mine: &OwnerInfo, event: Event<OwnerInfo>) {
     let mut presence = shared.presence();
-    let before = presence.others.len();
+    let before = presence.others.clone();
     match event {
-        Event::Sample(sample) if sample.value.incarnation != incarnation => {
-            let other = format!("{} (pid {})", sample.value.task, sample.value.pid);
-            if presence.others.is_empty() {
+        Event::Sample(sample) if sample.value.incarnation != mine.incarnation => {
+            let (other, claim) = (
+                format!("{} (pid {})", sample.value.task, sample.value.pid),
+                sample.value.claim,
+            );
+            if claim > mine.claim {
+                tracing::warn!(port = %shared.port, owner = %shared.task, by = %other,
+                    "this owner was replaced (the port was taken over)");
+            } else if claim == mine.claim && presence.others.is_empty() {
                 tracing::warn!(port = %shared.port, owner = %shared.task, other = %other,
                     "a second owner declared this port");
             }
-            presence.others.insert(sample.info.writer, other);
+            presence.others.insert(sample.info.writer, (other, claim));
         }
         Event::Notification(Notification::ProducerLost { writer, .. }) => {
             presence.others.remove(&writer);
         }
         _ => {}
     }
-    let changed = presence.others.len() != before;
+    let changed = presence.others != before;
     drop(presence);
     if changed {
         shared.changed.notify();

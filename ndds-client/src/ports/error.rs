@@ -47,6 +47,18 @@ pub enum PortError {
         /// The other.
         second: String,
     },
+    /// This owner was replaced: another task took the port over with a higher claim
+    /// ([`PortOwner::take_over`](super::PortOwner::take_over)). It receives and replies no
+    /// more; users send to the replacement.
+    #[error("port `{port}`: owner `{owner}` was replaced by `{by}`; it serves the port no more")]
+    Superseded {
+        /// The port.
+        port: String,
+        /// This owner's task.
+        owner: String,
+        /// The replacement, in words.
+        by: String,
+    },
     /// A restriction of the port refuses this user.
     #[error("port `{port}`: `{user}` refused by owner `{owner}`: {restriction}: {detail}")]
     Refused {

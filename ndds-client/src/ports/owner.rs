@@ -29,6 +29,9 @@ const UNPRIORITISED: i64 = i64::MIN;
 pub(crate) struct OwnerShared {
     pub(crate) port: String,
     pub(crate) task: String,
+    /// This owner's incarnation (random) and takeover claim (see [`OwnerInfo::claim`]).
+    incarnation: u64,
+    claim: u64,
     participant: Participant,
     /// Reply streams by user handle, with when each was last used.
     replies: Mutex<HashMap<String, (Producer<Reply>, Instant)>>,
@@ -164,9 +167,37 @@ impl OwnerShared {
         !self.restrictions.restricted() || self.admitted_users().iter().any(|u| u == user)
     }
 
-    /// The other owner of the port, if one is present.
+    /// The other owner of the port with this owner's claim, if one is present (owners of a
+    /// lower claim were replaced; one of a higher claim replaced this one).
     fn conflict(&self) -> Option<String> {
-        self.presence().others.values().min().cloned()
+        self.presence()
+            .others
+            .values()
+            .filter(|(_, claim)| *claim == self.claim)
+            .map(|(who, _)| who.clone())
+            .min()
+    }
+
+    /// The owner that took the port over from this one, if one did.
+    fn superseded_by(&self) -> Option<String> {
+        self.presence()
+            .others
+            .values()
+            .filter(|(_, claim)| *claim > self.claim)
+            .max_by_key(|(_, claim)| *claim)
+            .map(|(who, _)| who.clone())
+    }
+
+    /// [`PortError::Superseded`] if this owner was replaced.
+    fn check_superseded(&self) -> Result<(), PortError> {
+        match self.superseded_by() {
+            Some(by) => Err(PortError::Superseded {
+                port: self.port.clone(),
+                owner: self.task.clone(),
+                by,
+            }),
+            None => Ok(()),
+        }
     }
 }
 
@@ -215,6 +246,75 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         task: &str,
         restrictions: Restrictions,
     ) -> Result<Self, PortError> {
+        Self::declare_claiming(participant, port, task, restrictions, 0)
+    }
+
+    /// Takes `port` over from its owner, for a hung or failed one that still holds it: listens
+    /// up to `listen` for the owners there are (it stops once it heard the declaration of every
+    /// owner its daemon knows of and discovery matched it with), then declares `task` the owner with a claim above
+    /// every claim heard. Users send to the highest claim from then on; the
+    /// replaced owner is told (its `receive` and replies fail with
+    /// [`PortError::Superseded`]), and requests it held time out for their senders. With no
+    /// owner heard, it declares the port with claim 1. Two replacements racing with the same
+    /// claim are a conflict, reported as two owners are.
+    pub fn take_over(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        restrictions: Restrictions,
+        listen: Duration,
+    ) -> Result<Self, PortError> {
+        check_name(port)?;
+        let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
+        let deadline = Instant::now() + listen;
+        // Every owner's declaration is kept for late listeners: once one has come from each
+        // declaration producer the daemon knows of (its graph, now) and discovery matched,
+        // every claim there is has been heard.
+        let owner_topic = topic(port, "owner");
+        let known: Vec<crate::Guid> = participant
+            .graph()
+            .map(|graph| {
+                graph
+                    .endpoints
+                    .iter()
+                    .filter(|e| {
+                        e.info.topic == owner_topic
+                            && e.info.kind() == ndds_core::wire::EndpointKind::Producer
+                    })
+                    .map(|e| e.info.guid)
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut heard: HashMap<crate::Guid, u64> = HashMap::new();
+        loop {
+            let matched = owners.matched();
+            let waited_for = known.iter().chain(matched.iter().map(|m| &m.guid));
+            if !(known.is_empty() && matched.is_empty())
+                && waited_for.clone().all(|guid| heard.contains_key(guid))
+            {
+                break;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            if let Ok(sample) = owners.recv_timeout(left.min(Duration::from_millis(20))) {
+                heard.insert(sample.info.writer, sample.value.claim);
+            }
+        }
+        let highest = heard.values().copied().max();
+        let claim = highest.map_or(1, |h| h.saturating_add(1));
+        drop(owners);
+        Self::declare_claiming(participant, port, task, restrictions, claim)
+    }
+
+    fn declare_claiming(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        restrictions: Restrictions,
+        claim: u64,
+    ) -> Result<Self, PortError> {
         check_name(port)?;
         let users = reliable_consumer::<UserInfo>(participant, port, &topic(port, "users"))?;
         let requests = reliable_consumer::<Request>(participant, port, &topic(port, "request"))?;
@@ -230,11 +330,14 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             restrictions: restrictions.clone(),
             admitted: Vec::new(),
             queue: 0,
+            claim,
         };
         let priority = restrictions.priority;
         let shared = Arc::new(OwnerShared {
             port: port.to_owned(),
             task: task.to_owned(),
+            incarnation,
+            claim,
             participant: participant.clone(),
             replies: Mutex::new(HashMap::new()),
             stop: AtomicBool::new(false),
@@ -412,6 +515,16 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         self.shared.conflict()
     }
 
+    /// The owner that took this port over from this one, if one did.
+    pub fn superseded_by(&self) -> Option<String> {
+        self.shared.superseded_by()
+    }
+
+    /// This owner's takeover claim (0: declared; see [`PortOwner::take_over`]).
+    pub fn claim(&self) -> u64 {
+        self.shared.claim
+    }
+
     /// [`receive`](Self::receive) for a loop that serves the port: `None` at the timeout, for
     /// a request that does not decode (its sender's problem: the next one is taken at once),
     /// and for a failure that lasts (a second owner), which is logged as an error when it
@@ -466,6 +579,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             Some(Ok(request)) => self.handle(request),
             Some(Err(err)) => Err(err),
             None => {
+                self.shared.check_superseded()?;
                 // At the deadline, what is already there is still taken.
                 match self.take_request() {
                     Some(request) => self.handle(request),
@@ -485,6 +599,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     async fn next_request(&self) -> Result<Request, PortError> {
         loop {
             let seen = self.shared.changed.generation();
+            self.shared.check_superseded()?;
             if let Some(other) = self.shared.conflict() {
                 return Err(PortError::SecondOwner {
                     port: self.shared.port.clone(),
@@ -690,6 +805,7 @@ impl<R: Serialize> ReplyHandle<R> {
         if self.answered {
             return Ok(());
         }
+        self.shared.check_superseded()?;
         let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
             port: self.shared.port.clone(),
             what: "encoding a reply",
@@ -708,7 +824,11 @@ fn send_reply(
     id: u64,
     payload: Vec<u8>,
 ) -> Result<(), PortError> {
-    let reply = Reply { id, payload };
+    let reply = Reply {
+        id,
+        owner: shared.incarnation,
+        payload,
+    };
     let write = |producer: &Producer<Reply>| {
         producer.write(&reply).map_err(|source| PortError::Write {
             port: shared.port.clone(),

@@ -173,9 +173,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         wait::race(mine, self.owners_noted.changed(seen)).await;
     }
 
-    /// The owner now: its task, or an error when there are two or the formats differ; `None`
-    /// while none is known (or it has not admitted this user yet).
-    fn owner(&self, demux: &mut Demux) -> Result<Option<String>, PortError> {
+    /// The owner now — the one of the highest takeover claim — as its task and incarnation,
+    /// or an error when two share that claim or the formats differ; `None` while none is
+    /// known (or it has not admitted this user yet).
+    fn owner(&self, demux: &mut Demux) -> Result<Option<(String, u64)>, PortError> {
         let mut noted = false;
         while let Ok(event) = self.owners.try_recv_event() {
             Self::note_owner(demux, event);
@@ -185,7 +186,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             self.owners_noted.notify();
         }
         demux.admission_ends = None;
-        let mut owners: Vec<(&Guid, &OwnerInfo)> = demux.owners.iter().collect();
+        let top = demux.owners.values().map(|o| o.claim).max();
+        let mut owners: Vec<(&Guid, &OwnerInfo)> = demux
+            .owners
+            .iter()
+            .filter(|(_, o)| Some(o.claim) == top)
+            .collect();
         owners.sort_by(|(_, a), (_, b)| a.task.cmp(&b.task).then(a.pid.cmp(&b.pid)));
         match owners.as_slice() {
             [] => Ok(None),
@@ -231,7 +237,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                         user_formats: format!("{:016x}/{:016x}", self.formats.0, self.formats.1),
                     });
                 }
-                Ok(Some(owner.task.clone()))
+                Ok(Some((owner.task.clone(), owner.incarnation)))
             }
             [(_, a), (_, b), ..] => Err(PortError::SecondOwner {
                 port: self.port.clone(),
@@ -285,7 +291,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                     let declared = demux
                         .owners
                         .values()
-                        .find_map(|o| o.restrictions.timeout_ms);
+                        .find(|o| o.incarnation == owner.1)
+                        .and_then(|o| o.restrictions.timeout_ms);
                     if let Some(ms) = declared {
                         let limit = wait::deadline(start, Duration::from_millis(ms));
                         deadline = deadline.into_iter().chain(limit).min();
@@ -300,6 +307,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             let until = deadline.into_iter().chain(admission_ends).min();
             wait::timeout_at(until, self.owner_event(seen)).await;
         };
+        let (owner, incarnation) = owner;
         if !wait::matched_by(&self.requests, deadline).await {
             return Err(timed_out(Some(owner)));
         }
@@ -327,7 +335,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 what: "a request".to_owned(),
                 source,
             })?;
-        let Some(reply) = wait::timeout_at(deadline, self.reply_to(id)).await else {
+        let Some(reply) = wait::timeout_at(deadline, self.reply_to(id, incarnation)).await else {
             self.withdraw(id);
             return Err(timed_out(Some(owner)));
         };
@@ -427,16 +435,25 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         wait::block_on(self.exchange(value, timeout))
     }
 
-    /// The reply to request `id`. Every waiting sender reads the topic; one that takes
-    /// another's reply hands it over.
-    async fn reply_to(&self, id: u64) -> Reply {
+    /// The reply to request `id` from owner `incarnation` (one from an owner replaced
+    /// meanwhile is dropped). Every waiting sender reads the topic; one that takes another's
+    /// reply hands it over.
+    async fn reply_to(&self, id: u64, incarnation: u64) -> Reply {
         loop {
             let seen = self.handed.generation();
-            if let Some(reply) = self.demux().waiting.remove(&id) {
-                return reply;
+            let handed = self.demux().waiting.remove(&id);
+            if let Some(reply) = handed {
+                if reply.owner == incarnation {
+                    return reply;
+                }
+                continue;
             }
             match wait::race(wait::next_sample(&self.replies), self.handed.changed(seen)).await {
-                Either::Left(Some(sample)) if sample.value.id == id => return sample.value,
+                Either::Left(Some(sample)) if sample.value.id == id => {
+                    if sample.value.owner == incarnation {
+                        return sample.value;
+                    }
+                }
                 Either::Left(Some(sample)) => {
                     let mut demux = self.demux();
                     if demux.awaiting.contains(&sample.value.id) {

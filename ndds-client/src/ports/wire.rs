@@ -26,6 +26,9 @@ pub struct Request {
 pub struct Reply {
     /// The request's id.
     pub id: u64,
+    /// The replying owner's incarnation: a user takes replies from the owner it sent to
+    /// only (not from one that was replaced meanwhile).
+    pub owner: u64,
     /// The reply, postcard-encoded.
     #[serde(with = "serde_bytes")]
     pub payload: Vec<u8>,
@@ -126,4 +129,8 @@ pub struct OwnerInfo {
     pub admitted: Vec<String>,
     /// Requests buffered at the owner and not received yet (by its filter or `select`).
     pub queue: u32,
+    /// Takeover claim: 0 for an owner that declared the port; a replacement
+    /// ([`PortOwner::take_over`](super::PortOwner::take_over)) claims one above every claim it
+    /// heard. The highest claim owns the port; two owners with the same claim are a conflict.
+    pub claim: u64,
 }
