@@ -266,7 +266,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     ) -> Result<Self, PortError> {
         check_name(port)?;
         let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
-        let deadline = Instant::now() + listen;
+        let deadline = Instant::now()
+            .checked_add(listen)
+            .unwrap_or_else(|| Instant::now() + Duration::from_secs(86_400));
         // Every owner's declaration is kept for late listeners: once one has come from each
         // declaration producer the daemon knows of (its graph, now) and discovery matched,
         // every claim there is has been heard.
@@ -552,7 +554,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 wait::block_on(wait::timeout_at(wait::deadline(start, timeout), async {
                     loop {
                         let seen = shared.changed.generation();
-                        if shared.conflict().is_none() || shared.stop.load(Ordering::Acquire) {
+                        // A replaced owner waits the timeout out too (no busy loop).
+                        let lasting =
+                            shared.conflict().is_some() || shared.superseded_by().is_some();
+                        if !lasting || shared.stop.load(Ordering::Acquire) {
                             return;
                         }
                         shared.changed.changed(seen).await;
