@@ -251,9 +251,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
 
     /// Takes `port` over from its owner, for a hung or failed one that still holds it: listens
     /// up to `listen` for the owners there are (it stops once it heard the declaration of every
-    /// owner its daemon knows of and discovery matched it with), then declares `task` the owner with a claim above
-    /// every claim heard. Users send to the highest claim from then on; the
-    /// replaced owner is told (its `receive` and replies fail with
+    /// owner its daemon knows of and discovery matched it with), then declares `task` the
+    /// owner with a claim above every claim heard. Users send to the highest claim from then
+    /// on; the replaced owner is told (its `receive` and replies fail with
     /// [`PortError::Superseded`]), and requests it held time out for their senders. With no
     /// owner heard, it declares the port with claim 1. Two replacements racing with the same
     /// claim are a conflict, reported as two owners are.
@@ -265,14 +265,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         listen: Duration,
     ) -> Result<Self, PortError> {
         check_name(port)?;
-        let owners = reliable_consumer::<OwnerInfo>(participant, port, &topic(port, "owner"))?;
-        let deadline = Instant::now()
-            .checked_add(listen)
-            .unwrap_or_else(|| Instant::now() + Duration::from_secs(86_400));
+        let owner_topic = topic(port, "owner");
+        let owners = reliable_consumer::<OwnerInfo>(participant, port, &owner_topic)?;
+        let deadline = wait::deadline(Instant::now(), listen);
         // Every owner's declaration is kept for late listeners: once one has come from each
         // declaration producer the daemon knows of (its graph, now) and discovery matched,
         // every claim there is has been heard.
-        let owner_topic = topic(port, "owner");
         let known: Vec<crate::Guid> = participant
             .graph()
             .map(|graph| {
@@ -296,7 +294,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             {
                 break;
             }
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = deadline.map_or(Duration::MAX, |at| {
+                at.saturating_duration_since(Instant::now())
+            });
             if left.is_zero() {
                 break;
             }
