@@ -4,7 +4,7 @@
 mod common;
 
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use ndds_client::ports::{PortError, PortOwner, PortUser, Restrictions, Usage};
 
@@ -77,7 +77,7 @@ fn threads_of_a_new_user_that_wait_for_the_owner_together_all_find_it() {
     let dir = tempfile::tempdir().unwrap();
     let p = participant(dir.path(), "ports-waiting");
     let user = Arc::new(PortUser::<u32, u32>::declare(&p, "arm.late", "client").unwrap());
-    let started = std::time::Instant::now();
+    let started = Instant::now();
     let threads: Vec<_> = (0..4)
         .map(|k| {
             let user = Arc::clone(&user);
@@ -119,7 +119,7 @@ fn without_an_owner_or_a_reply_a_send_times_out_naming_the_port() {
     }
     // An owner that takes the request and never replies: the sender's timeout names it.
     let owner = PortOwner::<u32, u32>::declare(&p, "gripper", "gripper-driver").unwrap();
-    let started = std::time::Instant::now();
+    let started = Instant::now();
     let sender = std::thread::spawn(move || user.send(&2, Duration::from_secs(2)));
     let (_request, _never_replied) = owner.receive(WAIT).unwrap();
     let err = sender.join().unwrap().unwrap_err();
@@ -528,7 +528,7 @@ fn each_restriction_refuses_what_it_should_naming_the_port_and_both_sides() {
     )
     .unwrap();
     let user = PortUser::<u32, u32>::declare(&p, "slow", "impatient").unwrap();
-    let started = std::time::Instant::now();
+    let started = Instant::now();
     let err = user.send(&1, Duration::from_secs(10)).unwrap_err();
     assert!(matches!(err, PortError::Timeout { .. }), "{err}");
     assert!(
@@ -832,6 +832,8 @@ fn sendall_reaches_only_the_users_the_restrictions_allow() {
         )
         .unwrap();
     assert!(common::eventually(WAIT, || owner.users() == 3));
+    // The forged reply must reach the owner (a reliable write before the match reaches nobody).
+    assert!(common::eventually(WAIT, || !forge.matched().is_empty()));
     let refused_member = std::thread::spawn(move || {
         mallory.receive_all(Duration::from_secs(3), |v| format!("mallory has {v}"))
     });
@@ -871,6 +873,70 @@ fn sendall_reaches_only_the_users_the_restrictions_allow() {
 }
 
 #[test]
+fn a_reply_from_a_user_that_left_just_after_is_still_taken() {
+    use ndds_client::ports::{OwnerInfo, PortWire};
+    use ndds_client::{ConsumerQos, Reliability};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "sendall-leaver");
+    let owner = Arc::new(
+        PortOwner::<u32, u32>::declare_with(
+            &p,
+            "roll",
+            "teacher",
+            Restrictions {
+                users: vec!["pupil".into()],
+                ..Restrictions::default()
+            },
+        )
+        .unwrap(),
+    );
+    let declarations = p
+        .consumer_with_type::<OwnerInfo>(
+            "port/roll/owner",
+            OwnerInfo::description(),
+            ConsumerQos {
+                reliability: Reliability::Reliable { depth: 16 },
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let admitted = |want: usize| {
+        let until = Instant::now() + WAIT;
+        while let Some(left) = until.checked_duration_since(Instant::now()) {
+            match declarations.recv_timeout(left) {
+                Ok(s) if s.value.admitted.len() == want => return true,
+                Ok(_) => {}
+                Err(_) => return false,
+            }
+        }
+        false
+    };
+    let pupil =
+        PortUser::<u32, u32>::declare_with(&p, "roll", "pupil", &[Usage::ReceiveAll]).unwrap();
+    assert!(admitted(1), "the pupil was never admitted");
+    assert!(common::eventually(WAIT, || owner.users() == 1));
+    // The broadcast goes out on the first poll; the owner reads replies only when polled
+    // again, after it has heard that the pupil left: the reply is judged after the loss.
+    let mut sendall = Box::pin(owner.sendall_async(4, WAIT));
+    assert!(futures_util::FutureExt::now_or_never(sendall.as_mut()).is_none());
+    std::thread::spawn(move || {
+        pupil.receive_all(WAIT, |n| n * 10).unwrap();
+        drop(pupil);
+    })
+    .join()
+    .unwrap();
+    assert!(admitted(0), "the owner never heard that the pupil left");
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let (who, reply) = runtime.block_on(sendall).unwrap();
+    assert_eq!((who.as_str(), reply), ("pupil", 40));
+    assert_eq!(owner.refused_replies(), 0);
+}
+
+#[test]
 fn a_responders_port_takes_restrictions_like_any_owners() {
     use ndds_client::ports::Responder;
 
@@ -904,7 +970,7 @@ fn a_responders_port_takes_restrictions_like_any_owners() {
     let planner = asker("planner");
     assert_eq!(planner.query(&1, WAIT).unwrap(), 2);
     // The port's timeout bounds a query, whatever its caller allowed.
-    let started = std::time::Instant::now();
+    let started = Instant::now();
     let err = planner.query(&0, WAIT).unwrap_err();
     assert!(matches!(err, PortError::Timeout { .. }), "{err}");
     assert!(

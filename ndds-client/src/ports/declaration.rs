@@ -40,6 +40,25 @@ pub(crate) struct Presence {
     pub(crate) others: HashMap<Guid, (String, u64)>,
     /// Refusals so far, in words.
     pub(crate) refused: Vec<String>,
+    /// Users that went away while admitted, most recent last (at most [`DEPARTED_KEPT`]),
+    /// with when: their last replies may still be on their way (the loss of a user's
+    /// declaration can overtake a reply it wrote on another topic just before it left).
+    pub(crate) departed: std::collections::VecDeque<(String, Instant)>,
+}
+
+/// Users that went away remembered at most (see [`Presence::departed`]).
+const DEPARTED_KEPT: usize = 256;
+
+/// How long a reply from a user that went away while admitted is still taken.
+pub(crate) const DEPARTED_GRACE: Duration = Duration::from_secs(30);
+
+impl Presence {
+    /// Whether user handle `user` went away while admitted within [`DEPARTED_GRACE`].
+    pub(crate) fn departed_recently(&self, user: &str) -> bool {
+        self.departed
+            .iter()
+            .any(|(u, at)| u == user && at.elapsed() <= DEPARTED_GRACE)
+    }
 }
 
 /// The declaration thread's endpoints.
@@ -138,6 +157,15 @@ fn on_user(shared: &OwnerShared, event: Event<UserInfo>) {
                 .filter(|(_, w)| *w == writer)
                 .map(|(u, _)| u.user.clone())
                 .collect();
+            drop(presence);
+            let admitted = shared.admitted_users();
+            let mut presence = shared.presence();
+            for user in gone.iter().filter(|u| admitted.contains(u)) {
+                if presence.departed.len() >= DEPARTED_KEPT {
+                    presence.departed.pop_front();
+                }
+                presence.departed.push_back((user.clone(), Instant::now()));
+            }
             presence.active.retain(|(_, w)| *w != writer);
             drop(presence);
             for user in gone {

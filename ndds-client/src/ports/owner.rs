@@ -153,7 +153,7 @@ impl OwnerShared {
             .restrictions
             .refusal(&reply.task, &[super::wire::Usage::ReceiveAll])
             .is_some()
-            || !self.admitted(&reply.user);
+            || !(self.admitted(&reply.user) || self.presence().departed_recently(&reply.user));
         if refused {
             self.refused_replies.fetch_add(1, Ordering::Relaxed);
             tracing::debug!(port = %self.port, user = %reply.task,

@@ -247,6 +247,40 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         }
     }
 
+    /// Waits until the owner is known, unique, of our formats and has admitted this user;
+    /// its task and incarnation, or `None` when `deadline` passes first. The owner's timeout
+    /// restriction, counted from `start`, shortens `deadline`.
+    async fn current_owner(
+        &self,
+        start: Instant,
+        deadline: &mut Option<Instant>,
+    ) -> Result<Option<(String, u64)>, PortError> {
+        loop {
+            let seen = self.owners_noted.generation();
+            let admission_ends = {
+                let mut demux = self.demux();
+                if let Some(owner) = self.owner(&mut demux)? {
+                    let declared = demux
+                        .owners
+                        .values()
+                        .find(|o| o.incarnation == owner.1)
+                        .and_then(|o| o.restrictions.timeout_ms);
+                    if let Some(ms) = declared {
+                        let limit = wait::deadline(start, Duration::from_millis(ms));
+                        *deadline = (*deadline).into_iter().chain(limit).min();
+                    }
+                    return Ok(Some(owner));
+                }
+                demux.admission_ends
+            };
+            if deadline.is_some_and(|at| Instant::now() >= at) {
+                return Ok(None);
+            }
+            let until = (*deadline).into_iter().chain(admission_ends).min();
+            wait::timeout_at(until, self.owner_event(seen)).await;
+        }
+    }
+
     /// Sends `value` and waits (at most `timeout`, or the port's timeout restriction if
     /// shorter) for the owner's reply.
     pub fn send(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
@@ -283,31 +317,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             waited: start.elapsed(),
         };
         // An owner must be known (and unique, with our formats) before the request goes out.
-        let owner = loop {
-            let seen = self.owners_noted.generation();
-            let admission_ends = {
-                let mut demux = self.demux();
-                if let Some(owner) = self.owner(&mut demux)? {
-                    let declared = demux
-                        .owners
-                        .values()
-                        .find(|o| o.incarnation == owner.1)
-                        .and_then(|o| o.restrictions.timeout_ms);
-                    if let Some(ms) = declared {
-                        let limit = wait::deadline(start, Duration::from_millis(ms));
-                        deadline = deadline.into_iter().chain(limit).min();
-                    }
-                    break owner;
-                }
-                demux.admission_ends
-            };
-            if deadline.is_some_and(|at| Instant::now() >= at) {
-                return Err(timed_out(None));
-            }
-            let until = deadline.into_iter().chain(admission_ends).min();
-            wait::timeout_at(until, self.owner_event(seen)).await;
+        let Some((owner, incarnation)) = self.current_owner(start, &mut deadline).await? else {
+            return Err(timed_out(None));
         };
-        let (owner, incarnation) = owner;
         if !wait::matched_by(&self.requests, deadline).await {
             return Err(timed_out(Some(owner)));
         }
@@ -384,19 +396,28 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         self.owner(&mut self.demux())?;
         let start = Instant::now();
         let deadline = wait::deadline(start, timeout);
-        let broadcast = wait::timeout_at(deadline, wait::next_sample(&self.broadcasts))
-            .await
-            .flatten()
-            .ok_or_else(|| PortError::Timeout {
-                port: self.port.clone(),
-                operation: "receive_all",
-                task: self.task.clone(),
-                owner: None,
-                waited: start.elapsed(),
-            })?
-            .value;
-        // The owner is known now (its message came): refused, the message is not answered.
-        self.owner(&mut self.demux())?;
+        let timed_out = || PortError::Timeout {
+            port: self.port.clone(),
+            operation: "receive_all",
+            task: self.task.clone(),
+            owner: None,
+            waited: start.elapsed(),
+        };
+        let broadcast = loop {
+            let broadcast = wait::timeout_at(deadline, wait::next_sample(&self.broadcasts))
+                .await
+                .flatten()
+                .ok_or_else(timed_out)?
+                .value;
+            // The owner is known once its message came, but it may not have heard (admitted)
+            // this user yet: a reply sent now would be dropped as from a stranger. Refused,
+            // the message is not answered; one from an owner replaced meanwhile is skipped.
+            if self.answerable(&broadcast, start, deadline).await? {
+                break broadcast;
+            }
+            tracing::debug!(port = %self.port, user = %self.task,
+                "a broadcast from a replaced owner: not answered");
+        };
         let value: Q = postcard::from_bytes(&broadcast.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a broadcast",
@@ -426,6 +447,50 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 source,
             })?;
         Ok(value)
+    }
+
+    /// Whether `broadcast` comes from the owner now (one that admitted this user), waiting
+    /// by `deadline` for that owner's declaration if it is not known yet; `false` for one
+    /// from an owner replaced meanwhile. A timeout when the owner stays unknown or has not
+    /// admitted this user by then; the refusal when it refuses this user.
+    async fn answerable(
+        &self,
+        broadcast: &Broadcast,
+        start: Instant,
+        deadline: Option<Instant>,
+    ) -> Result<bool, PortError> {
+        let timed_out = || PortError::Timeout {
+            port: self.port.clone(),
+            operation: "receive_all",
+            task: self.task.clone(),
+            owner: None,
+            waited: start.elapsed(),
+        };
+        loop {
+            let seen = self.owners_noted.generation();
+            let mut until = deadline;
+            let Some((_, incarnation)) = self.current_owner(start, &mut until).await? else {
+                return Err(timed_out());
+            };
+            if incarnation == broadcast.owner {
+                return Ok(true);
+            }
+            let known = self
+                .demux()
+                .owners
+                .values()
+                .any(|o| o.incarnation == broadcast.owner);
+            if known {
+                return Ok(false);
+            }
+            // Its declaration has not come yet (it may be the replacement of the one known).
+            if wait::timeout_at(deadline, self.owner_event(seen))
+                .await
+                .is_none()
+            {
+                return Err(timed_out());
+            }
+        }
     }
 
     /// Queries the port: the owner's response handler (see [`Responder`](super::Responder))
