@@ -1041,3 +1041,56 @@ fn a_replacement_takes_over_the_port_of_a_hung_owner() {
     assert_eq!(third.claim(), 2);
     assert!(common::eventually(WAIT, || new.superseded_by().is_some()));
 }
+
+#[test]
+fn a_request_held_by_a_replaced_owner_is_run_once_by_its_replacement() {
+    use ndds_client::ports::Selectable;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "takeover-inflight");
+    let hung = PortOwner::<u32, u32>::declare(&p, "feeder", "feed-server").unwrap();
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "feeder", "line").unwrap());
+    // A request reaches the hung owner, which never receives it.
+    let sender = {
+        let user = Arc::clone(&user);
+        std::thread::spawn(move || user.send(&5, WAIT))
+    };
+    assert!(common::eventually(WAIT, || hung.waiting() == 1));
+    let new = PortOwner::<u32, u32>::take_over(
+        &p,
+        "feeder",
+        "feed-server-2",
+        Restrictions::default(),
+        WAIT,
+    )
+    .unwrap();
+    // The sender learns of the replacement and sends the request again, to it: it is run
+    // there once (the copy addressed to the replaced owner is dropped).
+    let (value, reply) = new.receive(WAIT).unwrap();
+    assert_eq!(value, 5);
+    reply.reply(&50).unwrap();
+    assert_eq!(sender.join().unwrap().unwrap(), 50);
+    let again = new.receive(Duration::from_millis(300));
+    assert!(matches!(again, Err(PortError::Timeout { .. })), "{again:?}");
+    assert!(new.misaddressed() >= 1, "the copy for the replaced owner");
+    // The replaced owner let go of the requests topic: it does not hold its users'
+    // flow-control window, so more requests than its queue and the window (256 each) pass.
+    let server = std::thread::spawn(move || {
+        for _ in 0..600 {
+            let (n, reply) = new.receive(WAIT).unwrap();
+            reply.reply(&(n + 1)).unwrap();
+        }
+        new
+    });
+    for n in 0..600 {
+        assert_eq!(user.send(&n, WAIT).unwrap(), n + 1);
+    }
+    let new = server.join().unwrap();
+    assert_eq!(new.misaddressed(), 1);
+    // Nor does it keep the request it held (its sender went to the replacement).
+    assert_eq!(hung.waiting(), 0);
+    assert!(matches!(
+        hung.receive(Duration::from_millis(100)),
+        Err(PortError::Superseded { .. })
+    ));
+}

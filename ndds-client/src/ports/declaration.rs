@@ -202,6 +202,7 @@ fn on_owner(shared: &OwnerShared, mine: &OwnerInfo, event: Event<OwnerInfo>) {
     let changed = presence.others != before;
     drop(presence);
     if changed {
+        shared.release_requests_if_replaced();
         shared.changed.notify();
     }
 }

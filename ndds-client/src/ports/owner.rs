@@ -50,6 +50,13 @@ pub(crate) struct OwnerShared {
     withdrawn: AtomicU64,
     /// Replies to `sendall` dropped because the restrictions refuse their users.
     refused_replies: AtomicU64,
+    /// Requests dropped because they are for another owner of the port.
+    misaddressed: AtomicU64,
+    /// The requests topic, while this owner is not replaced: a replaced owner lets go of it
+    /// at once (its declaration thread does, however the task that serves the port is doing)
+    /// so that a hung owner does not hold its users' flow-control window. It takes the topic
+    /// again if its replacement goes away.
+    requests: Mutex<Option<Arc<Consumer<Request>>>>,
 }
 
 impl OwnerShared {
@@ -68,6 +75,9 @@ impl OwnerShared {
     /// Takes `request`, just read off the topic, into `pending`; a withdrawal drops the
     /// request it names from there, or is remembered if that request was received already.
     fn absorb(&self, pending: &mut VecDeque<Request>, request: Request) {
+        if !self.addressed_here(&request) {
+            return;
+        }
         if !request.withdraw {
             pending.push_back(request);
             return;
@@ -82,6 +92,16 @@ impl OwnerShared {
             }
             late.push_back((request.user, request.id));
         }
+    }
+
+    /// Whether `request` is for this owner; one for another owner of the port is counted
+    /// and dropped.
+    pub(crate) fn addressed_here(&self, request: &Request) -> bool {
+        if request.owner == self.incarnation {
+            return true;
+        }
+        self.misaddressed.fetch_add(1, Ordering::Relaxed);
+        false
     }
 
     /// Drops from `queue` the request `withdrawal` names; whether it was there.
@@ -188,6 +208,45 @@ impl OwnerShared {
             .map(|(who, _)| who.clone())
     }
 
+    /// The requests topic, taken again if this owner let go of it and is no longer replaced;
+    /// `None` while it is replaced (or the topic cannot be taken: logged).
+    pub(crate) fn requests(&self) -> Option<Arc<Consumer<Request>>> {
+        let superseded = self.superseded_by().is_some();
+        let mut slot = self.requests.lock().unwrap_or_else(|p| p.into_inner());
+        if superseded {
+            *slot = None;
+            return None;
+        }
+        if slot.is_none() {
+            let name = topic(&self.port, "request");
+            match reliable_consumer::<Request>(&self.participant, &self.port, &name) {
+                Ok(consumer) => *slot = Some(Arc::new(consumer)),
+                Err(err) => {
+                    tracing::warn!(port = %self.port, error = %err, "the requests topic could not be taken again");
+                }
+            }
+        }
+        slot.clone()
+    }
+
+    /// Lets go of the requests topic if this owner was replaced (see `requests`), and of the
+    /// requests it holds: their senders send them again to the replacement.
+    pub(crate) fn release_requests_if_replaced(&self) {
+        if self.superseded_by().is_some() {
+            let released = self
+                .requests
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .take();
+            drop(released);
+            let held = std::mem::take(&mut *self.pending());
+            if !held.is_empty() {
+                tracing::debug!(port = %self.port, owner = %self.task, requests = held.len(),
+                    "replaced: the requests held here go to the replacement");
+            }
+        }
+    }
+
     /// [`PortError::Superseded`] if this owner was replaced.
     fn check_superseded(&self) -> Result<(), PortError> {
         match self.superseded_by() {
@@ -209,7 +268,8 @@ pub struct PortOwner<Q, R> {
     broadcasts: AtomicU64,
     sendall_turn: Mutex<()>,
     /// `None` when a filter thread reads the topic.
-    requests: Option<Consumer<Request>>,
+    /// Whether requests are taken from the topic by `receive` (no filter in between).
+    direct: bool,
     filter: Option<JoinHandle<()>>,
     /// The port's priority, or [`UNPRIORITISED`].
     priority: AtomicI64,
@@ -350,9 +410,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             withdrawn_late: Mutex::new(VecDeque::new()),
             withdrawn: AtomicU64::new(0),
             refused_replies: AtomicU64::new(0),
+            misaddressed: AtomicU64::new(0),
+            requests: Mutex::new(Some(Arc::new(requests))),
         });
-        let (requests, filter) = match shared.restrictions.filter {
-            None => (Some(requests), None),
+        let (direct, filter) = match shared.restrictions.filter {
+            None => (true, None),
             Some(Filter::BoundedBuffer { capacity: 0 }) => {
                 return Err(PortError::ZeroCapacity {
                     port: port.to_owned(),
@@ -372,9 +434,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 let name = format!("port-filter-{port}");
                 let thread = std::thread::Builder::new()
                     .name(name.clone())
-                    .spawn(move || bounded_buffer(&shared, &requests, capacity as usize))
+                    .spawn(move || bounded_buffer(&shared, capacity as usize))
                     .map_err(spawn_error(port, &name))?;
-                (None, Some(thread))
+                (false, Some(thread))
             }
         };
         let declaring = Arc::clone(&shared);
@@ -395,7 +457,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             broadcasts: AtomicU64::new(1),
             sendall_turn: Mutex::new(()),
             shared,
-            requests,
+            direct,
             filter,
             priority: AtomicI64::new(priority.map_or(UNPRIORITISED, i64::from)),
             incarnation,
@@ -485,6 +547,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// Replies to `sendall` dropped because their users are refused or not admitted.
     pub fn refused_replies(&self) -> u64 {
         self.shared.refused_replies.load(Ordering::Relaxed)
+    }
+
+    /// Requests dropped because they were for another owner of the port (during a takeover,
+    /// each request is for one owner: the one its sender knew as the port's owner).
+    pub fn misaddressed(&self) -> u64 {
+        self.shared.misaddressed.load(Ordering::Relaxed)
     }
 
     /// Requests dropped because their senders stopped waiting (their timeouts passed while
@@ -600,6 +668,16 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         }
     }
 
+    /// The requests topic when `receive` reads it itself (no filter), and this owner is not
+    /// replaced.
+    fn direct_requests(&self) -> Option<Arc<Consumer<Request>>> {
+        if self.direct {
+            self.shared.requests()
+        } else {
+            None
+        }
+    }
+
     /// The next request from an admitted user, as soon as there is one.
     async fn next_request(&self) -> Result<Request, PortError> {
         loop {
@@ -615,7 +693,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             if let Some(request) = self.take_request() {
                 return Ok(request);
             }
-            let arrived = match &self.requests {
+            let arrived = match self.direct_requests().as_deref() {
                 Some(requests) => {
                     match wait::race(
                         wait::next_sample(requests),
@@ -649,9 +727,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// withdrew it is never received.
     fn take_request(&self) -> Option<Request> {
         loop {
+            let requests = self.direct_requests();
             let request = {
                 let mut pending = self.shared.pending();
-                if let Some(requests) = &self.requests {
+                if let Some(requests) = requests {
                     while pending.len() < PENDING_LIMIT {
                         match requests.try_recv() {
                             Ok(sample) => self.shared.absorb(&mut pending, sample.value),
@@ -711,9 +790,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
     }
 
     fn waiting(&self) -> usize {
+        let requests = self.direct_requests();
         let mut pending = self.shared.pending();
         let before = pending.len();
-        if let Some(requests) = &self.requests {
+        if let Some(requests) = requests {
             // Taken off the topic up to a bound; the rest waits there (flow control).
             while pending.len() < PENDING_LIMIT {
                 match requests.try_recv() {
@@ -734,7 +814,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> super::Se
         Box::pin(async move {
             let seen = self.shared.changed.generation();
             let room = self.shared.queue_len() < PENDING_LIMIT;
-            match &self.requests {
+            match self.direct_requests().as_deref() {
                 Some(requests) if room => {
                     let arrived = wait::race(
                         wait::next_sample(requests),
@@ -878,12 +958,18 @@ fn send_reply(
 /// requests that wait are read off the topic all the same (up to [`PENDING_LIMIT`], then
 /// they wait there), so that a sender that stops waiting withdraws its request before the
 /// buffer takes it. It sleeps on the topic and on the owner's changes.
-fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: usize) {
+fn bounded_buffer(shared: &OwnerShared, capacity: usize) {
     let empty = postcard::to_stdvec(&()).unwrap_or_default();
     // Read and not yet taken into the buffer (not answered either).
     let mut waiting: VecDeque<Request> = VecDeque::new();
     while !shared.stop.load(Ordering::Acquire) {
         let seen = shared.changed.generation();
+        let Some(requests) = shared.requests() else {
+            // Replaced: the senders of what waits here send it again to the replacement.
+            waiting.clear();
+            wait::block_on(shared.changed.changed(seen));
+            continue;
+        };
         while shared.queue_len() < capacity
             && let Some(request) = waiting.pop_front()
         {
@@ -904,7 +990,7 @@ fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: 
             continue;
         }
         let arrived = wait::block_on(wait::race(
-            wait::next_sample(requests),
+            wait::next_sample(&requests),
             shared.changed.changed(seen),
         ));
         let request = match arrived {
@@ -915,6 +1001,9 @@ fn bounded_buffer(shared: &OwnerShared, requests: &Consumer<Request>, capacity: 
             }
             Either::Right(()) => continue,
         };
+        if !shared.addressed_here(&request) {
+            continue;
+        }
         if request.withdraw {
             // Not answered yet: dropped here. Answered (the answer and the sender's timeout
             // crossed): dropped from the buffer, if the owner has not received it.

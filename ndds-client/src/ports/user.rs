@@ -1,7 +1,7 @@
 //! [`PortUser`]: a task that uses a port — `send` blocks until the owner replies (or the
 //! timeout). Several threads may send through one user at once; each gets its own reply.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
@@ -50,8 +50,9 @@ pub struct PortUser<Q, R> {
 struct Demux {
     /// Replies taken off the topic by one sender for another.
     waiting: HashMap<u64, Reply>,
-    /// Requests whose senders still wait (replies to others are dropped).
-    awaiting: HashSet<u64>,
+    /// Requests whose senders still wait, with the incarnation of the owner each is for
+    /// (replies to others, and from other owners, are dropped).
+    awaiting: HashMap<u64, u64>,
     /// Owners present: their declaration's producer -> their latest declaration.
     owners: HashMap<Guid, OwnerInfo>,
     /// When each owner was first seen (admission takes a moment).
@@ -317,7 +318,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             waited: start.elapsed(),
         };
         // An owner must be known (and unique, with our formats) before the request goes out.
-        let Some((owner, incarnation)) = self.current_owner(start, &mut deadline).await? else {
+        let Some((mut owner, mut incarnation)) = self.current_owner(start, &mut deadline).await?
+        else {
             return Err(timed_out(None));
         };
         if !wait::matched_by(&self.requests, deadline).await {
@@ -329,27 +331,37 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "encoding a request",
             reason: e.to_string(),
         })?;
-        self.demux().awaiting.insert(id);
+        self.demux().awaiting.insert(id, incarnation);
         let _awaiting = Awaiting {
             demux: &self.demux,
             id,
         };
-        self.requests
-            .write(&Request {
-                id,
-                user: self.user.clone(),
-                task: self.task.clone(),
-                payload,
-                withdraw: false,
-            })
-            .map_err(|source| PortError::Write {
-                port: self.port.clone(),
-                what: "a request".to_owned(),
-                source,
-            })?;
-        let Some(reply) = wait::timeout_at(deadline, self.reply_to(id, incarnation)).await else {
-            self.withdraw(id);
-            return Err(timed_out(Some(owner)));
+        self.write_request(id, incarnation, &payload)?;
+        // The request is for one owner. If that owner is replaced (taken over) before it
+        // replies, the request goes again to the replacement: the replaced owner drops or
+        // cannot answer it, and its replies would be dropped here anyway.
+        let reply = loop {
+            let replaced = self.replaced(incarnation);
+            match wait::timeout_at(
+                deadline,
+                wait::race(self.reply_to(id, incarnation), replaced),
+            )
+            .await
+            {
+                None => {
+                    self.withdraw(id, incarnation);
+                    return Err(timed_out(Some(owner)));
+                }
+                Some(Either::Left(reply)) => break reply,
+                Some(Either::Right((task, replacement))) => {
+                    tracing::info!(port = %self.port, user = %self.task, from = %owner, to = %task,
+                        "the port's owner was replaced while a request waited: sent again to the replacement");
+                    self.withdraw(id, incarnation);
+                    (owner, incarnation) = (task, replacement);
+                    self.demux().awaiting.insert(id, incarnation);
+                    self.write_request(id, incarnation, &payload)?;
+                }
+            }
         };
         postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
@@ -358,17 +370,52 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         })
     }
 
+    /// Writes request `id` for the owner of incarnation `owner`.
+    fn write_request(&self, id: u64, owner: u64, payload: &[u8]) -> Result<(), PortError> {
+        self.requests
+            .write(&Request {
+                id,
+                user: self.user.clone(),
+                task: self.task.clone(),
+                payload: payload.to_vec(),
+                withdraw: false,
+                owner,
+            })
+            .map_err(|source| PortError::Write {
+                port: self.port.clone(),
+                what: "a request".to_owned(),
+                source,
+            })
+    }
+
+    /// Waits until the owner of the port is another than the one of incarnation `current`
+    /// (which was replaced) and has admitted this user: the replacement's task and
+    /// incarnation. A conflict or a refusal keeps it waiting: the request's own deadline
+    /// ends that.
+    async fn replaced(&self, current: u64) -> (String, u64) {
+        loop {
+            let seen = self.owners_noted.generation();
+            if let Ok(Some((task, incarnation))) = self.owner(&mut self.demux())
+                && incarnation != current
+            {
+                return (task, incarnation);
+            }
+            self.owner_event(seen).await;
+        }
+    }
+
     /// Tells the owner that nobody waits for request `id` any more: it drops the request if
     /// it has not received it yet, so a send that timed out is not acted on later. Best
     /// effort: the owner may have received the request already (then its reply is dropped
     /// here), and a withdrawal that cannot be written is only logged.
-    fn withdraw(&self, id: u64) {
+    fn withdraw(&self, id: u64, owner: u64) {
         let withdrawal = Request {
             id,
             user: self.user.clone(),
             task: self.task.clone(),
             payload: Vec::new(),
             withdraw: true,
+            owner,
         };
         if let Err(err) = self.requests.write(&withdrawal) {
             tracing::debug!(port = %self.port, error = %err, "withdrawal of a timed-out request not sent");
@@ -521,7 +568,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 }
                 Either::Left(Some(sample)) => {
                     let mut demux = self.demux();
-                    if demux.awaiting.contains(&sample.value.id) {
+                    if demux.awaiting.get(&sample.value.id) == Some(&sample.value.owner) {
                         demux.waiting.insert(sample.value.id, sample.value);
                         drop(demux);
                         self.handed.notify();

@@ -19,6 +19,9 @@ pub struct Request {
     /// passed), so the owner drops that request if it has not received it yet (the payload
     /// is empty).
     pub withdraw: bool,
+    /// The incarnation of the owner it is for: another owner of the port (one being replaced,
+    /// or its replacement) drops it, so that no request is run by two owners.
+    pub owner: u64,
 }
 
 /// A reply from the owner.
