@@ -653,7 +653,7 @@ fn every_primitive_has_an_async_form() {
             &p,
             "async.cmd",
             "client",
-            &[Usage::Send, Usage::ReceiveAll],
+            &[Usage::Send, Usage::ReceiveAll, Usage::Receive],
         )
         .unwrap(),
     );
@@ -701,6 +701,22 @@ fn every_primitive_has_an_async_form() {
     });
     assert_eq!(first.unwrap(), ("client".to_owned(), 90));
     assert_eq!(answered.unwrap(), 9);
+    assert!(common::eventually(WAIT, || owner.present_users().len() == 1));
+    let (all, one, answered_all, answered_one) = runtime.block_on(async {
+        tokio::join!(
+            owner.callall_async(5, WAIT),
+            owner.send_to_async("client", 6, WAIT),
+            user.receive_all_async(WAIT, |v| v + 1),
+            user.receive_async(WAIT, |v| v + 2)
+        )
+    });
+    let all = all.unwrap();
+    assert_eq!(
+        (all.replies, all.missing),
+        (vec![("client".to_owned(), 6)], vec![])
+    );
+    assert_eq!(one.unwrap(), 8);
+    assert_eq!((answered_all.unwrap(), answered_one.unwrap()), (5, 6));
 }
 
 #[test]
@@ -1093,4 +1109,105 @@ fn a_request_held_by_a_replaced_owner_is_run_once_by_its_replacement() {
         hung.receive(Duration::from_millis(100)),
         Err(PortError::Superseded { .. })
     ));
+}
+
+#[test]
+fn an_owner_sends_to_one_user_and_queries_them_all_with_callall() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "owner-to-users");
+    let parent = PortOwner::<u32, u32>::declare(&p, "children", "parent").unwrap();
+    let child = |task: &str, usages: &[Usage]| {
+        Arc::new(PortUser::<u32, u32>::declare_with(&p, "children", task, usages).unwrap())
+    };
+    let left = child("left", &[Usage::Receive, Usage::ReceiveAll]);
+    let right = child("right", &[Usage::ReceiveAll]);
+    let _quiet = child("quiet", &[Usage::ReceiveAll]);
+    assert!(
+        common::eventually(WAIT, || parent.present_users().len() == 3),
+        "{:?}",
+        parent.present_users()
+    );
+    assert_eq!(
+        parent.present_users(),
+        [
+            "left [Receive, ReceiveAll]",
+            "quiet [ReceiveAll]",
+            "right [ReceiveAll]"
+        ]
+    );
+
+    // To one user: it answers through `receive`.
+    let answering = {
+        let left = Arc::clone(&left);
+        std::thread::spawn(move || left.receive(WAIT, |n| n * 10))
+    };
+    assert_eq!(parent.send_to("left", &3, WAIT).unwrap(), 30);
+    assert_eq!(answering.join().unwrap().unwrap(), 3);
+    // A user that does not take such messages is named as such, with the users there are.
+    let err = parent
+        .send_to("right", &1, Duration::from_millis(300))
+        .unwrap_err();
+    assert!(
+        matches!(&err, PortError::NoSuchUser { user, usage: "Receive", present, .. }
+            if user == "right" && present.len() == 3),
+        "{err}"
+    );
+    assert!(err.to_string().contains("right [ReceiveAll]"), "{err}");
+    // Nor may a user receive what it did not declare.
+    let err = right
+        .receive(Duration::from_millis(10), |n| *n)
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PortError::Refused {
+                restriction: "usage",
+                ..
+            }
+        ),
+        "{err}"
+    );
+
+    // To all: every user asked answers, or is named as missing.
+    let answers = [(&left, 1), (&right, 2)].map(|(user, k)| {
+        let user = Arc::clone(user);
+        std::thread::spawn(move || user.receive_all(WAIT, move |n| n + k))
+    });
+    let all = parent.callall(&100, Duration::from_secs(3)).unwrap();
+    let mut replies = all.replies.clone();
+    replies.sort();
+    assert_eq!(
+        replies,
+        [("left".to_owned(), 101), ("right".to_owned(), 102)]
+    );
+    assert_eq!(all.missing, ["quiet"]);
+    for answer in answers {
+        assert_eq!(answer.join().unwrap().unwrap(), 100);
+    }
+
+    // Calls of one owner overlap: each gets its own replies.
+    let to_left = {
+        let left = Arc::clone(&left);
+        std::thread::spawn(move || {
+            (
+                left.receive(WAIT, |n| n + 1000),
+                left.receive_all(WAIT, |n| n + 1),
+            )
+        })
+    };
+    let to_right = {
+        let right = Arc::clone(&right);
+        std::thread::spawn(move || right.receive_all(WAIT, |n| n + 2))
+    };
+    std::thread::scope(|s| {
+        let one = s.spawn(|| parent.send_to("left", &7, WAIT));
+        let all = parent.callall(&8, Duration::from_secs(3)).unwrap();
+        assert_eq!(one.join().unwrap().unwrap(), 1007);
+        let mut replies = all.replies;
+        replies.sort();
+        assert_eq!(replies, [("left".to_owned(), 9), ("right".to_owned(), 10)]);
+    });
+    let (one, all) = to_left.join().unwrap();
+    assert_eq!((one.unwrap(), all.unwrap()), (7, 8));
+    assert_eq!(to_right.join().unwrap().unwrap(), 8);
 }

@@ -57,6 +57,16 @@ where
         let user = Arc::clone(self);
         async move { user.receive_all_future(timeout, answer).await }
     }
+
+    /// [`receive`](Self::receive), as a future.
+    pub fn receive_async<F: FnOnce(&Q) -> R + Send + 'static>(
+        self: &Arc<Self>,
+        timeout: Duration,
+        answer: F,
+    ) -> impl Future<Output = Result<Q, PortError>> + Send + use<Q, R, F> {
+        let user = Arc::clone(self);
+        async move { user.receive_future(timeout, answer).await }
+    }
 }
 
 impl<Q, R> PortOwner<Q, R>
@@ -89,6 +99,27 @@ where
             let replies = owner.sendall_future(&value, timeout).await?;
             Ok(replies.first().clone())
         }
+    }
+
+    /// [`callall`](Self::callall), as a future.
+    pub fn callall_async(
+        self: &Arc<Self>,
+        value: Q,
+        timeout: Duration,
+    ) -> impl Future<Output = Result<super::Answers<R>, PortError>> + Send + use<Q, R> {
+        let owner = Arc::clone(self);
+        async move { owner.callall_future(&value, timeout).await }
+    }
+
+    /// [`send_to`](Self::send_to), as a future.
+    pub fn send_to_async(
+        self: &Arc<Self>,
+        task: &str,
+        value: Q,
+        timeout: Duration,
+    ) -> impl Future<Output = Result<R, PortError>> + Send + use<Q, R> {
+        let (owner, task) = (Arc::clone(self), task.to_owned());
+        async move { owner.send_to_future(&task, &value, timeout).await }
     }
 }
 

@@ -130,6 +130,11 @@ impl Declaration {
 }
 
 fn on_user(shared: &OwnerShared, event: Event<UserInfo>) {
+    on_user_event(shared, event);
+    shared.users_changed.notify();
+}
+
+fn on_user_event(shared: &OwnerShared, event: Event<UserInfo>) {
     let mut presence = shared.presence();
     match event {
         Event::Sample(sample) => {

@@ -12,7 +12,7 @@ use crate::error::{DeclareError, WriteError};
 #[non_exhaustive]
 pub enum PortError {
     /// No reply (or no request) within the timeout.
-    #[error("port `{port}`: {operation} by `{task}` timed out after {waited:?}{}", owner.as_ref().map(|o| format!(" (owner `{o}`)")).unwrap_or_default())]
+    #[error("port `{port}`: {operation} by `{task}` timed out after {waited:?}{}", owner.as_ref().map(|o| format!(" ({} `{o}`)", if *operation == "send_to" { "user" } else { "owner" })).unwrap_or_default())]
     Timeout {
         /// The port.
         port: String,
@@ -20,7 +20,7 @@ pub enum PortError {
         operation: &'static str,
         /// The task that waited.
         task: String,
-        /// The owner it waited for, if one was known.
+        /// The owner it waited for, if one was known (for the owner's `send_to`: the user).
         owner: Option<String>,
         /// How long it waited.
         waited: Duration,
@@ -36,6 +36,21 @@ pub enum PortError {
         missing: Vec<String>,
         /// How long it waited.
         waited: Duration,
+    },
+    /// The owner's `send_to` named a user that is not there (or does not take such messages,
+    /// or is not admitted) within the timeout.
+    #[error("port `{port}`: owner `{owner}` has no user `{user}` that declared `{usage}` (users present: {})", if present.is_empty() { "none".to_owned() } else { present.join(", ") })]
+    NoSuchUser {
+        /// The port.
+        port: String,
+        /// The owner's task.
+        owner: String,
+        /// The user's task it named.
+        user: String,
+        /// The usage such a user must declare.
+        usage: &'static str,
+        /// The users present, with their usages.
+        present: Vec<String>,
     },
     /// Two owners declared the port: reported to both, and to users.
     #[error("port `{port}` has two owners: `{first}` and `{second}`")]

@@ -48,7 +48,7 @@ pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
-pub use sendall::{Broadcast, BroadcastReply, Replies};
+pub use sendall::{Answers, Broadcast, BroadcastReply, Replies};
 pub use user::{ADMISSION_WAIT, PortUser};
 pub use waitfor::{Arrival, LINGER, REPEAT, Rendezvous};
 pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};

@@ -23,6 +23,9 @@ use super::{
 };
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
+/// A stream to one user, shared by the calls that use it, with when it was last used.
+type Stream<T> = (Arc<Producer<T>>, Instant);
+
 /// A port without a priority, as stored (no `i32` is this).
 const UNPRIORITISED: i64 = i64::MIN;
 
@@ -35,6 +38,10 @@ pub(crate) struct OwnerShared {
     participant: Participant,
     /// Reply streams by user handle, with when each was last used.
     replies: Mutex<HashMap<String, (Producer<Reply>, Instant)>>,
+    /// Streams to single users (`send_to`) by user handle, with when each was last used.
+    to_users: Mutex<HashMap<String, Stream<Broadcast>>>,
+    /// Told when the users present change (the declaration thread heard one come or go).
+    pub(crate) users_changed: Notify,
     pub(crate) stop: AtomicBool,
     /// Told when the owner stops, another owner comes or goes, and `pending` changes.
     pub(crate) changed: Notify,
@@ -132,6 +139,64 @@ impl OwnerShared {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .remove(user);
+        self.to_users
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(user);
+    }
+
+    /// The handle of an admitted user of task `task` that declared `usage`, if one is here.
+    pub(crate) fn admitted_with(&self, task: &str, usage: super::Usage) -> Option<String> {
+        let admitted = self.admitted_users();
+        self.presence()
+            .active
+            .iter()
+            .find(|(u, _)| {
+                u.task == task && u.usages.contains(&usage) && admitted.contains(&u.user)
+            })
+            .map(|(u, _)| u.user.clone())
+    }
+
+    /// The tasks of the users present, for messages.
+    pub(crate) fn present_users(&self) -> Vec<String> {
+        let mut tasks: Vec<String> = self
+            .presence()
+            .active
+            .iter()
+            .map(|(u, _)| format!("{} {:?}", u.task, u.usages))
+            .collect();
+        tasks.sort();
+        tasks
+    }
+
+    /// The stream to user handle `user` (created on first use: it waits, at most
+    /// [`REPLY_MATCH`], until the user's end matches — outside the lock).
+    pub(crate) fn to_user(&self, user: &str) -> Result<Arc<Producer<Broadcast>>, PortError> {
+        {
+            let mut streams = self.to_users.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some((producer, used)) = streams.get_mut(user) {
+                *used = Instant::now();
+                return Ok(Arc::clone(producer));
+            }
+        }
+        let name = topic(&self.port, &format!("to/{user}"));
+        let producer = Arc::new(reliable_producer::<Broadcast>(
+            &self.participant,
+            &self.port,
+            &name,
+        )?);
+        producer.wait_for_consumers(1, REPLY_MATCH);
+        let mut streams = self.to_users.lock().unwrap_or_else(|p| p.into_inner());
+        if streams.len() >= REPLY_STREAMS
+            && let Some(oldest) = streams
+                .iter()
+                .min_by_key(|(_, (_, used))| *used)
+                .map(|(k, _)| k.clone())
+        {
+            streams.remove(&oldest);
+        }
+        streams.insert(user.to_owned(), (Arc::clone(&producer), Instant::now()));
+        Ok(producer)
     }
 
     /// Why the user list or usage restriction refuses `user`, if it does.
@@ -265,9 +330,10 @@ pub struct PortOwner<Q, R> {
     shared: Arc<OwnerShared>,
     broadcast: Producer<Broadcast>,
     broadcast_replies: Consumer<BroadcastReply>,
+    /// The id of the next message to users (`sendall`, `callall`, `send_to`).
     broadcasts: AtomicU64,
-    sendall_turn: Mutex<()>,
-    /// `None` when a filter thread reads the topic.
+    /// Hands each user's reply to the call that waits for it.
+    demux: super::sendall::ReplyDemux,
     /// Whether requests are taken from the topic by `receive` (no filter in between).
     direct: bool,
     filter: Option<JoinHandle<()>>,
@@ -402,6 +468,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             claim,
             participant: participant.clone(),
             replies: Mutex::new(HashMap::new()),
+            to_users: Mutex::new(HashMap::new()),
+            users_changed: Notify::default(),
             stop: AtomicBool::new(false),
             changed: Notify::default(),
             restrictions,
@@ -455,7 +523,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             broadcast: reliable_producer(participant, port, &topic(port, "all"))?,
             broadcast_replies: reliable_consumer(participant, port, &topic(port, "all-reply"))?,
             broadcasts: AtomicU64::new(1),
-            sendall_turn: Mutex::new(()),
+            demux: super::sendall::ReplyDemux::default(),
             shared,
             direct,
             filter,
@@ -489,53 +557,188 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     ) -> Result<super::Replies<'_, R>, PortError> {
         let start = Instant::now();
         let port = &self.shared.port;
-        let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
-            port: port.clone(),
-            what: "encoding a broadcast",
-            reason: e.to_string(),
-        })?;
-        let id = {
-            // One broadcast at a time per owner: they share the reply stream.
-            let _turn = self.sendall_turn.lock().unwrap_or_else(|p| p.into_inner());
-            let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
-            self.broadcast
-                .write(&Broadcast {
-                    owner: self.incarnation,
-                    id,
-                    task: self.shared.task.clone(),
-                    payload,
-                })
-                .map_err(|source| PortError::Write {
-                    port: port.clone(),
-                    what: "a broadcast".to_owned(),
-                    source,
-                })?;
-            id
-        };
-        let first = super::sendall::next_reply(
-            port,
-            &self.broadcast_replies,
-            &self.shared,
-            (self.incarnation, id),
+        let awaited = self.broadcast_message(&self.broadcast, value, "a broadcast")?;
+        let shared = &self.shared;
+        let first = wait::timeout_at(
             wait::deadline(start, timeout),
+            self.demux
+                .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
+                    shared.accepts_broadcast_reply(r)
+                }),
         )
         .await
+        .flatten()
         .ok_or_else(|| PortError::Timeout {
             port: port.clone(),
             operation: "sendall",
             task: self.shared.task.clone(),
             owner: None,
             waited: start.elapsed(),
-        })??;
+        })?;
         Ok(super::Replies {
             port,
-            id,
+            awaited,
             owner: self.incarnation,
             source: &self.broadcast_replies,
             shared: &self.shared,
-            first,
+            first: super::sendall::decode(port, first)?,
             _reply: PhantomData,
         })
+    }
+
+    /// Writes `value` on `topic` as the next message to users, its replies awaited.
+    fn broadcast_message(
+        &self,
+        topic: &Producer<Broadcast>,
+        value: &Q,
+        what: &str,
+    ) -> Result<super::sendall::Awaited<'_>, PortError> {
+        let port = &self.shared.port;
+        self.shared.check_superseded()?;
+        let payload = postcard::to_stdvec(value).map_err(|e| PortError::Codec {
+            port: port.clone(),
+            what: "encoding a message to users",
+            reason: e.to_string(),
+        })?;
+        let id = self.broadcasts.fetch_add(1, Ordering::Relaxed);
+        let awaited = self.demux.await_replies(id);
+        topic
+            .write(&Broadcast {
+                owner: self.incarnation,
+                id,
+                task: self.shared.task.clone(),
+                payload,
+            })
+            .map_err(|source| PortError::Write {
+                port: port.clone(),
+                what: what.to_owned(),
+                source,
+            })?;
+        Ok(awaited)
+    }
+
+    /// `callall`: sends `value` to every user of the port that takes messages to all users
+    /// (usage [`ReceiveAll`](super::Usage::ReceiveAll)) and is admitted now, and waits (at
+    /// most `timeout`) until each has answered: the answers, and the users that did not
+    /// answer in time. Users that declared the port after this call are not asked.
+    pub fn callall(&self, value: &Q, timeout: Duration) -> Result<super::Answers<R>, PortError> {
+        wait::block_on(self.callall_future(value, timeout))
+    }
+
+    pub(crate) async fn callall_future(
+        &self,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<super::Answers<R>, PortError> {
+        let deadline = wait::deadline(Instant::now(), timeout);
+        let port = &self.shared.port;
+        // Who is asked: admitted users that declared `ReceiveAll`, by handle.
+        let admitted = self.shared.admitted_users();
+        let mut asked: HashMap<String, String> = self
+            .shared
+            .presence()
+            .active
+            .iter()
+            .filter(|(u, _)| {
+                admitted.contains(&u.user) && u.usages.contains(&super::Usage::ReceiveAll)
+            })
+            .map(|(u, _)| (u.user.clone(), u.task.clone()))
+            .collect();
+        let awaited = self.broadcast_message(&self.broadcast, value, "a broadcast query")?;
+        let shared = &self.shared;
+        let mut replies = Vec::new();
+        while !asked.is_empty() {
+            let next =
+                self.demux
+                    .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
+                        shared.accepts_broadcast_reply(r)
+                    });
+            let Some(reply) = wait::timeout_at(deadline, next).await.flatten() else {
+                break;
+            };
+            // One answer per user asked; a user that came after the query is not waited for.
+            if asked.remove(&reply.user).is_some() {
+                replies.push(super::sendall::decode(port, reply)?);
+            }
+        }
+        let mut missing: Vec<String> = asked.into_values().collect();
+        missing.sort();
+        Ok(super::Answers { replies, missing })
+    }
+
+    /// `send` the other way round: sends `value` to the user of the port whose task is `task`
+    /// (it must take such messages: usage [`Receive`](super::Usage::Receive)) and waits (at
+    /// most `timeout`) for its reply. A user that is not there within the timeout is
+    /// [`PortError::NoSuchUser`], naming the users that are.
+    pub fn send_to(&self, task: &str, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        wait::block_on(self.send_to_future(task, value, timeout))
+    }
+
+    pub(crate) async fn send_to_future(
+        &self,
+        task: &str,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<R, PortError> {
+        let start = Instant::now();
+        let deadline = wait::deadline(start, timeout);
+        let port = &self.shared.port;
+        // The user, once the owner has heard (and admitted) it.
+        let user = loop {
+            let seen = self.shared.users_changed.generation();
+            if let Some(user) = self.shared.admitted_with(task, super::Usage::Receive) {
+                break user;
+            }
+            if wait::timeout_at(deadline, self.shared.users_changed.changed(seen))
+                .await
+                .is_none()
+            {
+                return Err(PortError::NoSuchUser {
+                    port: port.clone(),
+                    owner: self.shared.task.clone(),
+                    user: task.to_owned(),
+                    usage: "Receive",
+                    present: self.shared.present_users(),
+                });
+            }
+        };
+        let stream = self.shared.to_user(&user)?;
+        let awaited = self.broadcast_message(&stream, value, &format!("a message to `{task}`"))?;
+        drop(stream);
+        let shared = &self.shared;
+        let reply = wait::timeout_at(
+            deadline,
+            self.demux
+                .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
+                    r.user == user && shared.accepts_broadcast_reply(r)
+                }),
+        )
+        .await
+        .flatten()
+        .ok_or_else(|| PortError::Timeout {
+            port: port.clone(),
+            operation: "send_to",
+            task: self.shared.task.clone(),
+            owner: Some(task.to_owned()),
+            waited: start.elapsed(),
+        })?;
+        Ok(super::sendall::decode(port, reply)?.1)
+    }
+
+    /// The users the owner has heard and admitted now, as task names with their usages
+    /// (for example `arm [Send, Receive]`), sorted: those `send_to` and `callall` reach.
+    pub fn present_users(&self) -> Vec<String> {
+        let admitted = self.shared.admitted_users();
+        let mut users: Vec<String> = self
+            .shared
+            .presence()
+            .active
+            .iter()
+            .filter(|(u, _)| admitted.contains(&u.user))
+            .map(|(u, _)| format!("{} {:?}", u.task, u.usages))
+            .collect();
+        users.sort();
+        users
     }
 
     /// Users matched on the broadcast topic now (who a `sendall` reaches; those the

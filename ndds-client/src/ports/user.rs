@@ -28,6 +28,8 @@ pub struct PortUser<Q, R> {
     /// The user's declaration, written once and kept for owners that match later.
     _declaration: Producer<UserInfo>,
     broadcasts: Consumer<Broadcast>,
+    /// Messages the owner sends to this user alone (with usage `Receive`).
+    to_me: Option<Consumer<Broadcast>>,
     broadcast_replies: Producer<BroadcastReply>,
     port: String,
     task: String,
@@ -110,6 +112,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             declared: Instant::now(),
             _declaration: declaration,
             broadcasts: reliable_consumer(participant, port, &topic(port, "all"))?,
+            to_me: if usages.contains(&Usage::Receive) {
+                Some(reliable_consumer(
+                    participant,
+                    port,
+                    &topic(port, &format!("to/{user}")),
+                )?)
+            } else {
+                None
+            },
             broadcast_replies: reliable_producer(participant, port, &topic(port, "all-reply"))?,
             requests: reliable_producer::<Request>(participant, port, &topic(port, "request"))?,
             replies: reliable_consumer::<Reply>(
@@ -294,7 +305,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         if self.usages.contains(&usage) {
             return Ok(());
         }
-        Err(PortError::Refused {
+        Err(self.undeclared(usage))
+    }
+
+    /// The refusal of an operation this user did not declare.
+    fn undeclared(&self, usage: Usage) -> PortError {
+        PortError::Refused {
             port: self.port.clone(),
             owner: String::new(),
             user: self.task.clone(),
@@ -303,7 +319,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 "{usage:?} was not declared by this user (declared: {:?})",
                 self.usages
             ),
-        })
+        }
     }
 
     /// One request and its reply: `send` and `query` as a future.
@@ -438,6 +454,37 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
         self.require(Usage::ReceiveAll)?;
+        self.answer_owner(&self.broadcasts, "receive_all", timeout, answer)
+            .await
+    }
+
+    /// Takes the next message the owner sent to this user alone (`send_to`), waiting at most
+    /// `timeout`, and answers it with `answer`; returns the message. The user must have
+    /// declared usage [`Receive`](Usage::Receive).
+    pub fn receive(&self, timeout: Duration, answer: impl FnOnce(&Q) -> R) -> Result<Q, PortError> {
+        wait::block_on(self.receive_future(timeout, answer))
+    }
+
+    pub(crate) async fn receive_future(
+        &self,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> R,
+    ) -> Result<Q, PortError> {
+        // Its stream exists when, and only when, the user declared `Receive`.
+        let Some(to_me) = &self.to_me else {
+            return Err(self.undeclared(Usage::Receive));
+        };
+        self.answer_owner(to_me, "receive", timeout, answer).await
+    }
+
+    /// Takes the next message from the owner on `source` and answers it with `answer`.
+    async fn answer_owner(
+        &self,
+        source: &Consumer<Broadcast>,
+        operation: &'static str,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> R,
+    ) -> Result<Q, PortError> {
         // A user the owner's restrictions refuse takes no part (known owners only: one not
         // heard yet is judged when its message comes).
         self.owner(&mut self.demux())?;
@@ -445,13 +492,13 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         let deadline = wait::deadline(start, timeout);
         let timed_out = || PortError::Timeout {
             port: self.port.clone(),
-            operation: "receive_all",
+            operation,
             task: self.task.clone(),
             owner: None,
             waited: start.elapsed(),
         };
         let broadcast = loop {
-            let broadcast = wait::timeout_at(deadline, wait::next_sample(&self.broadcasts))
+            let broadcast = wait::timeout_at(deadline, wait::next_sample(source))
                 .await
                 .flatten()
                 .ok_or_else(timed_out)?
@@ -459,23 +506,26 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             // The owner is known once its message came, but it may not have heard (admitted)
             // this user yet: a reply sent now would be dropped as from a stranger. Refused,
             // the message is not answered; one from an owner replaced meanwhile is skipped.
-            if self.answerable(&broadcast, start, deadline).await? {
+            if self
+                .answerable(&broadcast, operation, start, deadline)
+                .await?
+            {
                 break broadcast;
             }
             tracing::debug!(port = %self.port, user = %self.task,
-                "a broadcast from a replaced owner: not answered");
+                "a message from a replaced owner: not answered");
         };
         let value: Q = postcard::from_bytes(&broadcast.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
-            what: "decoding a broadcast",
+            what: "decoding a message from the owner",
             reason: e.to_string(),
         })?;
         let payload = postcard::to_stdvec(&answer(&value)).map_err(|e| PortError::Codec {
             port: self.port.clone(),
-            what: "encoding a broadcast reply",
+            what: "encoding a reply to the owner",
             reason: e.to_string(),
         })?;
-        // The broadcast came, so its owner exists; its reply stream may not have matched this
+        // The message came, so its owner exists; its reply stream may not have matched this
         // user yet (across hosts discovery is not symmetric in time): a reliable reply written
         // before the match would reach nobody. Wait briefly, as first replies do.
         let briefly = wait::deadline(Instant::now(), super::owner::REPLY_MATCH.min(timeout));
@@ -490,7 +540,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             })
             .map_err(|source| PortError::Write {
                 port: self.port.clone(),
-                what: "a broadcast reply".to_owned(),
+                what: "a reply to the owner".to_owned(),
                 source,
             })?;
         Ok(value)
@@ -503,12 +553,13 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     async fn answerable(
         &self,
         broadcast: &Broadcast,
+        operation: &'static str,
         start: Instant,
         deadline: Option<Instant>,
     ) -> Result<bool, PortError> {
         let timed_out = || PortError::Timeout {
             port: self.port.clone(),
-            operation: "receive_all",
+            operation,
             task: self.task.clone(),
             owner: None,
             waited: start.elapsed(),

@@ -44,8 +44,10 @@ pub enum Usage {
     Send,
     /// `query`: a request answered by the owner's response handler.
     Query,
-    /// `receive_all`: messages the owner sends to every user (`sendall`).
+    /// `receive_all`: messages the owner sends to every user (`sendall`, `callall`).
     ReceiveAll,
+    /// `receive`: messages the owner sends to this user alone (`send_to`).
+    Receive,
 }
 
 /// Restrictions an owner declares with its port, checked when users match it.
