@@ -1211,3 +1211,48 @@ fn an_owner_sends_to_one_user_and_queries_them_all_with_callall() {
     assert_eq!((one.unwrap(), all.unwrap()), (7, 8));
     assert_eq!(to_right.join().unwrap().unwrap(), 8);
 }
+
+#[test]
+fn a_tightly_coupled_port_busy_waits_and_still_keeps_its_timeouts() {
+    use ndds_client::ports::ProcessClass;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "tight");
+    let class = ProcessClass::Tight { spin_us: 2000 };
+    let child = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "beam.child",
+        "child",
+        Restrictions {
+            class,
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(child.restrictions().class.spin(), Duration::from_millis(2));
+    let parent = PortUser::<u32, u32>::declare(&p, "beam.child", "parent").unwrap();
+    std::thread::scope(|s| {
+        let slave = s.spawn(|| {
+            for _ in 0..50 {
+                let (n, reply) = child.receive(WAIT).unwrap();
+                reply.reply(&(n * 2)).unwrap();
+            }
+        });
+        for n in 0..50 {
+            assert_eq!(parent.send(&n, WAIT).unwrap(), n * 2);
+        }
+        slave.join().unwrap();
+    });
+    // Spinning ends; the deadlines are kept as on any port.
+    let started = Instant::now();
+    let err = parent.send(&1, Duration::from_millis(200)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    assert!(started.elapsed() >= Duration::from_millis(200));
+    assert!(common::eventually(WAIT, || {
+        use ndds_client::ports::Selectable;
+        child.waiting();
+        child.withdrawn() == 1
+    }));
+    let err = child.receive(Duration::from_millis(100)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+}

@@ -51,7 +51,7 @@ pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Answers, Broadcast, BroadcastReply, Replies};
 pub use user::{ADMISSION_WAIT, PortUser};
 pub use waitfor::{Arrival, LINGER, REPEAT, Rendezvous};
-pub use wire::{Filter, OwnerInfo, Reply, Request, Restrictions, Usage, UserInfo};
+pub use wire::{Filter, OwnerInfo, ProcessClass, Reply, Request, Restrictions, Usage, UserInfo};
 
 use crate::{
     Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability, TypeDescription,

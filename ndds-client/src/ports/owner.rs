@@ -851,6 +851,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     ) -> Result<(Q, ReplyHandle<R>), PortError> {
         let start = Instant::now();
         let at = wait::deadline(start, timeout);
+        // A tightly-coupled port's next request is busy-waited for at first.
+        let spin = self.shared.restrictions.class.spin();
+        if !spin.is_zero() {
+            wait::spin_until(start + spin.min(timeout));
+        }
         match wait::timeout_at(at, self.next_request()).await {
             Some(Ok(request)) => self.handle(request),
             Some(Err(err)) => Err(err),

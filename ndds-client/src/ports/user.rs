@@ -353,6 +353,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             id,
         };
         self.write_request(id, incarnation, &payload)?;
+        // A tightly-coupled port's reply is busy-waited for at first.
+        let class = self
+            .demux()
+            .owners
+            .values()
+            .find(|o| o.incarnation == incarnation)
+            .map(|o| o.restrictions.class)
+            .unwrap_or_default();
+        if !class.spin().is_zero() {
+            wait::spin_until(Instant::now() + class.spin());
+        }
         // The request is for one owner. If that owner is replaced (taken over) before it
         // replies, the request goes again to the replacement: the replaced owner drops or
         // cannot answer it, and its replies would be dropped here anyway.

@@ -30,6 +30,22 @@ thread_local! {
     static PARK_UNTIL: Cell<Option<Option<Instant>>> = const { Cell::new(None) };
 }
 
+thread_local! {
+    /// Inside [`block_on`]: until when a pending future asked to be polled again without
+    /// parking ([`spin_until`]).
+    static SPIN_UNTIL: Cell<Option<Instant>> = const { Cell::new(None) };
+}
+
+/// Asks the [`block_on`] that polls the current future to busy-wait — poll again without
+/// parking — until `at`, for a tightly-coupled port (see
+/// [`ProcessClass`](super::ProcessClass)). Outside [`block_on`] (an async form) it does
+/// nothing.
+pub(crate) fn spin_until(at: Instant) {
+    if blocking() {
+        SPIN_UNTIL.with(|s| s.set(Some(s.get().map_or(at, |old| old.max(at)))));
+    }
+}
+
 struct Unpark(std::thread::Thread);
 
 impl Wake for Unpark {
@@ -48,10 +64,18 @@ pub(crate) fn block_on<F: Future>(future: F) -> F::Output {
     let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
     let mut cx = Context::from_waker(&waker);
     let outer = PARK_UNTIL.with(Cell::get);
+    let outer_spin = SPIN_UNTIL.with(|s| s.replace(None));
     let result = loop {
         PARK_UNTIL.with(|p| p.set(Some(None)));
         if let Poll::Ready(output) = future.as_mut().poll(&mut cx) {
             break output;
+        }
+        if SPIN_UNTIL
+            .with(Cell::get)
+            .is_some_and(|at| Instant::now() < at)
+        {
+            std::hint::spin_loop();
+            continue;
         }
         match PARK_UNTIL.with(Cell::get).flatten() {
             Some(at) => std::thread::park_timeout(at.saturating_duration_since(Instant::now())),
@@ -59,6 +83,7 @@ pub(crate) fn block_on<F: Future>(future: F) -> F::Output {
         }
     };
     PARK_UNTIL.with(|p| p.set(outer));
+    SPIN_UNTIL.with(|s| s.set(outer_spin));
     result
 }
 
@@ -340,5 +365,45 @@ mod tests {
         });
         rx.recv_timeout(Duration::from_secs(10)).unwrap();
         assert!(start.elapsed() >= Duration::from_millis(40));
+    }
+
+    #[test]
+    fn a_spinning_block_on_polls_without_parking_until_the_spin_ends_then_parks() {
+        let notify = Arc::new(Notify::default());
+        let seen = notify.generation();
+        let other = Arc::clone(&notify);
+        let t = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(150));
+            other.notify();
+        });
+        let start = Instant::now();
+        let spin_end = start + Duration::from_millis(30);
+        let polls = Cell::new(0_u64);
+        let late_polls = Cell::new(0_u64);
+        let mut changed = pin!(notify.changed(seen));
+        block_on(std::future::poll_fn(|cx| {
+            if polls.get() == 0 {
+                spin_until(spin_end);
+            }
+            polls.set(polls.get() + 1);
+            if Instant::now() >= spin_end {
+                late_polls.set(late_polls.get() + 1);
+            }
+            changed.as_mut().poll(cx)
+        }));
+        t.join().unwrap();
+        assert!(start.elapsed() >= Duration::from_millis(150));
+        // Polled over and over while spinning, then parked until the notification woke it:
+        // a poll or two after the spin (the last spinning one, the wake-up; a spurious
+        // unpark may add one).
+        assert!(polls.get() > 100, "{} polls while spinning", polls.get());
+        assert!(
+            late_polls.get() <= 3,
+            "{} polls after the spin",
+            late_polls.get()
+        );
+        // Outside block_on, asking to spin does nothing.
+        spin_until(Instant::now() + Duration::from_secs(60));
+        assert_eq!(SPIN_UNTIL.with(Cell::get), None);
     }
 }

@@ -66,6 +66,40 @@ pub struct Restrictions {
     pub priority: Option<i32>,
     /// A filter spliced in at the owner's end.
     pub filter: Option<Filter>,
+    /// The class of the process the port serves (the paper's process type restriction):
+    /// it decides how the port's primitives wait.
+    pub class: ProcessClass,
+}
+
+/// How a port's primitives wait for what they are waiting for (Shin, section 4.2, after
+/// Roberts): by parking the thread until woken (a context switch each way), or, for a
+/// tightly-coupled process whose exchanges are much more frequent than its computations, by
+/// busy-waiting first.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ProcessClass {
+    /// Park until woken: the paper's independent, loosely-coupled, serialized-motion and
+    /// work-coupled processes, whose exchanges are rare next to their computations.
+    #[default]
+    Loose,
+    /// A user's `send` and `query` and the owner's `receive` busy-wait (poll without
+    /// parking) for up to `spin_us` microseconds before they park: a reply that comes
+    /// within that time is taken without the wake-up of a parked thread. Each waiting
+    /// thread keeps a core busy meanwhile: for a parent and its slave child on cores of
+    /// their own. Blocking forms only (an async form leaves waiting to its executor).
+    Tight {
+        /// How long to busy-wait before parking, in microseconds.
+        spin_us: u32,
+    },
+}
+
+impl ProcessClass {
+    /// How long this class busy-waits before parking (zero for [`ProcessClass::Loose`]).
+    pub fn spin(self) -> std::time::Duration {
+        match self {
+            Self::Loose => std::time::Duration::ZERO,
+            Self::Tight { spin_us } => std::time::Duration::from_micros(u64::from(spin_us)),
+        }
+    }
 }
 
 /// A filter task spliced into a port (Shin's port filter restriction).

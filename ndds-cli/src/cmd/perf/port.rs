@@ -4,7 +4,9 @@
 use std::time::{Duration, Instant};
 
 use hdrhistogram::Histogram;
-use ndds_client::ports::{PortError, PortOwner, PortUser, Responder, Usage};
+use ndds_client::ports::{
+    PortError, PortOwner, PortUser, ProcessClass, Responder, Restrictions, Usage,
+};
 use serde_json::json;
 
 use super::connect;
@@ -29,6 +31,11 @@ pub struct Args {
     /// Serve this many seconds at most.
     #[arg(long, default_value_t = 60.0)]
     seconds: f64,
+    /// Serve a tightly-coupled port: the owner's `receive`, and its users' `send` and
+    /// `query`, busy-wait this many microseconds before they park (the client learns it
+    /// from the owner's declaration). Each waiting side keeps a core busy meanwhile.
+    #[arg(long, value_name = "SPIN_US")]
+    tight: Option<u32>,
     /// One JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -45,13 +52,26 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     );
     if args.serve {
         let until = Instant::now() + Duration::from_secs_f64(args.seconds);
+        let restrictions = Restrictions {
+            class: args
+                .tight
+                .map_or(ProcessClass::Loose, |spin_us| ProcessClass::Tight {
+                    spin_us,
+                }),
+            ..Restrictions::default()
+        };
         if args.query {
             let mut responder = Responder::new(&participant, "perf-server")?;
-            responder.handle(&args.port, 0, |n: u64| n)?;
+            responder.handle_with(&args.port, restrictions, |n: u64| n)?;
             std::thread::sleep(until.saturating_duration_since(Instant::now()));
             return Ok(());
         }
-        let owner = PortOwner::<u64, u64>::declare(&participant, &args.port, "perf-server")?;
+        let owner = PortOwner::<u64, u64>::declare_with(
+            &participant,
+            &args.port,
+            "perf-server",
+            restrictions,
+        )?;
         while Instant::now() < until {
             match owner.receive(Duration::from_millis(100)) {
                 Ok((n, reply)) => reply.reply(&n)?,
