@@ -1256,3 +1256,89 @@ fn a_tightly_coupled_port_busy_waits_and_still_keeps_its_timeouts() {
     let err = child.receive(Duration::from_millis(100)).unwrap_err();
     assert!(matches!(err, PortError::Timeout { .. }), "{err}");
 }
+
+#[test]
+fn a_filter_of_the_owners_module_passes_answers_and_refuses_requests() {
+    use ndds_client::ports::{Filter, RequestFilter, Verdict};
+
+    /// Zero is answered at once; above the limit is refused; the rest reaches the owner
+    /// doubled. Its module changes the limit through the port FILTER.
+    struct Guard {
+        limit: u32,
+    }
+    impl RequestFilter<u32, u32> for Guard {
+        type Message = u32;
+        fn request(&mut self, sender: &str, n: u32) -> Verdict<u32, u32> {
+            match n {
+                0 => Verdict::Answer(0),
+                13 => panic!("unlucky {sender}"),
+                n if n > self.limit => {
+                    Verdict::Refuse(format!("{n} is above the limit {}", self.limit))
+                }
+                n => Verdict::Pass(n * 2),
+            }
+        }
+        fn message(&mut self, limit: u32) {
+            self.limit = limit;
+        }
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "filtered");
+    let (owner, filter) = PortOwner::<u32, u32>::declare_filtered(
+        &p,
+        "dose",
+        "pump",
+        Restrictions::default(),
+        Guard { limit: 20 },
+    )
+    .unwrap();
+    assert_eq!(owner.restrictions().filter, Some(Filter::Task));
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "dose", "nurse").unwrap());
+    let served = std::sync::atomic::AtomicU32::new(0);
+    std::thread::scope(|s| {
+        let server = s.spawn(|| {
+            while let Ok((n, reply)) = owner.receive(Duration::from_secs(2)) {
+                served.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                reply.reply(&(n + 1)).unwrap();
+            }
+        });
+        // Answered by the filter: the owner never sees it.
+        assert_eq!(user.send(&0, WAIT).unwrap(), 0);
+        // Passed on, changed: the owner gets 10.
+        assert_eq!(user.send(&5, WAIT).unwrap(), 11);
+        // Refused: the filter's exception reaches the sender with its reason.
+        let err = user.send(&50, WAIT).unwrap_err();
+        assert!(
+            matches!(&err, PortError::Refused { restriction: "filter", detail, owner, .. }
+                if detail == "50 is above the limit 20" && owner == "pump"),
+            "{err}"
+        );
+        // The module raises the limit through FILTER: taken before the next request.
+        assert!(filter.send(100));
+        assert_eq!(user.send(&50, WAIT).unwrap(), 101);
+        // A filter that panics refuses the request and goes on.
+        let err = user.send(&13, WAIT).unwrap_err();
+        assert!(
+            matches!(&err, PortError::Refused { restriction: "filter", detail, .. }
+                if detail.contains("panicked")),
+            "{err}"
+        );
+        assert_eq!(user.send(&7, WAIT).unwrap(), 15);
+        server.join().unwrap();
+    });
+    assert_eq!(served.load(std::sync::atomic::Ordering::Relaxed), 3);
+    // The restriction alone, without the filter's code, is refused.
+    let err = PortOwner::<u32, u32>::declare_with(
+        &p,
+        "dose2",
+        "pump",
+        Restrictions {
+            filter: Some(Filter::Task),
+            ..Restrictions::default()
+        },
+    )
+    .err()
+    .unwrap();
+    assert!(matches!(err, PortError::FilterCode { .. }), "{err}");
+}

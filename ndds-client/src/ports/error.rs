@@ -151,6 +151,14 @@ pub enum PortError {
         /// The port.
         port: String,
     },
+    /// A port declared with the restriction `Filter::Task` but without the filter's code.
+    #[error(
+        "port `{port}`: a `Filter::Task` restriction needs the filter's code: declare the port with `PortOwner::declare_filtered`"
+    )]
+    FilterCode {
+        /// The port.
+        port: String,
+    },
     /// A bounded-buffer filter declared with a capacity of 0.
     #[error("port `{port}`: a bounded-buffer filter needs a capacity of at least 1")]
     ZeroCapacity {

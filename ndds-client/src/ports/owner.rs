@@ -71,7 +71,7 @@ impl OwnerShared {
         self.presence.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn pending(&self) -> MutexGuard<'_, VecDeque<Request>> {
+    pub(crate) fn pending(&self) -> MutexGuard<'_, VecDeque<Request>> {
         self.pending.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -81,7 +81,7 @@ impl OwnerShared {
 
     /// Takes `request`, just read off the topic, into `pending`; a withdrawal drops the
     /// request it names from there, or is remembered if that request was received already.
-    fn absorb(&self, pending: &mut VecDeque<Request>, request: Request) {
+    pub(crate) fn absorb(&self, pending: &mut VecDeque<Request>, request: Request) {
         if !self.addressed_here(&request) {
             return;
         }
@@ -248,7 +248,7 @@ impl OwnerShared {
     }
 
     /// Whether a request from user handle `user` may be served.
-    fn admitted(&self, user: &str) -> bool {
+    pub(crate) fn admitted(&self, user: &str) -> bool {
         !self.restrictions.restricted() || self.admitted_users().iter().any(|u| u == user)
     }
 
@@ -372,7 +372,46 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         task: &str,
         restrictions: Restrictions,
     ) -> Result<Self, PortError> {
+        if restrictions.filter == Some(Filter::Task) {
+            return Err(PortError::FilterCode {
+                port: port.to_owned(),
+            });
+        }
         Self::declare_claiming(participant, port, task, restrictions, 0)
+    }
+
+    /// Declares `task` the owner of `port` with a filter of its own spliced in at its end
+    /// (see [`RequestFilter`](super::RequestFilter)): every request goes through `filter`,
+    /// which passes it on, answers it or refuses it. Returns the owner and the port `FILTER`
+    /// through which the owner's module talks to its filter. The restrictions' `filter` is
+    /// set to [`Filter::Task`], so users and `ndds ports` see that a filter sits there.
+    pub fn declare_filtered<F>(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        mut restrictions: Restrictions,
+        filter: F,
+    ) -> Result<(Self, super::FilterPort<F::Message>), PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+        F: super::RequestFilter<Q, R>,
+    {
+        restrictions.filter = Some(Filter::Task);
+        let mut owner = Self::declare_claiming(participant, port, task, restrictions, 0)?;
+        let inbox = Arc::new(Mutex::new(VecDeque::new()));
+        let (shared, taken) = (Arc::clone(&owner.shared), Arc::clone(&inbox));
+        let name = format!("port-filter-{port}");
+        let thread = std::thread::Builder::new()
+            .name(name.clone())
+            .spawn(move || super::filter::run::<Q, R, F>(&shared, filter, &taken))
+            .map_err(spawn_error(port, &name))?;
+        owner.filter = Some(thread);
+        let port = super::FilterPort {
+            shared: Arc::clone(&owner.shared),
+            inbox,
+        };
+        Ok((owner, port))
     }
 
     /// Takes `port` over from its owner, for a hung or failed one that still holds it: listens
@@ -483,6 +522,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         });
         let (direct, filter) = match shared.restrictions.filter {
             None => (true, None),
+            // `declare_filtered` starts the filter's thread.
+            Some(Filter::Task) => (false, None),
             Some(Filter::BoundedBuffer { capacity: 0 }) => {
                 return Err(PortError::ZeroCapacity {
                     port: port.to_owned(),
@@ -975,7 +1016,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             value,
             ReplyHandle {
                 shared: Arc::clone(&self.shared),
-                answered: self.filter.is_some(),
+                answered: matches!(
+                    self.shared.restrictions.filter,
+                    Some(Filter::BoundedBuffer { .. })
+                ),
                 id: request.id,
                 user: request.user,
                 task: request.task,
@@ -1110,7 +1154,7 @@ impl<R: Serialize> ReplyHandle<R> {
 
 /// Writes a reply to user handle `user`. The first reply to a user waits (at most
 /// [`REPLY_MATCH`]) until its reply stream matches — outside the lock, so other replies go on.
-fn send_reply(
+pub(crate) fn send_reply(
     shared: &OwnerShared,
     user: &str,
     task: &str,
@@ -1121,9 +1165,34 @@ fn send_reply(
         id,
         owner: shared.incarnation,
         payload,
+        refused: None,
     };
+    write_reply(shared, user, task, &reply)
+}
+
+/// Refuses `request` (a filter's exception): its sender's call fails with `reason`.
+pub(crate) fn send_refusal(
+    shared: &OwnerShared,
+    request: &Request,
+    reason: String,
+) -> Result<(), PortError> {
+    let reply = Reply {
+        id: request.id,
+        owner: shared.incarnation,
+        payload: Vec::new(),
+        refused: Some(reason),
+    };
+    write_reply(shared, &request.user, &request.task, &reply)
+}
+
+fn write_reply(
+    shared: &OwnerShared,
+    user: &str,
+    task: &str,
+    reply: &Reply,
+) -> Result<(), PortError> {
     let write = |producer: &Producer<Reply>| {
-        producer.write(&reply).map_err(|source| PortError::Write {
+        producer.write(reply).map_err(|source| PortError::Write {
             port: shared.port.clone(),
             what: format!("the reply to `{task}`"),
             source,

@@ -390,6 +390,15 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 }
             }
         };
+        if let Some(reason) = reply.refused {
+            return Err(PortError::Refused {
+                port: self.port.clone(),
+                owner,
+                user: self.task.clone(),
+                restriction: "filter",
+                detail: reason,
+            });
+        }
         postcard::from_bytes(&reply.payload).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "decoding a reply",

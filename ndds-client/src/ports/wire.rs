@@ -35,6 +35,9 @@ pub struct Reply {
     /// The reply, postcard-encoded.
     #[serde(with = "serde_bytes")]
     pub payload: Vec<u8>,
+    /// Not a reply: the port's filter refused the request, for this reason (the payload is
+    /// empty).
+    pub refused: Option<String>,
 }
 
 /// What a user does with a port (the message direction restriction).
@@ -112,6 +115,10 @@ pub enum Filter {
         /// Requests held at most.
         capacity: u32,
     },
+    /// A filter written by the owner's module
+    /// ([`PortOwner::declare_filtered`](super::PortOwner::declare_filtered)): it passes each
+    /// request on, answers it or refuses it.
+    Task,
 }
 
 impl Restrictions {
