@@ -204,3 +204,31 @@ fn bad_arguments_are_usage_errors() {
         assert_eq!(run.status.and_then(|s| s.code()), Some(2), "{run}");
     }
 }
+
+#[test]
+fn perf_port_serves_a_tightly_coupled_port_that_ndds_ports_shows() {
+    let world = World::start();
+    let server = world.spawn(&[
+        "perf",
+        "port",
+        "--serve",
+        "--tight",
+        "300",
+        "--seconds",
+        "20",
+        "--port",
+        "beam",
+    ]);
+    let run = world.ndds(&["perf", "port", "--port", "beam", "--count", "200", "--json"]);
+    let report = json(&run);
+    assert_eq!(report["mode"], "send/receive/reply", "{run}");
+    assert_eq!(count(&report, "count"), 200, "{run}");
+    assert!(number(&report, "p50_us") > 0.0, "{run}");
+    let ports = world.ndds(&["ports", "--listen", "2"]);
+    let text = ports.ok();
+    assert!(
+        text.contains("beam") && text.contains("tightly coupled (busy-waits 300 us)"),
+        "{ports}"
+    );
+    drop(server);
+}

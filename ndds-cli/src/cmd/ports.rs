@@ -17,8 +17,8 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
-    /// Seconds to listen for the ports' declarations (owners and users repeat theirs every
-    /// 250 ms).
+    /// Seconds to listen for the ports' declarations (each is kept for late readers, so they
+    /// come as soon as discovery matched).
     #[arg(long, value_parser = seconds::parse, default_value = "0.8")]
     listen: Duration,
 }
@@ -43,8 +43,11 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             matches!(leaf, "request" | "owner" | "users").then(|| port.to_owned())
         })
         .collect();
+    // Declarations are written once and kept for readers that match later: reliable
+    // readers get them (a best-effort reader gets only what is written after it matched).
     let qos = ConsumerQos {
         depth: 256,
+        reliability: ndds_client::Reliability::Reliable { depth: 256 },
         ..ConsumerQos::default()
     };
     let mut listeners = Vec::new();
@@ -159,6 +162,9 @@ fn print(view: &PortView) -> anyhow::Result<()> {
         }
         if let Some(filter) = &r.filter {
             parts.push(format!("filter {filter:?}"));
+        }
+        if let ndds_client::ports::ProcessClass::Tight { spin_us } = r.class {
+            parts.push(format!("tightly coupled (busy-waits {spin_us} us)"));
         }
         if !parts.is_empty() {
             outln!("  restrict  {}", parts.join(", "))?;
