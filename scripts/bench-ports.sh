@@ -6,10 +6,14 @@
 #
 #   scripts/bench-ports.sh            (scripts/bench.sh calls it)
 #
-# Environment: BENCH_PORT_COUNT (round trips per run, default 5000). Needs jq.
+# Environment: BENCH_PORT_COUNT (round trips per run, default 5000), BENCH_PORT_ROUNDS
+# (loosely against tightly coupled rounds, default 3), BENCH_PORT_SPIN_US (the tight port's
+# busy-wait, default 200). Needs jq.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 COUNT=${BENCH_PORT_COUNT:-5000}
+ROUNDS=${BENCH_PORT_ROUNDS:-3}
+SPIN_US=${BENCH_PORT_SPIN_US:-200}
 [[ -x target/release/ndds && -x target/release/ndds-daemon ]] ||
     cargo build --release -p ndds-cli -p ndds-daemon >&2
 WORK=$(mktemp -d /tmp/ndds-bench-ports.XXXXXX)
@@ -36,9 +40,24 @@ pair() {
 pair "$N perf port --serve --seconds 60" "$N perf port --count $COUNT --json" send
 pair "$N perf port --serve --query --seconds 60" "$N perf port --query --count $COUNT --json" query
 pair "$N perf pong --duration 60" "$N perf ping --size 64 --count $COUNT --json" pubsub
+# Loosely against tightly coupled (busy-waiting $SPIN_US us), alternating, $ROUNDS rounds.
+for r in $(seq 1 "$ROUNDS"); do
+    pair "$N perf port --serve --port ndds.loose --seconds 60" \
+        "$N perf port --port ndds.loose --count $COUNT --json" "loose$r"
+    pair "$N perf port --serve --port ndds.tight --tight $SPIN_US --seconds 60" \
+        "$N perf port --port ndds.tight --count $COUNT --json" "tight$r"
+done
 
 q() { jq -r "$2" "$WORK/$1.json"; }
 f1() { awk -v x="$1" 'BEGIN { printf "%.1f", x }'; }
+# The median over the rounds of field $2 of runs $1<round>.
+median() {
+    for r in $(seq 1 "$ROUNDS"); do q "$1$r" "$2"; done | sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'
+}
+each() {
+    for r in $(seq 1 "$ROUNDS"); do f1 "$(q "$1$r" "$2")"; echo; done | paste -sd, | sed 's/,/, /g'
+}
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.2f", a / b }'; }
 row() {
     echo "| $2 | $(f1 "$(q "$1" .p50_us)") | $(f1 "$(q "$1" .p90_us)") | $(f1 "$(q "$1" .p99_us)") | $(f1 "$(q "$1" .max_us)") |"
 }
@@ -54,6 +73,16 @@ Round trips between two processes under one daemon on loopback, $COUNT each, mea
 $(row send "port send / receive / reply")
 $(row query "port query / response handler")
 $(row pubsub "pub/sub ping / pong, 64 B (\`ndds perf ping\`)")
+
+Loosely against tightly coupled ports (\`ndds perf port --serve --tight $SPIN_US\`: the owner's
+\`receive\` and the user's \`send\` busy-wait up to $SPIN_US µs before they park), alternating,
+$ROUNDS rounds of $COUNT round trips (µs; each round's value, then the medians' ratio):
+
+| percentile | loose | tight | tight / loose |
+|---|---|---|---|
+| p50 | $(each loose .p50_us) | $(each tight .p50_us) | $(ratio "$(median tight .p50_us)" "$(median loose .p50_us)") |
+| p90 | $(each loose .p90_us) | $(each tight .p90_us) | $(ratio "$(median tight .p90_us)" "$(median loose .p90_us)") |
+| p99 | $(each loose .p99_us) | $(each tight .p99_us) | $(ratio "$(median tight .p99_us)" "$(median loose .p99_us)") |
 
 A port round trip is two reliable streams (request, reply) handled on application threads:
 the owner's \`receive\` and the user's wait for the reply each take a sample from a consumer
