@@ -41,8 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         width: 0.08,
         done: 0,
     }));
+    // The owner receives (and replies): its users may only send.
     let restrictions = Restrictions {
-        usages: vec![Usage::Send],
+        usages: vec![Usage::Receive],
         timeout_ms: Some(5_000),
         ..Restrictions::default()
     };

@@ -477,23 +477,63 @@ fn each_restriction_refuses_what_it_should_naming_the_port_and_both_sides() {
         .iter()
         .any(|r| r.contains("intruder") && r.contains("user list"))));
 
-    // Usage: the owner accepts queries only; a user declared for send is refused, and an
-    // operation a user did not declare is refused locally.
-    let _queries = PortOwner::<u32, u32>::declare_with(
+    // Usage: the owner answers queries only (usage Response); a user declared for send is
+    // refused (Send complements the owner's Receive), an operation a user did not declare is
+    // refused locally, and so is an owner's operation outside its own usages.
+    let queries = PortOwner::<u32, u32>::declare_with(
         &p,
         "lookup",
         "db",
         Restrictions {
-            usages: vec![Usage::Query],
+            usages: vec![Usage::Response],
             ..Restrictions::default()
         },
     )
     .unwrap();
     let sender = PortUser::<u32, u32>::declare(&p, "lookup", "writer").unwrap();
-    let (who, what) = refused(sender.send(&1, short));
+    let err = sender.send(&1, short).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("Send complements none of the owner's usages [Response]"),
+        "{err}"
+    );
+    let (who, what) = refused(Err::<u32, _>(err));
     assert_eq!((who.as_str(), what), ("lookup/db/writer", "usage"));
     let (_, what) = refused(sender.query(&1, short));
     assert_eq!(what, "usage");
+    let querier =
+        PortUser::<u32, u32>::declare_with(&p, "lookup", "reader", &[Usage::Query]).unwrap();
+    assert!(common::eventually(WAIT, || queries
+        .present_users()
+        .iter()
+        .any(|u| u.starts_with("reader"))));
+    assert!(
+        !queries.refusals().iter().any(|r| r.contains("reader")),
+        "{:?}",
+        queries.refusals()
+    );
+    drop(querier);
+    for err in [
+        queries.sendall(&1, short).err().unwrap(),
+        queries.callall(&1, short).err().unwrap(),
+        queries.send_to("reader", &1, short).err().unwrap(),
+    ] {
+        assert!(
+            matches!(
+                &err,
+                PortError::Refused {
+                    restriction: "usage",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("it declared [Response]"), "{err}");
+    }
+    // An owner's usage is not a user's.
+    let odd = PortUser::<u32, u32>::declare_with(&p, "lookup", "odd", &[Usage::SendAll]).unwrap();
+    let err = odd.receive_all(short, |n| *n).unwrap_err();
+    assert!(matches!(err, PortError::Refused { .. }), "{err}");
 
     // Maximum active users: the second user is refused while the first is active.
     let _solo = PortOwner::<u32, u32>::declare_with(
@@ -1148,7 +1188,7 @@ fn an_owner_sends_to_one_user_and_queries_them_all_with_callall() {
         .send_to("right", &1, Duration::from_millis(300))
         .unwrap_err();
     assert!(
-        matches!(&err, PortError::NoSuchUser { user, usage: "Receive", present, .. }
+        matches!(&err, PortError::NoSuchUser { user, usage: "Receive or Response", present, .. }
             if user == "right" && present.len() == 3),
         "{err}"
     );

@@ -145,16 +145,40 @@ impl OwnerShared {
             .remove(user);
     }
 
-    /// The handle of an admitted user of task `task` that declared `usage`, if one is here.
-    pub(crate) fn admitted_with(&self, task: &str, usage: super::Usage) -> Option<String> {
+    /// The handle of an admitted user of task `task` that declared one of `usages`, if one
+    /// is here.
+    pub(crate) fn admitted_with(&self, task: &str, usages: &[super::Usage]) -> Option<String> {
         let admitted = self.admitted_users();
         self.presence()
             .active
             .iter()
             .find(|(u, _)| {
-                u.task == task && u.usages.contains(&usage) && admitted.contains(&u.user)
+                u.task == task
+                    && u.usages.iter().any(|d| usages.contains(d))
+                    && admitted.contains(&u.user)
             })
             .map(|(u, _)| u.user.clone())
+    }
+
+    /// Refuses locally an operation the owner's usages do not allow (it needs one of `any`).
+    pub(crate) fn require(&self, operation: &str, any: &[super::Usage]) -> Result<(), PortError> {
+        if self.restrictions.owner_may(any) {
+            return Ok(());
+        }
+        Err(PortError::Refused {
+            port: self.port.clone(),
+            owner: self.task.clone(),
+            user: self.task.clone(),
+            restriction: "usage",
+            detail: format!(
+                "the owner's {operation} needs the usage {}; it declared {:?}",
+                any.iter()
+                    .map(|u| format!("{u:?}"))
+                    .collect::<Vec<_>>()
+                    .join(" or "),
+                self.restrictions.usages
+            ),
+        })
     }
 
     /// The tasks of the users present, for messages.
@@ -596,6 +620,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         value: &Q,
         timeout: Duration,
     ) -> Result<super::Replies<'_, R>, PortError> {
+        self.shared.require("sendall", &[super::Usage::SendAll])?;
         let start = Instant::now();
         let port = &self.shared.port;
         let awaited = self.broadcast_message(&self.broadcast, value, "a broadcast")?;
@@ -671,6 +696,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         value: &Q,
         timeout: Duration,
     ) -> Result<super::Answers<R>, PortError> {
+        self.shared.require("callall", &[super::Usage::CallAll])?;
         let deadline = wait::deadline(Instant::now(), timeout);
         let port = &self.shared.port;
         // Who is asked: admitted users that declared `ReceiveAll`, by handle.
@@ -708,7 +734,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     }
 
     /// `send` the other way round: sends `value` to the user of the port whose task is `task`
-    /// (it must take such messages: usage [`Receive`](super::Usage::Receive)) and waits (at
+    /// (it must take such messages: usage [`Receive`](super::Usage::Receive) or
+    /// [`Response`](super::Usage::Response)) and waits (at
     /// most `timeout`) for its reply. A user that is not there within the timeout is
     /// [`PortError::NoSuchUser`], naming the users that are.
     pub fn send_to(&self, task: &str, value: &Q, timeout: Duration) -> Result<R, PortError> {
@@ -721,13 +748,18 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         value: &Q,
         timeout: Duration,
     ) -> Result<R, PortError> {
+        self.shared
+            .require("send_to", &[super::Usage::Send, super::Usage::Query])?;
         let start = Instant::now();
         let deadline = wait::deadline(start, timeout);
         let port = &self.shared.port;
         // The user, once the owner has heard (and admitted) it.
         let user = loop {
             let seen = self.shared.users_changed.generation();
-            if let Some(user) = self.shared.admitted_with(task, super::Usage::Receive) {
+            if let Some(user) = self
+                .shared
+                .admitted_with(task, &[super::Usage::Receive, super::Usage::Response])
+            {
                 break user;
             }
             if wait::timeout_at(deadline, self.shared.users_changed.changed(seen))
@@ -738,7 +770,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     port: port.clone(),
                     owner: self.shared.task.clone(),
                     user: task.to_owned(),
-                    usage: "Receive",
+                    usage: "Receive or Response",
                     present: self.shared.present_users(),
                 });
             }
@@ -890,6 +922,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         &self,
         timeout: Duration,
     ) -> Result<(Q, ReplyHandle<R>), PortError> {
+        self.shared
+            .require("receive", &[super::Usage::Receive, super::Usage::Response])?;
         let start = Instant::now();
         let at = wait::deadline(start, timeout);
         // A tightly-coupled port's next request is busy-waited for at first.

@@ -28,7 +28,7 @@ pub struct PortUser<Q, R> {
     /// The user's declaration, written once and kept for owners that match later.
     _declaration: Producer<UserInfo>,
     broadcasts: Consumer<Broadcast>,
-    /// Messages the owner sends to this user alone (with usage `Receive`).
+    /// Messages the owner sends to this user alone (with usage `Receive` or `Response`).
     to_me: Option<Consumer<Broadcast>>,
     broadcast_replies: Producer<BroadcastReply>,
     port: String,
@@ -112,7 +112,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             declared: Instant::now(),
             _declaration: declaration,
             broadcasts: reliable_consumer(participant, port, &topic(port, "all"))?,
-            to_me: if usages.contains(&Usage::Receive) {
+            to_me: if usages.contains(&Usage::Receive) || usages.contains(&Usage::Response) {
                 Some(reliable_consumer(
                     participant,
                     port,
@@ -480,7 +480,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
 
     /// Takes the next message the owner sent to this user alone (`send_to`), waiting at most
     /// `timeout`, and answers it with `answer`; returns the message. The user must have
-    /// declared usage [`Receive`](Usage::Receive).
+    /// declared usage [`Receive`](Usage::Receive) (messages) or [`Response`](Usage::Response)
+    /// (queries: `answer` is its response handler).
     pub fn receive(&self, timeout: Duration, answer: impl FnOnce(&Q) -> R) -> Result<Q, PortError> {
         wait::block_on(self.receive_future(timeout, answer))
     }
@@ -490,7 +491,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         timeout: Duration,
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
-        // Its stream exists when, and only when, the user declared `Receive`.
+        // Its stream exists when, and only when, the user declared `Receive` or `Response`.
         let Some(to_me) = &self.to_me else {
             return Err(self.undeclared(Usage::Receive));
         };

@@ -40,23 +40,67 @@ pub struct Reply {
     pub refused: Option<String>,
 }
 
-/// What a user does with a port (the message direction restriction).
+/// What one end of a port does with it: the message direction restriction (Shin, section 3,
+/// and the six usages of section 5). An owner declares its own usages in
+/// [`Restrictions::usages`]; a user declares its own with
+/// [`PortUser::declare_with`](super::PortUser::declare_with). The two ends must complement
+/// each other:
+///
+/// | owner | user |
+/// |---|---|
+/// | `Receive` (and `reply`) | `Send` |
+/// | `Response` (a response handler) | `Query` |
+/// | `Send` (`send_to`) | `Receive` |
+/// | `Query` (`send_to`, answered by a user's handler) | `Response` |
+/// | `SendAll` (`sendall`), `CallAll` (`callall`) | `ReceiveAll` |
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum Usage {
-    /// `send`: a request answered by the owner's `reply`.
+    /// A user's `send`: a request answered by the owner's `reply`; an owner's: messages to
+    /// one user (`send_to`).
     Send,
-    /// `query`: a request answered by the owner's response handler.
+    /// A user's `query`: a request answered by the owner's response handler; an owner's:
+    /// a query to one user (`send_to`) answered by its response handler.
     Query,
-    /// `receive_all`: messages the owner sends to every user (`sendall`, `callall`).
+    /// A user's `receive_all`: messages the owner sends to every user (`sendall`,
+    /// `callall`).
     ReceiveAll,
-    /// `receive`: messages the owner sends to this user alone (`send_to`).
+    /// A user's `receive`: messages the owner sends to this user alone; an owner's:
+    /// `receive` (and `reply`).
     Receive,
+    /// A user's response handler for the owner's queries (taken with `receive`); an owner's:
+    /// a response handler for users' queries.
+    Response,
+    /// An owner's `sendall`.
+    SendAll,
+    /// An owner's `callall`.
+    CallAll,
+}
+
+impl Usage {
+    /// The usage of a user that complements this usage of an owner (`None`: not an owner's
+    /// usage).
+    pub fn user_complement(self) -> Option<Usage> {
+        Some(match self {
+            Usage::Receive => Usage::Send,
+            Usage::Response => Usage::Query,
+            Usage::Send => Usage::Receive,
+            Usage::Query => Usage::Response,
+            Usage::SendAll | Usage::CallAll => Usage::ReceiveAll,
+            Usage::ReceiveAll => return None,
+        })
+    }
+
+    /// Whether a user may declare this usage.
+    pub fn of_user(self) -> bool {
+        !matches!(self, Usage::SendAll | Usage::CallAll)
+    }
 }
 
 /// Restrictions an owner declares with its port, checked when users match it.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Restrictions {
-    /// Allowed usages (empty: any).
+    /// The owner's own usages (empty: any): the owner may only use the port through these,
+    /// and users only in the usages that complement them (see [`Usage`]).
     pub usages: Vec<Usage>,
     /// Tasks allowed to use the port (empty: any).
     pub users: Vec<String>,
@@ -131,12 +175,31 @@ impl Restrictions {
                 format!("`{task}` is not among {:?}", self.users),
             ));
         }
+        if let Some(bad) = usages.iter().find(|u| !u.of_user()) {
+            return Some((
+                "usage",
+                format!("{bad:?} is an owner's usage, not a user's"),
+            ));
+        }
         if !self.usages.is_empty()
-            && let Some(bad) = usages.iter().find(|u| !self.usages.contains(u))
+            && let Some(bad) = usages
+                .iter()
+                .find(|u| !self.usages.iter().any(|o| o.user_complement() == Some(**u)))
         {
-            return Some(("usage", format!("{bad:?} is not among {:?}", self.usages)));
+            return Some((
+                "usage",
+                format!(
+                    "{bad:?} complements none of the owner's usages {:?}",
+                    self.usages
+                ),
+            ));
         }
         None
+    }
+
+    /// Whether the owner's usages allow one of `any` (no usages declared: everything).
+    pub fn owner_may(&self, any: &[Usage]) -> bool {
+        self.usages.is_empty() || any.iter().any(|u| self.usages.contains(u))
     }
 
     /// Whether the owner must admit users one by one.
