@@ -145,19 +145,23 @@ impl OwnerShared {
             .remove(user);
     }
 
-    /// The handle of an admitted user of task `task` that declared one of `usages`, if one
-    /// is here.
-    pub(crate) fn admitted_with(&self, task: &str, usages: &[super::Usage]) -> Option<String> {
+    /// The handle and task of an admitted user of task `task` (any task, with `None`) that
+    /// declared one of `usages`, if one is here (the first heard).
+    pub(crate) fn admitted_with(
+        &self,
+        task: Option<&str>,
+        usages: &[super::Usage],
+    ) -> Option<(String, String)> {
         let admitted = self.admitted_users();
         self.presence()
             .active
             .iter()
             .find(|(u, _)| {
-                u.task == task
+                task.is_none_or(|t| u.task == t)
                     && u.usages.iter().any(|d| usages.contains(d))
                     && admitted.contains(&u.user)
             })
-            .map(|(u, _)| u.user.clone())
+            .map(|(u, _)| (u.user.clone(), u.task.clone()))
     }
 
     /// Refuses locally an operation the owner's usages do not allow (it needs one of `any`).
@@ -257,11 +261,12 @@ impl OwnerShared {
 
     /// Whether a reply to a `sendall` comes from a user the restrictions allow and admitted;
     /// one that does not is dropped and counted.
-    pub(crate) fn accepts_broadcast_reply(&self, reply: &BroadcastReply) -> bool {
-        let refused = self
-            .restrictions
-            .refusal(&reply.task, &[super::wire::Usage::ReceiveAll])
-            .is_some()
+    pub(crate) fn accepts_broadcast_reply(
+        &self,
+        reply: &BroadcastReply,
+        usages: &[super::Usage],
+    ) -> bool {
+        let refused = self.restrictions.refusal(&reply.task, usages).is_some()
             || !(self.admitted(&reply.user) || self.presence().departed_recently(&reply.user));
         if refused {
             self.refused_replies.fetch_add(1, Ordering::Relaxed);
@@ -629,7 +634,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             wait::deadline(start, timeout),
             self.demux
                 .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
-                    shared.accepts_broadcast_reply(r)
+                    shared.accepts_broadcast_reply(r, &[super::Usage::ReceiveAll])
                 }),
         )
         .await
@@ -718,7 +723,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             let next =
                 self.demux
                     .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
-                        shared.accepts_broadcast_reply(r)
+                        shared.accepts_broadcast_reply(r, &[super::Usage::ReceiveAll])
                     });
             let Some(reply) = wait::timeout_at(deadline, next).await.flatten() else {
                 break;
@@ -748,19 +753,47 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         value: &Q,
         timeout: Duration,
     ) -> Result<R, PortError> {
-        self.shared
-            .require("send_to", &[super::Usage::Send, super::Usage::Query])?;
+        self.to_one_user(Some(task), value, timeout).await
+    }
+
+    /// `query` the other way round: sends `value` to one user that answers the owner's
+    /// queries (usage [`Response`](super::Usage::Response)) — the first admitted, as the
+    /// paper lets any one of them answer — and waits (at most `timeout`) for its answer. With
+    /// no such user within the timeout: [`PortError::NoSuchUser`].
+    pub fn query(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        wait::block_on(self.query_future(value, timeout))
+    }
+
+    pub(crate) async fn query_future(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        self.to_one_user(None, value, timeout).await
+    }
+
+    /// Sends `value` to the user of task `task` (or, with `None`, to the first admitted user
+    /// with usage `Response`) and waits for its answer.
+    async fn to_one_user(
+        &self,
+        task: Option<&str>,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<R, PortError> {
+        use super::Usage;
+        let (operation, owner_usages, user_usages): (&str, &[Usage], &[Usage]) = match task {
+            Some(_) => (
+                "send_to",
+                &[Usage::Send, Usage::Query],
+                &[Usage::Receive, Usage::Response],
+            ),
+            None => ("query", &[Usage::Query], &[Usage::Response]),
+        };
+        self.shared.require(operation, owner_usages)?;
         let start = Instant::now();
         let deadline = wait::deadline(start, timeout);
         let port = &self.shared.port;
         // The user, once the owner has heard (and admitted) it.
-        let user = loop {
+        let (user, task) = loop {
             let seen = self.shared.users_changed.generation();
-            if let Some(user) = self
-                .shared
-                .admitted_with(task, &[super::Usage::Receive, super::Usage::Response])
-            {
-                break user;
+            if let Some(found) = self.shared.admitted_with(task, user_usages) {
+                break found;
             }
             if wait::timeout_at(deadline, self.shared.users_changed.changed(seen))
                 .await
@@ -769,12 +802,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                 return Err(PortError::NoSuchUser {
                     port: port.clone(),
                     owner: self.shared.task.clone(),
-                    user: task.to_owned(),
-                    usage: "Receive or Response",
+                    user: task.unwrap_or("(any)").to_owned(),
+                    usage: if task.is_some() {
+                        "Receive or Response"
+                    } else {
+                        "Response"
+                    },
                     present: self.shared.present_users(),
                 });
             }
         };
+        let task = task.as_str();
         let stream = self.shared.to_user(&user)?;
         let awaited = self.broadcast_message(&stream, value, &format!("a message to `{task}`"))?;
         drop(stream);
@@ -783,14 +821,19 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             deadline,
             self.demux
                 .next(&self.broadcast_replies, self.incarnation, awaited.id, |r| {
-                    r.user == user && shared.accepts_broadcast_reply(r)
+                    // The user was chosen for its usage: only the user list is judged again.
+                    r.user == user && shared.accepts_broadcast_reply(r, &[])
                 }),
         )
         .await
         .flatten()
         .ok_or_else(|| PortError::Timeout {
             port: port.clone(),
-            operation: "send_to",
+            operation: if operation == "query" {
+                "owner's query"
+            } else {
+                "send_to"
+            },
             task: self.shared.task.clone(),
             owner: Some(task.to_owned()),
             waited: start.elapsed(),

@@ -75,7 +75,7 @@ impl<R: DeserializeOwned> Replies<'_, R> {
             self.awaited
                 .demux
                 .next(self.source, self.owner, self.awaited.id, |r| {
-                    shared.accepts_broadcast_reply(r)
+                    shared.accepts_broadcast_reply(r, &[super::Usage::ReceiveAll])
                 }),
         ))
         .flatten()?;

@@ -506,6 +506,28 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         timeout: Duration,
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
+        let (message, value) = self.take_from_owner(source, operation, timeout).await?;
+        let payload = self.encode_reply(&answer(&value))?;
+        self.answer_message(&message, payload, timeout).await?;
+        Ok(value)
+    }
+
+    /// The next message the owner sent to this user alone (usage `Receive` or `Response`),
+    /// not answered yet: [`answer_message`](Self::answer_message) answers it.
+    pub(crate) async fn take_to_me(&self, timeout: Duration) -> Result<(Broadcast, Q), PortError> {
+        let Some(to_me) = &self.to_me else {
+            return Err(self.undeclared(Usage::Response));
+        };
+        self.take_from_owner(to_me, "receive", timeout).await
+    }
+
+    /// Takes the next message from the owner on `source`, decoded.
+    async fn take_from_owner(
+        &self,
+        source: &Consumer<Broadcast>,
+        operation: &'static str,
+        timeout: Duration,
+    ) -> Result<(Broadcast, Q), PortError> {
         // A user the owner's restrictions refuse takes no part (known owners only: one not
         // heard yet is judged when its message comes).
         self.owner(&mut self.demux())?;
@@ -541,11 +563,25 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             what: "decoding a message from the owner",
             reason: e.to_string(),
         })?;
-        let payload = postcard::to_stdvec(&answer(&value)).map_err(|e| PortError::Codec {
+        Ok((broadcast, value))
+    }
+
+    /// A reply to the owner, encoded.
+    pub(crate) fn encode_reply(&self, reply: &R) -> Result<Vec<u8>, PortError> {
+        postcard::to_stdvec(reply).map_err(|e| PortError::Codec {
             port: self.port.clone(),
             what: "encoding a reply to the owner",
             reason: e.to_string(),
-        })?;
+        })
+    }
+
+    /// Answers the owner's `message` with `payload` (an encoded reply).
+    pub(crate) async fn answer_message(
+        &self,
+        message: &Broadcast,
+        payload: Vec<u8>,
+        timeout: Duration,
+    ) -> Result<(), PortError> {
         // The message came, so its owner exists; its reply stream may not have matched this
         // user yet (across hosts discovery is not symmetric in time): a reliable reply written
         // before the match would reach nobody. Wait briefly, as first replies do.
@@ -553,8 +589,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         wait::matched_by(&self.broadcast_replies, briefly).await;
         self.broadcast_replies
             .write(&BroadcastReply {
-                owner: broadcast.owner,
-                id: broadcast.id,
+                owner: message.owner,
+                id: message.id,
                 task: self.task.clone(),
                 user: self.user.clone(),
                 payload,
@@ -563,8 +599,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 port: self.port.clone(),
                 what: "a reply to the owner".to_owned(),
                 source,
-            })?;
-        Ok(value)
+            })
     }
 
     /// Whether `broadcast` comes from the owner now (one that admitted this user), waiting

@@ -1,0 +1,872 @@
+//! Modules (Shin, 1985, section 5): a module declares its tasks, the ports it owns and uses
+//! with their restrictions, its response and exception handlers, its named subprograms and
+//! its `order`; [`ModuleBuilder::load`] checks all of it before anything runs and reports
+//! every problem at once ([`LoadError`]); [`Module::start`] runs it.
+//!
+//! **How a module runs.** Its background code (the *body*) and its handlers run on one thread,
+//! the module's (`module-<NAME>`), so that they never run at once: a handler runs only at a
+//! *preemption point* of the body, and only when the module's [`Order`] lets it — it outranks
+//! the innermost section running (see [`ndds_core::ports::order`]). The points are:
+//! - the entry and exit of a named section ([`ModuleContext::section`]: a subprogram such as
+//!   GRASP or INSERT);
+//! - every wait in a port primitive called through the [`ModuleContext`] (`send`, `query`,
+//!   `receive`, and [`ModuleContext::delay`]) — the section that waits still counts as
+//!   running: a handler that does not outrank it waits too;
+//! - [`ModuleContext::point`], wherever the body calls it.
+//!
+//! After the body returns, the module thread serves its handlers until the module stops.
+//!
+//! **Handlers.** A *response handler* `PORT.NAME` answers queries: from the port's users on a
+//! port the module owns (usage `Response`), or from the port's owner on a port the module
+//! uses (usage `Response`: LOAD_CARD answering LOAD_IT's `ASK_CHILD1.STATUS`). One listener
+//! thread per such port takes each query off the network and posts it; the module thread runs
+//! the handler at a point and the listener sends the answer. An *exception handler*
+//! `PORT.TIMEOUT` runs when an operation on the port through the module context times out:
+//! the operation returns the timeout to the body, and the handler runs at the next point the
+//! order allows (at once, if it outranks what runs). Rust code is never interrupted anywhere
+//! else.
+//!
+//! **Tasks** declared with the module start with it on threads of their own (`task-<NAME>`);
+//! they are other tasks, not sections of the module, and the order does not rank them.
+
+use std::any::Any;
+use std::collections::HashMap;
+use std::pin::pin;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, mpsc};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use ndds_core::ports::{LoadError, LoadProblem, ModuleSpec, Order, PortDecl, Sections};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use super::wait::{self, Either, Notify};
+use super::{PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage};
+use crate::{Participant, TypeDescription};
+
+/// What a module failed with.
+#[derive(Debug, thiserror::Error)]
+pub enum ModuleError {
+    /// Its declarations do not hold together (every problem is listed).
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// A port could not be declared, or a thread started.
+    #[error(transparent)]
+    Port(#[from] PortError),
+    /// The module is stopping: the body should return.
+    #[error("module `{0}` is stopping")]
+    Stopping(String),
+    /// The context was asked for a port the module did not declare at that end with these
+    /// types.
+    #[error("module `{module}` declared no port `{port}` {what}")]
+    NoPort {
+        /// The module.
+        module: String,
+        /// The port.
+        port: String,
+        /// At which end and with which types it was asked for.
+        what: String,
+    },
+}
+
+/// How long a listener waits for a message before it looks whether the module stops.
+const LISTEN_SLICE: Duration = Duration::from_millis(100);
+
+/// An event waiting for a handler.
+enum Event {
+    /// A query: its payload, and where the encoded answer goes.
+    Query {
+        payload: Vec<u8>,
+        answer: mpsc::SyncSender<Result<Vec<u8>, String>>,
+    },
+    /// A timeout on the handler's port.
+    Timeout,
+}
+
+type ResponseBody = Box<dyn FnMut(&[u8]) -> Result<Vec<u8>, String> + Send>;
+type ExceptionBody = Box<dyn FnMut(&ModuleContext) + Send>;
+type Body = Box<dyn FnOnce(&ModuleContext) + Send>;
+type TaskBody = Box<dyn FnOnce(&TaskContext) + Send>;
+type Declare = Box<dyn FnOnce(&Participant, &str) -> Result<Declared, PortError> + Send>;
+/// Starts a port's listener for the module's response handler (given the handler's name).
+type Listen = Box<dyn FnOnce(Arc<Shared>, String) -> JoinHandle<()> + Send>;
+
+/// A port declared by a module, type-erased, with what listens on it for queries.
+struct Declared {
+    port: String,
+    handle: Arc<dyn Any + Send + Sync>,
+    /// Starts the thread that takes queries for the module's response handler, if the port
+    /// has one.
+    listen: Option<Listen>,
+}
+
+/// A module being declared (see the module docs).
+pub struct ModuleBuilder {
+    participant: Participant,
+    spec: ModuleSpec,
+    order_problem: Option<String>,
+    ports: Vec<Declare>,
+    responses: HashMap<String, ResponseBody>,
+    response_formats: Vec<(String, (u64, u64))>,
+    exceptions: HashMap<String, ExceptionBody>,
+    tasks: Vec<(String, TaskBody)>,
+    body: Option<Body>,
+}
+
+/// The module's state shared by its thread, its listeners and its context.
+struct Shared {
+    name: String,
+    sections: Mutex<Sections<Event>>,
+    events: Notify,
+    stop: AtomicBool,
+    responses: Mutex<HashMap<String, ResponseBody>>,
+    exceptions: Mutex<HashMap<String, ExceptionBody>>,
+    /// Handlers run so far, in order, with the section they preempted (for tests and
+    /// `ndds`' views).
+    log: Mutex<Vec<String>>,
+}
+
+impl Shared {
+    fn sections(&self) -> MutexGuard<'_, Sections<Event>> {
+        self.sections.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn post(&self, handler: &str, event: Event) -> bool {
+        let posted = self.sections().post(handler, event).is_ok();
+        if posted {
+            self.events.notify();
+        } else {
+            tracing::warn!(module = %self.name, handler, "too many events wait for handlers: dropped");
+        }
+        posted
+    }
+}
+
+impl ModuleBuilder {
+    /// Starts declaring module `name` (also its background code's section name, and the task
+    /// name its ports are declared under).
+    pub fn new(participant: &Participant, name: &str) -> Self {
+        ModuleBuilder {
+            participant: participant.clone(),
+            spec: ModuleSpec {
+                name: name.to_owned(),
+                ..ModuleSpec::default()
+            },
+            order_problem: None,
+            ports: Vec::new(),
+            responses: HashMap::new(),
+            response_formats: Vec::new(),
+            exceptions: HashMap::new(),
+            tasks: Vec::new(),
+            body: None,
+        }
+    }
+
+    /// The module owns `port`, with `restrictions` (its usages, timeout, ...).
+    pub fn owns<Q, R>(mut self, port: &str, restrictions: Restrictions) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        self.spec.owns.push(PortDecl {
+            port: port.to_owned(),
+            usages: restrictions.usages.clone(),
+            timeout: restrictions.timeout_ms.is_some(),
+            formats: Some(formats::<Q, R>()),
+        });
+        let answers =
+            restrictions.usages.is_empty() || restrictions.usages.contains(&Usage::Response);
+        let name = port.to_owned();
+        self.ports.push(Box::new(move |participant, task| {
+            let owner = Arc::new(PortOwner::<Q, R>::declare_with(
+                participant,
+                &name,
+                task,
+                restrictions,
+            )?);
+            let serving = Arc::clone(&owner);
+            Ok(Declared {
+                port: name,
+                handle: owner,
+                listen: answers.then(|| {
+                    Box::new(move |shared: Arc<Shared>, handler: String| {
+                        spawn_listener(&shared.name.clone(), &handler.clone(), move || {
+                            serve_users(&shared, &handler, &serving);
+                        })
+                    }) as Listen
+                }),
+            })
+        }));
+        self
+    }
+
+    /// The module uses `port` with `usages`; `timeout`, if given, bounds every operation on
+    /// it through the module context (and allows a `PORT.TIMEOUT` handler).
+    pub fn uses<Q, R>(mut self, port: &str, usages: &[Usage], timeout: Option<Duration>) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        self.spec.uses.push(PortDecl {
+            port: port.to_owned(),
+            usages: usages.to_vec(),
+            timeout: timeout.is_some(),
+            formats: Some(formats::<Q, R>()),
+        });
+        let (name, usages) = (port.to_owned(), usages.to_vec());
+        let answers = usages.contains(&Usage::Response);
+        self.ports.push(Box::new(move |participant, task| {
+            let user = Arc::new(UsedPort {
+                user: PortUser::<Q, R>::declare_with(participant, &name, task, &usages)?,
+                timeout,
+            });
+            let serving = Arc::clone(&user);
+            Ok(Declared {
+                port: name,
+                handle: user,
+                listen: answers.then(|| {
+                    Box::new(move |shared: Arc<Shared>, handler: String| {
+                        spawn_listener(&shared.name.clone(), &handler.clone(), move || {
+                            serve_owner(&shared, &handler, &serving.user);
+                        })
+                    }) as Listen
+                }),
+            })
+        }));
+        self
+    }
+
+    /// Declares the response handler `handler` (`PORT.NAME`) and its body, for queries of
+    /// type `Q` answered with `R` (the port's types). One response handler per port.
+    pub fn response<Q, R>(
+        mut self,
+        handler: &str,
+        mut body: impl FnMut(Q) -> R + Send + 'static,
+    ) -> Self
+    where
+        Q: Serialize + DeserializeOwned + 'static,
+        R: Serialize + DeserializeOwned + 'static,
+    {
+        self.spec.responses.push(handler.to_owned());
+        self.response_formats
+            .push((handler.to_owned(), formats::<Q, R>()));
+        self.responses.insert(
+            handler.to_owned(),
+            Box::new(move |payload: &[u8]| {
+                let query: Q = postcard::from_bytes(payload).map_err(|e| e.to_string())?;
+                postcard::to_stdvec(&body(query)).map_err(|e| e.to_string())
+            }),
+        );
+        self
+    }
+
+    /// Declares the exception handler `handler` (`PORT.TIMEOUT`) and its body.
+    pub fn exception(
+        mut self,
+        handler: &str,
+        body: impl FnMut(&ModuleContext) + Send + 'static,
+    ) -> Self {
+        self.spec.exceptions.push(handler.to_owned());
+        self.exceptions.insert(handler.to_owned(), Box::new(body));
+        self
+    }
+
+    /// Declares a named subprogram (a section the body enters with
+    /// [`ModuleContext::section`]).
+    pub fn subprogram(mut self, name: &str) -> Self {
+        self.spec.subprograms.push(name.to_owned());
+        self
+    }
+
+    /// The module's order, in the paper's notation (`ORDER(A, B, C)`) or as names.
+    pub fn order(mut self, text: &str) -> Self {
+        match Order::parse(text) {
+            Ok(order) => self.spec.order = Some(order),
+            Err(err) => self.order_problem = Some(err.to_string()),
+        }
+        self
+    }
+
+    /// A task created with the module, on a thread of its own.
+    pub fn task(mut self, name: &str, body: impl FnOnce(&TaskContext) + Send + 'static) -> Self {
+        self.spec.tasks.push(name.to_owned());
+        self.tasks.push((name.to_owned(), Box::new(body)));
+        self
+    }
+
+    /// The module's background code.
+    pub fn body(mut self, body: impl FnOnce(&ModuleContext) + Send + 'static) -> Self {
+        self.body = Some(Box::new(body));
+        self
+    }
+
+    /// What the module declares.
+    pub fn spec(&self) -> &ModuleSpec {
+        &self.spec
+    }
+
+    /// Checks the module (every problem at once) and declares its ports.
+    pub fn load(self) -> Result<Module, ModuleError> {
+        let mut problems = self.spec.check(
+            self.responses
+                .keys()
+                .chain(self.exceptions.keys())
+                .map(String::as_str),
+        );
+        if let Some(problem) = &self.order_problem {
+            problems.push(LoadProblem::UnknownSection {
+                section: format!("(the order does not read: {problem})"),
+            });
+        }
+        // A response handler takes the port's types.
+        for (handler, handler_formats) in &self.response_formats {
+            let port = handler
+                .rsplit_once('.')
+                .map_or(handler.as_str(), |(p, _)| p);
+            let declared = self
+                .spec
+                .owns
+                .iter()
+                .chain(&self.spec.uses)
+                .find(|d| d.port == port)
+                .and_then(|d| d.formats);
+            if let Some(port_formats) = declared
+                && port_formats != *handler_formats
+            {
+                problems.push(LoadProblem::IncompatibleFormat {
+                    port: port.to_owned(),
+                    user: format!("{} (handler `{handler}`)", self.spec.name),
+                    owner_formats: port_formats,
+                    user_formats: *handler_formats,
+                });
+            }
+        }
+        if !problems.is_empty() {
+            return Err(LoadError {
+                module: self.spec.name.clone(),
+                problems,
+            }
+            .into());
+        }
+        let mut ports = HashMap::new();
+        let mut listeners = Vec::new();
+        for declare in self.ports {
+            let declared = declare(&self.participant, &self.spec.name)?;
+            let prefix = format!("{}.", declared.port);
+            if let Some(listen) = declared.listen
+                && let Some(handler) = self.spec.responses.iter().find(|h| h.starts_with(&prefix))
+            {
+                listeners.push((handler.clone(), listen));
+            }
+            ports.insert(declared.port, declared.handle);
+        }
+        // Without an order, the body is the one section named.
+        let order = match &self.spec.order {
+            Some(order) => order.clone(),
+            None => Order::new([self.spec.name.clone()]).map_err(|err| LoadError {
+                module: self.spec.name.clone(),
+                problems: vec![LoadProblem::UnknownSection {
+                    section: format!("(the module's name is not a section name: {err})"),
+                }],
+            })?,
+        };
+        Ok(Module {
+            shared: Arc::new(Shared {
+                name: self.spec.name.clone(),
+                sections: Mutex::new(Sections::new(order)),
+                events: Notify::default(),
+                stop: AtomicBool::new(false),
+                responses: Mutex::new(self.responses),
+                exceptions: Mutex::new(self.exceptions),
+                log: Mutex::new(Vec::new()),
+            }),
+            spec: self.spec,
+            ports: Arc::new(ports),
+            listeners,
+            tasks: self.tasks,
+            body: self.body,
+        })
+    }
+}
+
+fn formats<Q, R>() -> (u64, u64)
+where
+    Q: Serialize + DeserializeOwned + 'static,
+    R: Serialize + DeserializeOwned + 'static,
+{
+    (
+        TypeDescription::of::<Q>().fingerprint(),
+        TypeDescription::of::<R>().fingerprint(),
+    )
+}
+
+/// A used port and its timeout.
+struct UsedPort<Q, R> {
+    user: PortUser<Q, R>,
+    timeout: Option<Duration>,
+}
+
+fn spawn_listener(
+    module: &str,
+    handler: &str,
+    run: impl FnOnce() + Send + 'static,
+) -> JoinHandle<()> {
+    let name = format!("listen-{module}-{handler}");
+    std::thread::Builder::new()
+        .name(name.clone())
+        .spawn(run)
+        .unwrap_or_else(|err| {
+            tracing::error!(module, handler, error = %err, "listener thread not started: its queries time out");
+            std::thread::spawn(|| {})
+        })
+}
+
+/// Posts a query for `handler` and waits for the module thread's answer (`None` when the
+/// module stops first).
+fn ask_module(shared: &Shared, handler: &str, payload: Vec<u8>) -> Option<Result<Vec<u8>, String>> {
+    let (answer, answered) = mpsc::sync_channel(1);
+    if !shared.post(handler, Event::Query { payload, answer }) {
+        return Some(Err("the module has too many events waiting".to_owned()));
+    }
+    loop {
+        match answered.recv_timeout(LISTEN_SLICE) {
+            Ok(result) => return Some(result),
+            Err(mpsc::RecvTimeoutError::Timeout) if !shared.stop.load(Ordering::Acquire) => {}
+            Err(_) => return None,
+        }
+    }
+}
+
+/// The listener of an owned port with a response handler: users' queries.
+fn serve_users<Q, R>(shared: &Shared, handler: &str, owner: &PortOwner<Q, R>)
+where
+    Q: Serialize + DeserializeOwned,
+    R: Serialize + DeserializeOwned,
+{
+    while !shared.stop.load(Ordering::Acquire) {
+        let (query, reply): (Q, ReplyHandle<R>) = match owner.receive(LISTEN_SLICE) {
+            Ok(taken) => taken,
+            Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
+            Err(err) => {
+                tracing::warn!(module = %shared.name, handler, error = %err, "response handler's port");
+                std::thread::sleep(LISTEN_SLICE);
+                continue;
+            }
+        };
+        let Ok(payload) = postcard::to_stdvec(&query) else {
+            continue;
+        };
+        match ask_module(shared, handler, payload) {
+            Some(Ok(answer)) => match postcard::from_bytes::<R>(&answer) {
+                Ok(answer) => {
+                    if let Err(err) = reply.reply(&answer) {
+                        tracing::warn!(module = %shared.name, handler, error = %err, "answer not sent");
+                    }
+                }
+                Err(err) => {
+                    tracing::warn!(module = %shared.name, handler, error = %err, "answer does not decode")
+                }
+            },
+            Some(Err(err)) => {
+                tracing::warn!(module = %shared.name, handler, error = %err, "handler failed")
+            }
+            None => return,
+        }
+    }
+}
+
+/// The listener of a used port with usage `Response`: the owner's queries.
+fn serve_owner<Q, R>(shared: &Shared, handler: &str, user: &PortUser<Q, R>)
+where
+    Q: Serialize + DeserializeOwned,
+    R: Serialize + DeserializeOwned,
+{
+    while !shared.stop.load(Ordering::Acquire) {
+        let (message, query) = match wait::block_on(user.take_to_me(LISTEN_SLICE)) {
+            Ok(taken) => taken,
+            Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
+            Err(err) => {
+                tracing::warn!(module = %shared.name, handler, error = %err, "response handler's port");
+                std::thread::sleep(LISTEN_SLICE);
+                continue;
+            }
+        };
+        let Ok(payload) = postcard::to_stdvec(&query) else {
+            continue;
+        };
+        match ask_module(shared, handler, payload) {
+            Some(Ok(answer)) => {
+                if let Err(err) =
+                    wait::block_on(user.answer_message(&message, answer, Duration::from_secs(2)))
+                {
+                    tracing::warn!(module = %shared.name, handler, error = %err, "answer not sent");
+                }
+            }
+            Some(Err(err)) => {
+                tracing::warn!(module = %shared.name, handler, error = %err, "handler failed")
+            }
+            None => return,
+        }
+    }
+}
+
+/// A module that loaded: [`start`](Module::start) runs it.
+pub struct Module {
+    shared: Arc<Shared>,
+    spec: ModuleSpec,
+    ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
+    listeners: Vec<(String, Listen)>,
+    tasks: Vec<(String, TaskBody)>,
+    body: Option<Body>,
+}
+
+impl Module {
+    /// What the module declared.
+    pub fn spec(&self) -> &ModuleSpec {
+        &self.spec
+    }
+
+    /// Starts the module: its listeners, its tasks, and its thread (the body, then its
+    /// handlers until it stops).
+    pub fn start(self) -> Result<RunningModule, ModuleError> {
+        let mut threads = Vec::new();
+        for (handler, listen) in self.listeners {
+            threads.push(listen(Arc::clone(&self.shared), handler));
+        }
+        for (task, body) in self.tasks {
+            let context = TaskContext {
+                name: task.clone(),
+                module: self.spec.name.clone(),
+                stop: Arc::clone(&self.shared),
+            };
+            let name = format!("task-{task}");
+            threads.push(
+                std::thread::Builder::new()
+                    .name(name.clone())
+                    .spawn(move || body(&context))
+                    .map_err(|source| PortError::Spawn {
+                        port: None,
+                        thread: name,
+                        source,
+                    })?,
+            );
+        }
+        let context = ModuleContext {
+            shared: Arc::clone(&self.shared),
+            ports: Arc::clone(&self.ports),
+        };
+        let body = self.body;
+        let name = format!("module-{}", self.spec.name);
+        let main = std::thread::Builder::new()
+            .name(name.clone())
+            .spawn(move || {
+                if let Some(body) = body {
+                    context.in_section(&context.shared.name.clone(), || body(&context));
+                }
+                // Serve the handlers until the module stops.
+                while !context.stopping() {
+                    let seen = context.shared.events.generation();
+                    context.point();
+                    wait::block_on(wait::timeout_at(
+                        wait::deadline(Instant::now(), LISTEN_SLICE),
+                        context.shared.events.changed(seen),
+                    ));
+                }
+            })
+            .map_err(|source| PortError::Spawn {
+                port: None,
+                thread: name,
+                source,
+            })?;
+        threads.push(main);
+        Ok(RunningModule {
+            shared: self.shared,
+            threads,
+        })
+    }
+}
+
+/// A running module; dropping it (or [`stop`](RunningModule::stop)) stops it.
+pub struct RunningModule {
+    shared: Arc<Shared>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl RunningModule {
+    /// The handlers run so far, in order, each with the section it ran in (`handler` alone
+    /// when nothing else ran, `handler in SECTION` otherwise).
+    pub fn handled(&self) -> Vec<String> {
+        self.shared
+            .log
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// Stops the module: its context's primitives fail with [`ModuleError::Stopping`], and
+    /// once the body, its tasks and listeners have returned, this returns.
+    pub fn stop(mut self) {
+        self.halt();
+    }
+
+    fn halt(&mut self) {
+        self.shared.stop.store(true, Ordering::Release);
+        self.shared.events.notify();
+        for thread in self.threads.drain(..) {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for RunningModule {
+    fn drop(&mut self) {
+        self.halt();
+    }
+}
+
+/// What a task of a module sees.
+pub struct TaskContext {
+    name: String,
+    module: String,
+    stop: Arc<Shared>,
+}
+
+impl TaskContext {
+    /// The task's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The module's name.
+    pub fn module(&self) -> &str {
+        &self.module
+    }
+
+    /// Whether the module is stopping (the task should return).
+    pub fn stopping(&self) -> bool {
+        self.stop.stop.load(Ordering::Acquire)
+    }
+}
+
+/// What the module's body and handlers see: the module's ports, its sections and its
+/// preemption points (see the module docs).
+pub struct ModuleContext {
+    shared: Arc<Shared>,
+    ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
+}
+
+impl ModuleContext {
+    /// The module's name.
+    pub fn name(&self) -> &str {
+        &self.shared.name
+    }
+
+    /// Whether the module is stopping (the body should return).
+    pub fn stopping(&self) -> bool {
+        self.shared.stop.load(Ordering::Acquire)
+    }
+
+    /// A preemption point: runs the handlers whose events wait and that the order lets run
+    /// now, most urgent first.
+    pub fn point(&self) {
+        loop {
+            let next = self.shared.sections().next_at_point();
+            let Some((handler, event)) = next else { return };
+            let innermost = self.shared.sections().innermost().map(str::to_owned);
+            self.shared
+                .log
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .push(match innermost {
+                    Some(section) => format!("{handler} in {section}"),
+                    None => handler.clone(),
+                });
+            self.in_section(&handler, || self.run_handler(&handler, event));
+        }
+    }
+
+    fn run_handler(&self, handler: &str, event: Event) {
+        match event {
+            Event::Query { payload, answer } => {
+                // Taken out while it runs: a handler never runs inside itself.
+                let body = self
+                    .shared
+                    .responses
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .remove(handler);
+                let Some(mut body) = body else {
+                    let _ = answer.send(Err(format!("no response handler `{handler}`")));
+                    return;
+                };
+                let result =
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(&payload)))
+                        .unwrap_or_else(|_| Err(format!("response handler `{handler}` panicked")));
+                self.shared
+                    .responses
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .insert(handler.to_owned(), body);
+                let _ = answer.send(result);
+            }
+            Event::Timeout => {
+                let body = self
+                    .shared
+                    .exceptions
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .remove(handler);
+                if let Some(mut body) = body {
+                    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(self)))
+                        .is_err()
+                    {
+                        tracing::error!(module = %self.shared.name, handler, "exception handler panicked");
+                    }
+                    self.shared
+                        .exceptions
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .insert(handler.to_owned(), body);
+                }
+            }
+        }
+    }
+
+    /// Runs `f` as section `name`: entered (a point), run, left (a point).
+    fn in_section<T>(&self, name: &str, f: impl FnOnce() -> T) -> T {
+        self.shared.sections().enter(name);
+        self.point();
+        let out = f();
+        self.point();
+        if let Err(err) = self.shared.sections().leave(name) {
+            tracing::error!(module = %self.shared.name, error = %err, "sections left out of order");
+        }
+        out
+    }
+
+    /// Runs the named subprogram `name` (declared with
+    /// [`ModuleBuilder::subprogram`]) as a section: its entry and exit are points.
+    pub fn section<T>(&self, name: &str, f: impl FnOnce() -> T) -> T {
+        self.in_section(name, f)
+    }
+
+    /// Waits for `future`, running the handlers the order allows meanwhile.
+    fn at_points<F: std::future::Future>(&self, future: F) -> Result<F::Output, ModuleError> {
+        let mut future = pin!(future);
+        loop {
+            if self.stopping() {
+                return Err(ModuleError::Stopping(self.shared.name.clone()));
+            }
+            self.point();
+            let seen = self.shared.events.generation();
+            let woke = wait::block_on(wait::timeout_at(
+                wait::deadline(Instant::now(), LISTEN_SLICE),
+                wait::race(future.as_mut(), self.shared.events.changed(seen)),
+            ));
+            if let Some(Either::Left(out)) = woke {
+                return Ok(out);
+            }
+        }
+    }
+
+    /// `DELAY`: waits `duration`, running the handlers the order allows meanwhile.
+    pub fn delay(&self, duration: Duration) -> Result<(), ModuleError> {
+        self.at_points(wait::sleep_until(wait::deadline(Instant::now(), duration)))
+    }
+
+    fn port<T: Send + Sync + 'static>(&self, port: &str) -> Result<Arc<T>, ModuleError> {
+        self.ports
+            .get(port)
+            .cloned()
+            .and_then(|handle| handle.downcast::<T>().ok())
+            .ok_or_else(|| ModuleError::NoPort {
+                module: self.shared.name.clone(),
+                port: port.to_owned(),
+                what: format!("as {}", std::any::type_name::<T>()),
+            })
+    }
+
+    /// Posts `PORT.TIMEOUT` when `result` is a timeout and the module handles it.
+    fn on_timeout<T>(&self, port: &str, result: Result<T, PortError>) -> Result<T, ModuleError> {
+        if let Err(PortError::Timeout { .. }) = &result {
+            let handler = format!("{port}.TIMEOUT");
+            if self
+                .shared
+                .exceptions
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .contains_key(&handler)
+            {
+                self.shared.post(&handler, Event::Timeout);
+                self.point();
+            }
+        }
+        result.map_err(ModuleError::Port)
+    }
+
+    /// `SEND` on a port the module uses (usage `Send`): waits for the owner's reply.
+    pub fn send<Q, R>(&self, port: &str, value: &Q) -> Result<R, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        let used = self.port::<UsedPort<Q, R>>(port)?;
+        used.user.require(Usage::Send)?;
+        let timeout = used.timeout.unwrap_or(Duration::MAX);
+        let result = self.at_points(used.user.exchange(value, timeout))?;
+        self.on_timeout(port, result)
+    }
+
+    /// `QUERY` on a port: as a user, the owner's response handler answers; on a port the
+    /// module owns (usage `Query`), one of its users' response handlers does.
+    pub fn query<Q, R>(&self, port: &str, value: &Q) -> Result<R, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        if let Ok(owner) = self.port::<PortOwner<Q, R>>(port) {
+            let timeout = owner
+                .restrictions()
+                .timeout_ms
+                .map_or(Duration::MAX, Duration::from_millis);
+            let result = self.at_points(owner.query_future(value, timeout))?;
+            return self.on_timeout(port, result);
+        }
+        let used = self.port::<UsedPort<Q, R>>(port)?;
+        used.user.require(Usage::Query)?;
+        let timeout = used.timeout.unwrap_or(Duration::MAX);
+        let result = self.at_points(used.user.exchange(value, timeout))?;
+        self.on_timeout(port, result)
+    }
+
+    /// `RECEIVE` on a port the module owns: the next request and the handle to reply with,
+    /// waiting at most the port's timeout restriction (or `timeout`, if shorter).
+    pub fn receive<Q, R>(
+        &self,
+        port: &str,
+        timeout: Duration,
+    ) -> Result<(Q, ReplyHandle<R>), ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        let owner = self.port::<PortOwner<Q, R>>(port)?;
+        let timeout = owner
+            .restrictions()
+            .timeout_ms
+            .map_or(timeout, |ms| timeout.min(Duration::from_millis(ms)));
+        let result = self.at_points(owner.receive_future(timeout))?;
+        self.on_timeout(port, result)
+    }
+
+    /// The owner end of a port the module owns, for the primitives the context does not
+    /// wrap (`sendall`, `callall`, `send_to`, ...): they are not preemption points.
+    pub fn owner<Q, R>(&self, port: &str) -> Result<Arc<PortOwner<Q, R>>, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        self.port::<PortOwner<Q, R>>(port)
+    }
+}

@@ -1,0 +1,231 @@
+//! Modules (Shin's module layer) over real ports, through a real daemon: checked before they
+//! run with every problem at once, handlers run under the module's order at preemption
+//! points, timeouts run exception handlers.
+
+mod common;
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use ndds_client::ports::{
+    ModuleBuilder, ModuleError, PortError, PortOwner, PortUser, Restrictions, Usage,
+};
+
+const WAIT: Duration = Duration::from_secs(10);
+
+fn participant(dir: &std::path::Path, name: &str) -> ndds_client::Participant {
+    common::participant(&common::unique_config(dir, name))
+}
+
+/// A log of what happened, shared by the module's sections and the test.
+#[derive(Clone, Default)]
+struct Log(Arc<Mutex<Vec<String>>>);
+
+impl Log {
+    fn push(&self, what: impl Into<String>) {
+        self.0.lock().unwrap().push(what.into());
+    }
+    fn take(&self) -> Vec<String> {
+        self.0.lock().unwrap().clone()
+    }
+}
+
+#[test]
+fn chip_its_order_answers_the_critical_section_query_only_while_insert_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "chip-it");
+    // CHIP_IT2's end: it owns SHARE_FEEDER1 and queries CHIP_IT through it.
+    let chip_it2 = PortOwner::<u32, i32>::declare_with(
+        &p,
+        "SHARE_FEEDER1",
+        "CHIP_IT2",
+        Restrictions {
+            usages: vec![Usage::Query],
+            users: vec!["CHIP_IT".into()],
+            ..Restrictions::default()
+        },
+    )
+    .unwrap();
+    let log = Log::default();
+    let (answers, sections) = (log.clone(), log.clone());
+    let module = ModuleBuilder::new(&p, "CHIP_IT")
+        .uses::<u32, i32>("SHARE_FEEDER1", &[Usage::Response], None)
+        .response("SHARE_FEEDER1.CRIT_SECTION", move |_: u32| {
+            answers.push("answered");
+            1
+        })
+        .subprogram("GRASP")
+        .subprogram("INSERT")
+        .order("ORDER(CHIP_IT, GRASP, SHARE_FEEDER1.CRIT_SECTION, INSERT)")
+        .body(move |ctx| {
+            for _ in 0..4 {
+                for section in ["GRASP", "INSERT"] {
+                    let stopped = ctx.section(section, || {
+                        sections.push(format!("{section} begins"));
+                        let stopped = ctx.delay(Duration::from_millis(150)).is_err();
+                        sections.push(format!("{section} ends"));
+                        stopped
+                    });
+                    if stopped {
+                        return;
+                    }
+                }
+                // The background code between steps: not to be preempted either.
+                if ctx.delay(Duration::from_millis(150)).is_err() {
+                    return;
+                }
+            }
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    assert!(common::eventually(WAIT, || !chip_it2
+        .present_users()
+        .is_empty()));
+    // Queries arrive at any time; each is answered only when INSERT runs.
+    for _ in 0..3 {
+        assert_eq!(chip_it2.query(&1, WAIT).unwrap(), 1);
+    }
+    let handled = running.handled();
+    assert_eq!(handled.len(), 3, "{handled:?}");
+    assert!(
+        handled
+            .iter()
+            .all(|h| h == "SHARE_FEEDER1.CRIT_SECTION in INSERT"),
+        "{handled:?}"
+    );
+    // And in the log, each answer falls within INSERT: at its entry (a preemption point,
+    // before its first statement) or while it runs — never in GRASP or the background code.
+    let events = log.take();
+    let mut last = "";
+    for event in &events {
+        if event == "answered" {
+            assert!(
+                matches!(last, "GRASP ends" | "INSERT begins"),
+                "answered after `{last}`: {events:?}"
+            );
+        } else {
+            last = event;
+        }
+    }
+    running.stop();
+}
+
+#[test]
+fn a_timeout_runs_the_ports_exception_handler_under_the_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "gate");
+    // RELEASE owns LET_1_GO but is hung: it never replies.
+    let _release = PortOwner::<u32, i32>::declare(&p, "LET_1_GO", "RELEASE").unwrap();
+    let log = Log::default();
+    let (exceptions, body_log) = (log.clone(), log.clone());
+    let module = ModuleBuilder::new(&p, "GATE")
+        .uses::<u32, i32>("LET_1_GO", &[Usage::Send], Some(Duration::from_millis(300)))
+        .exception("LET_1_GO.TIMEOUT", move |ctx| {
+            exceptions.push(format!("{} handles the timeout", ctx.name()));
+        })
+        .order("ORDER(LET_1_GO.TIMEOUT, GATE)")
+        .body(move |ctx| {
+            let started = Instant::now();
+            let result = ctx.send::<u32, i32>("LET_1_GO", &1);
+            let timed_out = matches!(result, Err(ModuleError::Port(PortError::Timeout { .. })));
+            body_log.push(format!(
+                "send returned (timed out: {timed_out}, after at least 300 ms: {})",
+                started.elapsed() >= Duration::from_millis(300)
+            ));
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    assert!(common::eventually(WAIT, || log.take().len() == 2));
+    assert_eq!(
+        log.take(),
+        [
+            "GATE handles the timeout",
+            "send returned (timed out: true, after at least 300 ms: true)"
+        ]
+    );
+    assert_eq!(running.handled(), ["LET_1_GO.TIMEOUT in GATE"]);
+    running.stop();
+}
+
+#[test]
+fn a_module_that_does_not_hold_together_is_refused_with_every_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "load");
+    let err = ModuleBuilder::new(&p, "LOAD_CARD")
+        // Usage Response without a response handler for the port.
+        .uses::<u32, i32>("ASK_CHILD1", &[Usage::Response], None)
+        // A handler whose types are not the port's.
+        .uses::<u32, i32>("CARD_IN_PLACE", &[Usage::Response], None)
+        .response("CARD_IN_PLACE.DONE", |s: String| s)
+        // An exception handler for a port without a timeout.
+        .owns::<(), ()>("PALLET_IN_PLACE", Restrictions::default())
+        .exception("PALLET_IN_PLACE.TIMEOUT", |_| {})
+        .order("ORDER(PALLET_IN_PLACE.TIMEOUT, ASK_CHILD1.STATUS, LOAD_CARD)")
+        .load()
+        .err()
+        .unwrap();
+    let ModuleError::Load(load) = &err else {
+        panic!("{err}")
+    };
+    let text: Vec<String> = load.problems.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        text,
+        [
+            "port `ASK_CHILD1` is used with usage Response but no response handler `ASK_CHILD1.NAME` is declared",
+            "handler `PALLET_IN_PLACE.TIMEOUT`: port `PALLET_IN_PLACE` has no timeout restriction",
+            "the order names `ASK_CHILD1.STATUS`, which is not the module, a subprogram, or a declared handler",
+            &format!(
+                "port `CARD_IN_PLACE`: `LOAD_CARD (handler `CARD_IN_PLACE.DONE`)` uses message formats {} but the owner's are {}",
+                fingerprints::<String, String>(),
+                fingerprints::<u32, i32>()
+            ),
+        ],
+        "{err}"
+    );
+    // Nothing was declared: the module's ports are not on the network.
+    std::thread::sleep(Duration::from_millis(200));
+    let graph = p.graph().unwrap();
+    assert!(
+        !graph
+            .endpoints
+            .iter()
+            .any(|e| e.info.topic.starts_with("port/PALLET_IN_PLACE/")),
+        "a refused module declared a port"
+    );
+}
+
+fn fingerprints<
+    Q: serde::Serialize + serde::de::DeserializeOwned,
+    R: serde::Serialize + serde::de::DeserializeOwned,
+>() -> String {
+    format!(
+        "{:016x}/{:016x}",
+        ndds_client::TypeDescription::of::<Q>().fingerprint(),
+        ndds_client::TypeDescription::of::<R>().fingerprint()
+    )
+}
+
+#[test]
+fn a_users_query_is_answered_by_the_owning_modules_response_handler() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "status");
+    let module = ModuleBuilder::new(&p, "LOAD_IT")
+        .owns::<u32, u32>(
+            "STATUS",
+            Restrictions {
+                usages: vec![Usage::Response],
+                ..Restrictions::default()
+            },
+        )
+        .response("STATUS.NUM_LOADED", |n: u32| n + 40)
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    let asker =
+        PortUser::<u32, u32>::declare_with(&p, "STATUS", "operator", &[Usage::Query]).unwrap();
+    assert_eq!(asker.query(&2, WAIT).unwrap(), 42);
+    assert_eq!(running.handled(), ["STATUS.NUM_LOADED"]);
+    running.stop();
+}
