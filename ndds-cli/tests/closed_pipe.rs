@@ -120,6 +120,8 @@ fn listing_commands_end_quietly_when_stdout_is_closed_before_they_print() {
         &["nodes", "--json"],
         &["ports", "--listen", "0"],
         &["ports", "--listen", "0", "--json"],
+        &["modules", "--listen", "0"],
+        &["modules", "--listen", "0", "--json"],
     ] {
         let child = spawn_into_closed_pipe(&world, args);
         assert_quiet_success(args, wait(child, || {}));

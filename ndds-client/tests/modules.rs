@@ -229,3 +229,126 @@ fn a_users_query_is_answered_by_the_owning_modules_response_handler() {
     assert_eq!(running.handled(), ["STATUS.NUM_LOADED"]);
     running.stop();
 }
+
+/// LOAD_IT and its children, as in the appendix: LOAD_IT starts LOAD_CARD and SCREW_IN_CARD
+/// with `costart` and queries LOAD_CARD's status through ASK_CHILD1.
+fn load_it(p: &ndds_client::Participant, loaded: u32) -> ModuleBuilder {
+    let load_card = ModuleBuilder::new(p, "LOAD_CARD")
+        .uses::<(), u32>("ASK_CHILD1", &[Usage::Response], None)
+        .response("ASK_CHILD1.STATUS", move |()| loaded)
+        .task("FREEZE_PALLET", |task| {
+            while !task.stopping() {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        });
+    let screw_in_card = ModuleBuilder::new(p, "SCREW_IN_CARD");
+    ModuleBuilder::new(p, "LOAD_IT")
+        .owns::<(), u32>(
+            "ASK_CHILD1",
+            Restrictions {
+                usages: vec![Usage::Query],
+                users: vec!["LOAD_CARD".into()],
+                timeout_ms: Some(2_000),
+                ..Restrictions::default()
+            },
+        )
+        .child(load_card)
+        .child(screw_in_card)
+}
+
+#[test]
+fn costart_starts_the_children_and_the_parent_queries_them() {
+    use ndds_client::ports::{ModuleInfo, PortWire};
+    use ndds_client::{ConsumerQos, Reliability};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "costart");
+    let statuses = Log::default();
+    let seen = statuses.clone();
+    let module = load_it(&p, 17)
+        .body(move |ctx| {
+            // A child that is not one is refused, and starts nothing.
+            let err = ctx.costart(&["LOAD_CARD", "GATE"]).unwrap_err();
+            seen.push(err.to_string());
+            ctx.costart(&["LOAD_CARD", "SCREW_IN_CARD"]).unwrap();
+            let status: u32 = ctx.query("ASK_CHILD1", &()).unwrap();
+            seen.push(format!("LOAD_CARD has loaded {status}"));
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    assert!(common::eventually(WAIT, || statuses.take().len() == 2));
+    assert_eq!(
+        statuses.take(),
+        [
+            "module `LOAD_IT` has no child `GATE` to start (not declared with `child`, or started already)",
+            "LOAD_CARD has loaded 17",
+        ]
+    );
+    // Each module declares itself, with its parent: the tree.
+    let reliable = ConsumerQos {
+        reliability: Reliability::Reliable { depth: 4 },
+        ..ConsumerQos::default()
+    };
+    let declaration = |name: &str| {
+        p.consumer_with_type::<ModuleInfo>(
+            &format!("module/{name}"),
+            ModuleInfo::description(),
+            reliable,
+        )
+        .unwrap()
+        .recv_timeout(WAIT)
+        .unwrap()
+        .value
+    };
+    let parent = declaration("LOAD_IT");
+    assert_eq!(
+        (parent.parent, parent.children, parent.owns),
+        (
+            None,
+            vec!["LOAD_CARD".to_owned(), "SCREW_IN_CARD".to_owned()],
+            vec!["ASK_CHILD1".to_owned()]
+        )
+    );
+    let child = declaration("LOAD_CARD");
+    assert_eq!(
+        (child.parent.as_deref(), child.tasks, child.uses),
+        (
+            Some("LOAD_IT"),
+            vec!["FREEZE_PALLET".to_owned()],
+            vec!["ASK_CHILD1".to_owned()]
+        )
+    );
+    assert_eq!(child.pid, std::process::id());
+    // Stopping the parent stops its children (and their tasks).
+    running.stop();
+    let graph_has = |topic: &str| {
+        p.graph().unwrap().endpoints.iter().any(|e| {
+            e.info.topic == topic && e.info.kind() == ndds_core::wire::EndpointKind::Producer
+        })
+    };
+    assert!(common::eventually(WAIT, || !graph_has("module/LOAD_CARD")
+        && !graph_has("module/LOAD_IT")));
+}
+
+#[test]
+fn a_childs_problems_are_reported_with_the_parents() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "costart-load");
+    let broken_child = ModuleBuilder::new(&p, "SCREW_IN_CARD").uses::<(), u32>(
+        "ASK_CHILD2",
+        &[Usage::Response],
+        None,
+    );
+    let err = load_it(&p, 0).child(broken_child).load().err().unwrap();
+    let text = err.to_string();
+    assert!(
+        text.contains("in `SCREW_IN_CARD`: port `ASK_CHILD2` is used with usage Response but no response handler"),
+        "{text}"
+    );
+    // Two children of one name (load_it has one already).
+    assert!(
+        text.contains("child `SCREW_IN_CARD` is declared twice"),
+        "{text}"
+    );
+}

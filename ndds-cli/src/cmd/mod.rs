@@ -4,6 +4,7 @@ mod echo;
 mod fsm;
 mod hz;
 mod key;
+mod modules;
 mod nodes;
 mod perf;
 mod ports;
@@ -44,6 +45,8 @@ enum Command {
     Fsm(fsm::Args),
     /// List ports with their owner, users, restrictions and queue.
     Ports(ports::Args),
+    /// Show the module tree: each running module with its children, tasks and ports.
+    Modules(modules::Args),
     /// Load a system description file, verify it and run it, with a live status.
     Run(run::Args),
     /// Domain key files: a new one, and the steps of a key rotation.
@@ -72,6 +75,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Perf(args) => perf::run(&cli.daemon, &args),
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
+        Command::Modules(args) => modules::run(&cli.daemon, &args),
         Command::Key(args) => key::run(&args),
         Command::Security(args) => security::run(&args),
         Command::Run(args) => run::run(&cli.daemon, &args),

@@ -55,7 +55,9 @@ pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Answers, Broadcast, BroadcastReply, Replies};
 pub use user::{ADMISSION_WAIT, PortUser};
 pub use waitfor::{Arrival, LINGER, REPEAT, Rendezvous};
-pub use wire::{Filter, OwnerInfo, ProcessClass, Reply, Request, Restrictions, Usage, UserInfo};
+pub use wire::{
+    Filter, ModuleInfo, OwnerInfo, ProcessClass, Reply, Request, Restrictions, Usage, UserInfo,
+};
 
 use crate::{
     Consumer, ConsumerQos, Participant, Producer, ProducerQos, Reliability, TypeDescription,
@@ -194,6 +196,10 @@ impl PortWire for BroadcastReply {
     const TYPE_NAME: &'static str = builtin::PORT_BROADCAST_REPLY;
 }
 
+impl PortWire for ModuleInfo {
+    const TYPE_NAME: &'static str = builtin::PORT_MODULE_INFO;
+}
+
 impl PortWire for OwnerInfo {
     const TYPE_NAME: &'static str = builtin::PORT_OWNER_INFO;
 
@@ -202,6 +208,7 @@ impl PortWire for OwnerInfo {
         TypeDescription::describer()
             .with::<Usage>()
             .with::<Filter>()
+            .with::<ProcessClass>()
             .describe::<OwnerInfo>()
             .map_or_else(
                 |_| TypeDescription::named::<OwnerInfo>(Self::TYPE_NAME),

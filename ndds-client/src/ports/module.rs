@@ -42,7 +42,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::wait::{self, Either, Notify};
-use super::{PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage};
+use super::{ModuleInfo, PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage};
 use crate::{Participant, TypeDescription};
 
 /// What a module failed with.
@@ -57,6 +57,16 @@ pub enum ModuleError {
     /// The module is stopping: the body should return.
     #[error("module `{0}` is stopping")]
     Stopping(String),
+    /// `costart` named a module that is no child of this one, or one started already.
+    #[error(
+        "module `{module}` has no child `{child}` to start (not declared with `child`, or started already)"
+    )]
+    NoChild {
+        /// The module.
+        module: String,
+        /// The child named.
+        child: String,
+    },
     /// The context was asked for a port the module did not declare at that end with these
     /// types.
     #[error("module `{module}` declared no port `{port}` {what}")]
@@ -112,6 +122,7 @@ pub struct ModuleBuilder {
     exceptions: HashMap<String, ExceptionBody>,
     tasks: Vec<(String, TaskBody)>,
     body: Option<Body>,
+    children: Vec<ModuleBuilder>,
 }
 
 /// The module's state shared by its thread, its listeners and its context.
@@ -125,6 +136,8 @@ struct Shared {
     /// Handlers run so far, in order, with the section they preempted (for tests and
     /// `ndds`' views).
     log: Mutex<Vec<String>>,
+    /// Children started by `costart`: they stop before their parent.
+    started: Mutex<Vec<RunningModule>>,
 }
 
 impl Shared {
@@ -160,7 +173,16 @@ impl ModuleBuilder {
             exceptions: HashMap::new(),
             tasks: Vec::new(),
             body: None,
+            children: Vec::new(),
         }
+    }
+
+    /// A child module this one may start with [`ModuleContext::costart`]; it is checked (and
+    /// its ports declared) when this one loads, with the parent.
+    pub fn child(mut self, child: ModuleBuilder) -> Self {
+        self.spec.children.push(child.spec.name.clone());
+        self.children.push(child);
+        self
     }
 
     /// The module owns `port`, with `restrictions` (its usages, timeout, ...).
@@ -306,8 +328,37 @@ impl ModuleBuilder {
         &self.spec
     }
 
-    /// Checks the module (every problem at once) and declares its ports.
+    /// Checks the module and its children (every problem at once) and declares their ports.
     pub fn load(self) -> Result<Module, ModuleError> {
+        let mut problems = self.problems();
+        // Between the modules of the tree: ports owned outside it are checked when they
+        // match, so a port without an owner here is not a problem.
+        let mut specs = Vec::new();
+        self.collect_specs(&mut specs);
+        problems.extend(
+            ndds_core::ports::check_system(&specs)
+                .into_iter()
+                .filter(|p| !matches!(p, LoadProblem::NoOwner { .. })),
+        );
+        if !problems.is_empty() {
+            return Err(LoadError {
+                module: self.spec.name.clone(),
+                problems,
+            }
+            .into());
+        }
+        self.declare(None)
+    }
+
+    fn collect_specs(&self, specs: &mut Vec<ModuleSpec>) {
+        specs.push(self.spec.clone());
+        for child in &self.children {
+            child.collect_specs(specs);
+        }
+    }
+
+    /// This module's problems, and its children's (named).
+    fn problems(&self) -> Vec<LoadProblem> {
         let mut problems = self.spec.check(
             self.responses
                 .keys()
@@ -342,12 +393,26 @@ impl ModuleBuilder {
                 });
             }
         }
-        if !problems.is_empty() {
-            return Err(LoadError {
-                module: self.spec.name.clone(),
-                problems,
-            }
-            .into());
+        for child in &self.children {
+            problems.extend(
+                child
+                    .problems()
+                    .into_iter()
+                    .map(|problem| LoadProblem::InChild {
+                        module: child.spec.name.clone(),
+                        problem: Box::new(problem),
+                    }),
+            );
+        }
+        problems
+    }
+
+    /// Declares the ports of this module and its children (checked already).
+    fn declare(self, parent: Option<String>) -> Result<Module, ModuleError> {
+        let mut children = HashMap::new();
+        for child in self.children {
+            let name = child.spec.name.clone();
+            children.insert(name, child.declare(Some(self.spec.name.clone()))?);
         }
         let mut ports = HashMap::new();
         let mut listeners = Vec::new();
@@ -372,6 +437,9 @@ impl ModuleBuilder {
             })?,
         };
         Ok(Module {
+            participant: self.participant,
+            parent,
+            children,
             shared: Arc::new(Shared {
                 name: self.spec.name.clone(),
                 sections: Mutex::new(Sections::new(order)),
@@ -380,6 +448,7 @@ impl ModuleBuilder {
                 responses: Mutex::new(self.responses),
                 exceptions: Mutex::new(self.exceptions),
                 log: Mutex::new(Vec::new()),
+                started: Mutex::new(Vec::new()),
             }),
             spec: self.spec,
             ports: Arc::new(ports),
@@ -513,6 +582,9 @@ where
 
 /// A module that loaded: [`start`](Module::start) runs it.
 pub struct Module {
+    participant: Participant,
+    parent: Option<String>,
+    children: HashMap<String, Module>,
     shared: Arc<Shared>,
     spec: ModuleSpec,
     ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
@@ -530,6 +602,26 @@ impl Module {
     /// Starts the module: its listeners, its tasks, and its thread (the body, then its
     /// handlers until it stops).
     pub fn start(self) -> Result<RunningModule, ModuleError> {
+        let info = ModuleInfo {
+            name: self.spec.name.clone(),
+            parent: self.parent.clone(),
+            children: self.spec.children.clone(),
+            tasks: self.spec.tasks.clone(),
+            owns: self.spec.owns.iter().map(|d| d.port.clone()).collect(),
+            uses: self.spec.uses.iter().map(|d| d.port.clone()).collect(),
+            pid: std::process::id(),
+            host: gethostname::gethostname().to_string_lossy().into_owned(),
+        };
+        let topic = format!("module/{}", self.spec.name);
+        let declaration =
+            super::declaring_producer::<ModuleInfo>(&self.participant, &self.spec.name, &topic)?;
+        declaration
+            .write(&info)
+            .map_err(|source| PortError::Write {
+                port: self.spec.name.clone(),
+                what: "the module's declaration".to_owned(),
+                source,
+            })?;
         let mut threads = Vec::new();
         for (handler, listen) in self.listeners {
             threads.push(listen(Arc::clone(&self.shared), handler));
@@ -555,6 +647,7 @@ impl Module {
         let context = ModuleContext {
             shared: Arc::clone(&self.shared),
             ports: Arc::clone(&self.ports),
+            children: Mutex::new(self.children),
         };
         let body = self.body;
         let name = format!("module-{}", self.spec.name);
@@ -583,6 +676,7 @@ impl Module {
         Ok(RunningModule {
             shared: self.shared,
             threads,
+            _declaration: Some(declaration),
         })
     }
 }
@@ -591,6 +685,8 @@ impl Module {
 pub struct RunningModule {
     shared: Arc<Shared>,
     threads: Vec<JoinHandle<()>>,
+    /// The module's declaration (`module/<name>`), withdrawn when it stops.
+    _declaration: Option<crate::Producer<ModuleInfo>>,
 }
 
 impl RunningModule {
@@ -616,6 +712,20 @@ impl RunningModule {
         for thread in self.threads.drain(..) {
             let _ = thread.join();
         }
+        // Its children stop once it has (the body cannot start one any more).
+        let children = std::mem::take(
+            &mut *self
+                .shared
+                .started
+                .lock()
+                .unwrap_or_else(|p| p.into_inner()),
+        );
+        drop(children);
+    }
+
+    /// The module's name.
+    pub fn name(&self) -> &str {
+        &self.shared.name
     }
 }
 
@@ -654,6 +764,8 @@ impl TaskContext {
 pub struct ModuleContext {
     shared: Arc<Shared>,
     ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
+    /// Children not started yet.
+    children: Mutex<HashMap<String, Module>>,
 }
 
 impl ModuleContext {
@@ -665,6 +777,30 @@ impl ModuleContext {
     /// Whether the module is stopping (the body should return).
     pub fn stopping(&self) -> bool {
         self.shared.stop.load(Ordering::Acquire)
+    }
+
+    /// `COSTART`: starts these child modules (declared with [`ModuleBuilder::child`],
+    /// loaded and checked with this one), each on its own threads; they stop when this
+    /// module stops. A name that is no child not started yet starts nothing and is an error.
+    pub fn costart(&self, names: &[&str]) -> Result<(), ModuleError> {
+        let mut children = self.children.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(missing) = names.iter().find(|n| !children.contains_key(**n)) {
+            return Err(ModuleError::NoChild {
+                module: self.shared.name.clone(),
+                child: (*missing).to_owned(),
+            });
+        }
+        for name in names {
+            if let Some(child) = children.remove(*name) {
+                let running = child.start()?;
+                self.shared
+                    .started
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .push(running);
+            }
+        }
+        Ok(())
     }
 
     /// A preemption point: runs the handlers whose events wait and that the order lets run

@@ -189,3 +189,25 @@ pub struct OwnerInfo {
     /// heard. The highest claim owns the port; two owners with the same claim are a conflict.
     pub claim: u64,
 }
+
+/// A running module's declaration, on `module/<name>`: written once when it starts and kept
+/// for late readers (`ndds modules`); the module is there while its producer is matched.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModuleInfo {
+    /// The module.
+    pub name: String,
+    /// The module that started it (`costart`), if one did.
+    pub parent: Option<String>,
+    /// The modules it may start.
+    pub children: Vec<String>,
+    /// Its tasks.
+    pub tasks: Vec<String>,
+    /// The ports it owns.
+    pub owns: Vec<String>,
+    /// The ports it uses.
+    pub uses: Vec<String>,
+    /// Its process id.
+    pub pid: u32,
+    /// Its host's name.
+    pub host: String,
+}

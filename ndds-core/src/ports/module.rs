@@ -144,6 +144,13 @@ pub enum LoadProblem {
         /// The user's.
         user_formats: (u64, u64),
     },
+    /// A problem of a child module, found when its parent loaded.
+    InChild {
+        /// The child.
+        module: String,
+        /// The problem.
+        problem: Box<LoadProblem>,
+    },
     /// A child that is not a module of the system.
     UnknownChild {
         /// The parent.
@@ -213,6 +220,7 @@ impl fmt::Display for LoadProblem {
                 "port `{port}`: `{user}` uses message formats {:016x}/{:016x} but the owner's are {:016x}/{:016x}",
                 user_formats.0, user_formats.1, owner_formats.0, owner_formats.1
             ),
+            LoadProblem::InChild { module, problem } => write!(f, "in `{module}`: {problem}"),
             LoadProblem::UnknownChild { parent, child } => {
                 write!(
                     f,
@@ -274,6 +282,7 @@ impl ModuleSpec {
             .chain(self.exceptions.iter().map(|h| ("handler", h)))
             .chain(self.subprograms.iter().map(|s| ("subprogram", s)))
             .chain(self.tasks.iter().map(|t| ("task", t)))
+            .chain(self.children.iter().map(|c| ("child", c)))
         {
             if !seen.insert((kind, name.as_str())) {
                 problems.push(LoadProblem::Duplicate {

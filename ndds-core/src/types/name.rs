@@ -89,6 +89,8 @@ pub mod builtin {
     pub const PORT_BROADCAST: &str = "ndds::port::Broadcast";
     /// `ndds_client::ports::BroadcastReply`, a user's answer to a `sendall`.
     pub const PORT_BROADCAST_REPLY: &str = "ndds::port::BroadcastReply";
+    /// `ndds_client::ports::ModuleInfo`, a running module's declaration on `module/<name>`.
+    pub const PORT_MODULE_INFO: &str = "ndds::port::ModuleInfo";
     /// The sample of `ndds perf`.
     pub const PERF_SAMPLE: &str = "ndds::PerfSample";
 
@@ -105,6 +107,7 @@ pub mod builtin {
         PORT_ARRIVAL,
         PORT_BROADCAST,
         PORT_BROADCAST_REPLY,
+        PORT_MODULE_INFO,
         PERF_SAMPLE,
     ];
 }
