@@ -352,3 +352,92 @@ fn a_childs_problems_are_reported_with_the_parents() {
         "{text}"
     );
 }
+
+#[test]
+fn a_work_schedule_from_a_file_runs_its_steps_and_goes_on_past_an_empty_feeder() {
+    use ndds_client::ports::Performed;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "schedule");
+    let file = dir.path().join("chip_it.schedule");
+    std::fs::write(
+        &file,
+        "-- CHIP_IT's card: every chip the same priority\n\
+         1) GRASP(1), INSERT(10, 20, 3)\n\
+         1) GRASP(4), INSERT(12, 20, 3)\n\
+         1) GRASP(12), INSERT(14, 20, 3)\n",
+    )
+    .unwrap();
+    let log = Log::default();
+    let calls = log.clone();
+    let module = ModuleBuilder::new(&p, "CHIP_IT")
+        .subprogram("GRASP")
+        .subprogram("INSERT")
+        .schedule_file(&file)
+        .body(move |ctx| {
+            let mut feeder4 = 0; // empty until the operator refills it
+            let mut run = |ctx: &ndds_client::ports::ModuleContext, feeder4: u32| {
+                while ctx.more() > 0 {
+                    let performed = ctx.perform(|call| {
+                        let args: Vec<String> = call.args.iter().map(ToString::to_string).collect();
+                        calls.push(format!("{}({})", call.name, args.join(",")));
+                        let empty = call.name == "GRASP" && args == ["4"] && feeder4 == 0;
+                        i32::from(empty)
+                    });
+                    if let Performed::Failed { code, .. } = performed {
+                        calls.push(format!("feeder empty ({code}): operator told"));
+                    }
+                }
+            };
+            ctx.reinstate();
+            run(ctx, feeder4);
+            feeder4 = 10;
+            calls.push(format!("refilled: {} step(s) again", ctx.retry_failed()));
+            run(ctx, feeder4);
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    assert!(common::eventually(WAIT, || log.take().len() == 9));
+    assert_eq!(
+        log.take(),
+        [
+            "GRASP(1)",
+            "INSERT(10,20,3)",
+            "GRASP(4)",
+            "feeder empty (1): operator told",
+            "GRASP(12)",
+            "INSERT(14,20,3)",
+            "refilled: 1 step(s) again",
+            // The failed step resumes at the call that failed.
+            "GRASP(4)",
+            "INSERT(12,20,3)",
+        ]
+    );
+    running.stop();
+    // A schedule that calls what the module does not declare is refused at load, and so is
+    // one that does not read, naming its file.
+    let load = |text: &str| {
+        std::fs::write(&file, text).unwrap();
+        ModuleBuilder::new(&p, "CHIP_IT2")
+            .subprogram("GRASP")
+            .subprogram("INSERT")
+            .schedule_file(&file)
+            .load()
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let err = load("1) GRASP(1), INSRET(10, 20, 3)\n");
+    assert!(
+        err.contains(
+            "work schedule: line 1 calls `INSRET`, which is not a subprogram of the module"
+        ),
+        "{err}"
+    );
+    let err = load("1) GRASP(1\n");
+    assert!(
+        err.contains(&format!("work schedule: {}: line 1", file.display())),
+        "{err}"
+    );
+}

@@ -50,6 +50,8 @@ pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
 pub use filter::{FILTER_INBOX, FilterPort, RequestFilter, Verdict};
 pub use module::{Module, ModuleBuilder, ModuleContext, ModuleError, RunningModule, TaskContext};
+pub use ndds_core::ports::schedule::{Arg, Call};
+pub use ndds_core::ports::{LoadError, LoadProblem, Performed};
 pub use owner::{PortOwner, ReplyHandle};
 pub use respond::{PENDING_PER_PORT, Responder};
 pub use sendall::{Answers, Broadcast, BroadcastReply, Replies};

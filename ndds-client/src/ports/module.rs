@@ -37,7 +37,10 @@ use std::sync::{Arc, Mutex, MutexGuard, mpsc};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use ndds_core::ports::{LoadError, LoadProblem, ModuleSpec, Order, PortDecl, Sections};
+use ndds_core::ports::schedule::Call;
+use ndds_core::ports::{
+    LoadError, LoadProblem, ModuleSpec, Order, Performed, PortDecl, Sections, WorkSchedule,
+};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -123,6 +126,8 @@ pub struct ModuleBuilder {
     tasks: Vec<(String, TaskBody)>,
     body: Option<Body>,
     children: Vec<ModuleBuilder>,
+    schedule: Option<WorkSchedule<Call>>,
+    schedule_problems: Vec<String>,
 }
 
 /// The module's state shared by its thread, its listeners and its context.
@@ -174,6 +179,43 @@ impl ModuleBuilder {
             tasks: Vec::new(),
             body: None,
             children: Vec::new(),
+            schedule: None,
+            schedule_problems: Vec::new(),
+        }
+    }
+
+    /// The module's work schedule, in the paper's notation (one step per line:
+    /// `1) GRASP(1), INSERT(10.5, 20, 3)`). Each call must name a subprogram of the module
+    /// ([`subprogram`](Self::subprogram)); the body runs it with [`ModuleContext::perform`].
+    pub fn schedule(mut self, text: &str) -> Self {
+        match WorkSchedule::parse(text) {
+            Ok(schedule) => self.schedule = Some(schedule),
+            Err(err) => self.schedule_problems.push(err.to_string()),
+        }
+        self
+    }
+
+    /// The work schedule, read from a file (so that moving a chip is an edit of that file,
+    /// not of the module).
+    pub fn schedule_file(self, path: impl AsRef<std::path::Path>) -> Self {
+        let path = path.as_ref();
+        match std::fs::read_to_string(path) {
+            Ok(text) => {
+                let before = self.schedule_problems.len();
+                let mut this = self.schedule(&text);
+                if this.schedule_problems.len() > before
+                    && let Some(last) = this.schedule_problems.last_mut()
+                {
+                    *last = format!("{}: {last}", path.display());
+                }
+                this
+            }
+            Err(err) => {
+                let mut this = self;
+                this.schedule_problems
+                    .push(format!("{}: {err}", path.display()));
+                this
+            }
         }
     }
 
@@ -393,6 +435,28 @@ impl ModuleBuilder {
                 });
             }
         }
+        problems.extend(
+            self.schedule_problems
+                .iter()
+                .map(|what| LoadProblem::Schedule { what: what.clone() }),
+        );
+        if let Some(schedule) = &self.schedule {
+            for (step, call) in schedule
+                .steps()
+                .iter()
+                .flat_map(|step| step.calls.iter().map(move |call| (step, call)))
+            {
+                if !self.spec.subprograms.contains(&call.name) {
+                    problems.push(LoadProblem::Schedule {
+                        what: format!(
+                            "{}calls `{}`, which is not a subprogram of the module",
+                            step.line.map(|l| format!("line {l} ")).unwrap_or_default(),
+                            call.name
+                        ),
+                    });
+                }
+            }
+        }
         for child in &self.children {
             problems.extend(
                 child
@@ -451,6 +515,7 @@ impl ModuleBuilder {
                 started: Mutex::new(Vec::new()),
             }),
             spec: self.spec,
+            schedule: self.schedule,
             ports: Arc::new(ports),
             listeners,
             tasks: self.tasks,
@@ -585,6 +650,7 @@ pub struct Module {
     participant: Participant,
     parent: Option<String>,
     children: HashMap<String, Module>,
+    schedule: Option<WorkSchedule<Call>>,
     shared: Arc<Shared>,
     spec: ModuleSpec,
     ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
@@ -648,6 +714,7 @@ impl Module {
             shared: Arc::clone(&self.shared),
             ports: Arc::clone(&self.ports),
             children: Mutex::new(self.children),
+            schedule: Mutex::new(self.schedule),
         };
         let body = self.body;
         let name = format!("module-{}", self.spec.name);
@@ -766,6 +833,8 @@ pub struct ModuleContext {
     ports: Arc<HashMap<String, Arc<dyn Any + Send + Sync>>>,
     /// Children not started yet.
     children: Mutex<HashMap<String, Module>>,
+    /// The work schedule (taken out while `perform` runs it).
+    schedule: Mutex<Option<WorkSchedule<Call>>>,
 }
 
 impl ModuleContext {
@@ -777,6 +846,45 @@ impl ModuleContext {
     /// Whether the module is stopping (the body should return).
     pub fn stopping(&self) -> bool {
         self.shared.stop.load(Ordering::Acquire)
+    }
+
+    fn schedule(&self) -> MutexGuard<'_, Option<WorkSchedule<Call>>> {
+        self.schedule.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// `REINSTATE`: every step of the work schedule pending again.
+    pub fn reinstate(&self) {
+        if let Some(schedule) = self.schedule().as_mut() {
+            schedule.reinstate();
+        }
+    }
+
+    /// `MORE`: the steps of the work schedule `perform` may still run.
+    pub fn more(&self) -> usize {
+        self.schedule().as_ref().map_or(0, WorkSchedule::more)
+    }
+
+    /// `PERFORM`: runs the calls of the most urgent step not yet done, each as the section of
+    /// its subprogram (its entry and exit are preemption points) through `call`, which does
+    /// the work and returns its code (0: done; anything else fails the step there, and the
+    /// other steps go on). Inside a handler that preempted a `perform`, `perform` does
+    /// nothing.
+    pub fn perform(&self, mut call: impl FnMut(&Call) -> i32) -> Performed {
+        let taken = self.schedule().take();
+        let Some(mut schedule) = taken else {
+            return Performed::Nothing;
+        };
+        let performed = schedule.perform(|c| self.in_section(&c.name, || call(c)));
+        *self.schedule() = Some(schedule);
+        performed
+    }
+
+    /// The failed steps of the work schedule pending again (an operator refilled a feeder),
+    /// resuming at the call that failed; how many.
+    pub fn retry_failed(&self) -> usize {
+        self.schedule()
+            .as_mut()
+            .map_or(0, WorkSchedule::retry_failed)
     }
 
     /// `COSTART`: starts these child modules (declared with [`ModuleBuilder::child`],

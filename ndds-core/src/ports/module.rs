@@ -144,6 +144,11 @@ pub enum LoadProblem {
         /// The user's.
         user_formats: (u64, u64),
     },
+    /// The work schedule does not read, or calls what the module does not declare.
+    Schedule {
+        /// What is wrong.
+        what: String,
+    },
     /// A problem of a child module, found when its parent loaded.
     InChild {
         /// The child.
@@ -221,6 +226,7 @@ impl fmt::Display for LoadProblem {
                 user_formats.0, user_formats.1, owner_formats.0, owner_formats.1
             ),
             LoadProblem::InChild { module, problem } => write!(f, "in `{module}`: {problem}"),
+            LoadProblem::Schedule { what } => write!(f, "work schedule: {what}"),
             LoadProblem::UnknownChild { parent, child } => {
                 write!(
                     f,
