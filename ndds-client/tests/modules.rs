@@ -376,7 +376,7 @@ fn a_work_schedule_from_a_file_runs_its_steps_and_goes_on_past_an_empty_feeder()
         .schedule_file(&file)
         .body(move |ctx| {
             let mut feeder4 = 0; // empty until the operator refills it
-            let mut run = |ctx: &ndds_client::ports::ModuleContext, feeder4: u32| {
+            let run = |ctx: &ndds_client::ports::ModuleContext, feeder4: u32| {
                 while ctx.more() > 0 {
                     let performed = ctx.perform(|call| {
                         let args: Vec<String> = call.args.iter().map(ToString::to_string).collect();
