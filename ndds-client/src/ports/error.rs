@@ -12,7 +12,7 @@ use crate::error::{DeclareError, WriteError};
 #[non_exhaustive]
 pub enum PortError {
     /// No reply (or no request) within the timeout.
-    #[error("port `{port}`: {operation} by `{task}` timed out after {waited:?}{}", owner.as_ref().map(|o| format!(" ({} `{o}`)", if *operation == "send_to" || *operation == "owner's query" { "user" } else { "owner" })).unwrap_or_default())]
+    #[error("port `{port}`: {operation} by `{task}` timed out after {waited:?}{}", owner.as_ref().map(|o| format!(" ({} `{o}`)", if matches!(*operation, "send_to" | "owner's query" | "owner's send") { "user" } else { "owner" })).unwrap_or_default())]
     Timeout {
         /// The port.
         port: String,

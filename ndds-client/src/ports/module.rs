@@ -694,6 +694,7 @@ impl Module {
         }
         for (task, body) in self.tasks {
             let context = TaskContext {
+                participant: self.participant.clone(),
                 name: task.clone(),
                 module: self.spec.name.clone(),
                 stop: Arc::clone(&self.shared),
@@ -804,12 +805,18 @@ impl Drop for RunningModule {
 
 /// What a task of a module sees.
 pub struct TaskContext {
+    participant: Participant,
     name: String,
     module: String,
     stop: Arc<Shared>,
 }
 
 impl TaskContext {
+    /// The participant the module runs in (for the task's own ports and topics).
+    pub fn participant(&self) -> &Participant {
+        &self.participant
+    }
+
     /// The task's name.
     pub fn name(&self) -> &str {
         &self.name
@@ -1048,13 +1055,22 @@ impl ModuleContext {
         }
         result.map_err(ModuleError::Port)
     }
-
-    /// `SEND` on a port the module uses (usage `Send`): waits for the owner's reply.
+    /// `SEND`: on a port the module uses (usage `Send`), to the owner, waiting for its
+    /// reply; on a port it owns (usage `Send`), to its user that receives (the first
+    /// admitted), waiting for that user's answer — within the port's timeout.
     pub fn send<Q, R>(&self, port: &str, value: &Q) -> Result<R, ModuleError>
     where
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
         R: Serialize + DeserializeOwned + Send + Sync + 'static,
     {
+        if let Ok(owner) = self.port::<PortOwner<Q, R>>(port) {
+            let timeout = owner
+                .restrictions()
+                .timeout_ms
+                .map_or(Duration::MAX, Duration::from_millis);
+            let result = self.at_points(owner.send_any_future(value, timeout))?;
+            return self.on_timeout(port, result);
+        }
         let used = self.port::<UsedPort<Q, R>>(port)?;
         used.user.require(Usage::Send)?;
         let timeout = used.timeout.unwrap_or(Duration::MAX);
@@ -1102,6 +1118,28 @@ impl ModuleContext {
             .map_or(timeout, |ms| timeout.min(Duration::from_millis(ms)));
         let result = self.at_points(owner.receive_future(timeout))?;
         self.on_timeout(port, result)
+    }
+    /// `RECEIVE` on a port the module uses (usage `Receive` or `Response`): takes the next
+    /// message its owner sent to this module and answers it with `answer` (the paper's
+    /// RECEIVE then REPLY), waiting at most the port's timeout (or `timeout`, if shorter).
+    pub fn receive_from_owner<Q, R>(
+        &self,
+        port: &str,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> R,
+    ) -> Result<Q, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        let used = self.port::<UsedPort<Q, R>>(port)?;
+        let timeout = used.timeout.map_or(timeout, |t| t.min(timeout));
+        let taken = self.at_points(used.user.take_to_me(timeout))?;
+        let (message, value) = self.on_timeout(port, taken)?;
+        let payload = used.user.encode_reply(&answer(&value))?;
+        let answered = self.at_points(used.user.answer_message(&message, payload, timeout))?;
+        answered?;
+        Ok(value)
     }
 
     /// The owner end of a port the module owns, for the primitives the context does not

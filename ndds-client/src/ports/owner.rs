@@ -763,13 +763,28 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     pub fn query(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         wait::block_on(self.query_future(value, timeout))
     }
-
     pub(crate) async fn query_future(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         self.to_one_user(None, value, timeout).await
     }
 
-    /// Sends `value` to the user of task `task` (or, with `None`, to the first admitted user
-    /// with usage `Response`) and waits for its answer.
+    /// `send` the other way round, to whichever user takes the owner's messages (usage
+    /// [`Receive`](super::Usage::Receive); the first admitted): for a port of one user
+    /// (`max_users: Some(1)`) whose task may be replaced under another name. With no such
+    /// user within the timeout: [`PortError::NoSuchUser`].
+    pub fn send_any(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        wait::block_on(self.send_any_future(value, timeout))
+    }
+
+    pub(crate) async fn send_any_future(
+        &self,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<R, PortError> {
+        self.to_one_user(Some(""), value, timeout).await
+    }
+    /// Sends `value` to the user of task `task` (with `Some("")`, to the first admitted user
+    /// with usage `Receive`; with `None`, to the first admitted user with usage `Response`)
+    /// and waits for its answer.
     async fn to_one_user(
         &self,
         task: Option<&str>,
@@ -778,6 +793,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     ) -> Result<R, PortError> {
         use super::Usage;
         let (operation, owner_usages, user_usages): (&str, &[Usage], &[Usage]) = match task {
+            Some("") => ("send", &[Usage::Send], &[Usage::Receive]),
             Some(_) => (
                 "send_to",
                 &[Usage::Send, Usage::Query],
@@ -785,6 +801,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             ),
             None => ("query", &[Usage::Query], &[Usage::Response]),
         };
+        let task = task.filter(|t| !t.is_empty());
         self.shared.require(operation, owner_usages)?;
         let start = Instant::now();
         let deadline = wait::deadline(start, timeout);
@@ -803,10 +820,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                     port: port.clone(),
                     owner: self.shared.task.clone(),
                     user: task.unwrap_or("(any)").to_owned(),
-                    usage: if task.is_some() {
-                        "Receive or Response"
-                    } else {
-                        "Response"
+                    usage: match operation {
+                        "send_to" => "Receive or Response",
+                        "send" => "Receive",
+                        _ => "Response",
                     },
                     present: self.shared.present_users(),
                 });
@@ -829,10 +846,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         .flatten()
         .ok_or_else(|| PortError::Timeout {
             port: port.clone(),
-            operation: if operation == "query" {
-                "owner's query"
-            } else {
-                "send_to"
+            operation: match operation {
+                "query" => "owner's query",
+                "send" => "owner's send",
+                _ => "send_to",
             },
             task: self.shared.task.clone(),
             owner: Some(task.to_owned()),
