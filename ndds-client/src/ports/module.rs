@@ -108,6 +108,8 @@ type Listen = Box<dyn FnOnce(Arc<Shared>, String) -> JoinHandle<()> + Send>;
 /// A port declared by a module, type-erased, with what listens on it for queries.
 struct Declared {
     port: String,
+    /// More handles under names of their own (a filtered port's `FILTER/<port>`).
+    extra: Vec<(String, Arc<dyn Any + Send + Sync>)>,
     handle: Arc<dyn Any + Send + Sync>,
     /// Starts the thread that takes queries for the module's response handler, if the port
     /// has one.
@@ -251,6 +253,7 @@ impl ModuleBuilder {
             )?);
             let serving = Arc::clone(&owner);
             Ok(Declared {
+                extra: Vec::new(),
                 port: name,
                 handle: owner,
                 listen: answers.then(|| {
@@ -260,6 +263,48 @@ impl ModuleBuilder {
                         })
                     }) as Listen
                 }),
+            })
+        }));
+        self
+    }
+    /// The module owns `port` with a filter of its own spliced in (see
+    /// [`RequestFilter`](super::RequestFilter)); the body talks to the filter through the
+    /// port `FILTER`, [`ModuleContext::filter`].
+    pub fn owns_filtered<Q, R, F>(
+        mut self,
+        port: &str,
+        restrictions: Restrictions,
+        filter: F,
+    ) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+        F: super::RequestFilter<Q, R>,
+        F::Message: Sync,
+    {
+        self.spec.owns.push(PortDecl {
+            port: port.to_owned(),
+            usages: restrictions.usages.clone(),
+            timeout: restrictions.timeout_ms.is_some(),
+            formats: Some(formats::<Q, R>()),
+        });
+        let name = port.to_owned();
+        self.ports.push(Box::new(move |participant, task| {
+            let (owner, filter) = PortOwner::<Q, R>::declare_filtered(
+                participant,
+                &name,
+                task,
+                restrictions,
+                filter,
+            )?;
+            Ok(Declared {
+                extra: vec![(
+                    format!("FILTER/{name}"),
+                    Arc::new(filter) as Arc<dyn Any + Send + Sync>,
+                )],
+                port: name,
+                handle: Arc::new(owner),
+                listen: None,
             })
         }));
         self
@@ -287,6 +332,7 @@ impl ModuleBuilder {
             });
             let serving = Arc::clone(&user);
             Ok(Declared {
+                extra: Vec::new(),
                 port: name,
                 handle: user,
                 listen: answers.then(|| {
@@ -489,6 +535,7 @@ impl ModuleBuilder {
                 listeners.push((handler.clone(), listen));
             }
             ports.insert(declared.port, declared.handle);
+            ports.extend(declared.extra);
         }
         // Without an order, the body is the one section named.
         let order = match &self.spec.order {
@@ -1140,6 +1187,14 @@ impl ModuleContext {
         let answered = self.at_points(used.user.answer_message(&message, payload, timeout))?;
         answered?;
         Ok(value)
+    }
+    /// The port `FILTER` of a port the module owns with a filter
+    /// ([`ModuleBuilder::owns_filtered`]): how the body talks to that filter.
+    pub fn filter<M: Send + Sync + 'static>(
+        &self,
+        port: &str,
+    ) -> Result<Arc<super::FilterPort<M>>, ModuleError> {
+        self.port::<super::FilterPort<M>>(&format!("FILTER/{port}"))
     }
 
     /// The owner end of a port the module owns, for the primitives the context does not
