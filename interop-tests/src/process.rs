@@ -251,6 +251,22 @@ impl ClientProcess {
         Self::spawn(Command::new(binary("ndds-test-node")), socket, args)
     }
 
+    /// Starts the workspace binary `name` (an example program built as one) with `args`,
+    /// connected to the daemon at `socket`; its stdout lines can be read.
+    pub fn program(name: &str, socket: &Path, args: &[&str]) -> Self {
+        Self::spawn(Command::new(binary(name)), socket, args)
+    }
+
+    /// As [`program`](Self::program), inside `host` (the daemon at `socket` must run there).
+    pub fn program_on(host: &Host, name: &str, socket: &Path, args: &[&str]) -> Self {
+        Self::spawn(host.exec(binary(name)), socket, args)
+    }
+
+    /// Sends SIGINT (Ctrl-C) to the process.
+    pub fn interrupt(&self) {
+        let _ = kill(Pid::from_raw(self.child.id() as i32), Signal::SIGINT);
+    }
+
     /// Starts `ndds-test-node` with `args` and `env` in its environment, connected to the
     /// daemon at `socket`.
     pub fn test_node_with_env(socket: &Path, args: &[&str], env: &[(&str, &Path)]) -> Self {

@@ -296,7 +296,7 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 };
                 let pallet = sample.value;
                 event("FREEZE_PALLET", "frozen", json!({ "pallet": pallet }));
-                match signal.send(&pallet, Duration::from_secs(30)) {
+                match task.send(&signal, &pallet, Duration::from_secs(30)) {
                     Ok(()) => {
                         let station = if pallet % 2 == 0 {
                             &station0
@@ -310,6 +310,7 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                             json!({ "pallet": pallet, "station": pallet % 2 }),
                         );
                     }
+                    Err(ModuleError::Stopping(_)) => return,
                     Err(err) => event(
                         "FREEZE_PALLET",
                         "not_loaded",
@@ -568,7 +569,7 @@ fn chip_it(
                     continue;
                 };
                 let pallet = sample.value;
-                if signal.send(&pallet, Duration::from_secs(60)).is_ok() {
+                if task.send(&signal, &pallet, Duration::from_secs(60)).is_ok() {
                     let _ = done.write(&Done {
                         pallet,
                         robot: me.to_owned(),

@@ -873,10 +873,39 @@ impl TaskContext {
     pub fn module(&self) -> &str {
         &self.module
     }
-
     /// Whether the module is stopping (the task should return).
     pub fn stopping(&self) -> bool {
         self.stop.stop.load(Ordering::Acquire)
+    }
+
+    /// `send` through `user` (a port the task declared itself), given up as soon as the
+    /// module stops ([`ModuleError::Stopping`]; the request is not withdrawn then: an owner
+    /// that is still there may receive it).
+    pub fn send<Q, R>(
+        &self,
+        user: &PortUser<Q, R>,
+        value: &Q,
+        timeout: Duration,
+    ) -> Result<R, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned,
+        R: Serialize + DeserializeOwned,
+    {
+        user.require(Usage::Send)?;
+        let mut exchange = pin!(user.exchange(value, timeout));
+        loop {
+            if self.stopping() {
+                return Err(ModuleError::Stopping(self.module.clone()));
+            }
+            let seen = self.stop.events.generation();
+            let woke = wait::block_on(wait::race(
+                exchange.as_mut(),
+                self.stop.events.changed(seen),
+            ));
+            if let Either::Left(result) = woke {
+                return result.map_err(ModuleError::Port);
+            }
+        }
     }
 }
 
@@ -1084,10 +1113,11 @@ impl ModuleContext {
                 what: format!("as {}", std::any::type_name::<T>()),
             })
     }
-
-    /// Posts `PORT.TIMEOUT` when `result` is a timeout and the module handles it.
+    /// Posts `PORT.TIMEOUT` when `result` is a timeout (no answer within the port's timeout,
+    /// or, for an owner's message, no user to take it within that time) and the module
+    /// handles it.
     fn on_timeout<T>(&self, port: &str, result: Result<T, PortError>) -> Result<T, ModuleError> {
-        if let Err(PortError::Timeout { .. }) = &result {
+        if let Err(PortError::Timeout { .. } | PortError::NoSuchUser { .. }) = &result {
             let handler = format!("{port}.TIMEOUT");
             if self
                 .shared
