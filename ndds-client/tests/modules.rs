@@ -441,3 +441,36 @@ fn a_work_schedule_from_a_file_runs_its_steps_and_goes_on_past_an_empty_feeder()
         "{err}"
     );
 }
+
+#[test]
+fn without_an_order_handlers_interrupt_the_body_and_a_panic_leaves_the_sections_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "no-order");
+    let module = ModuleBuilder::new(&p, "CELL")
+        .owns::<u32, u32>(
+            "STATUS",
+            Restrictions {
+                usages: vec![Usage::Response],
+                ..Restrictions::default()
+            },
+        )
+        .response("STATUS.NOW", |n: u32| n * 2)
+        .subprogram("WORK")
+        .body(|ctx| {
+            // A subprogram that panics: its section is left all the same.
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                ctx.section("WORK", || panic!("a tool broke"))
+            }));
+            // The body runs on (a long motion); queries are answered meanwhile.
+            let _ = ctx.delay(Duration::from_secs(30));
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    let asker =
+        PortUser::<u32, u32>::declare_with(&p, "STATUS", "operator", &[Usage::Query]).unwrap();
+    assert_eq!(asker.query(&21, WAIT).unwrap(), 42);
+    // It ran inside the body's section (not inside a WORK left open by the panic).
+    assert_eq!(running.handled(), ["STATUS.NOW in CELL"]);
+    running.stop();
+}

@@ -83,8 +83,12 @@ where
     F: RequestFilter<Q, R>,
 {
     let _types = PhantomData::<fn(Q) -> R>;
-    while !shared.stop.load(Ordering::Acquire) {
+    loop {
+        // The generation first: a stop after it wakes the wait below.
         let seen = shared.changed.generation();
+        if shared.stop.load(Ordering::Acquire) {
+            return;
+        }
         take_messages(shared, &mut filter, inbox);
         let Some(requests) = shared.requests() else {
             // Replaced: nothing comes here any more (until the replacement goes).
@@ -134,6 +138,9 @@ where
             Verdict::Refuse("the port's filter failed (it panicked)".to_owned())
         });
         let answered = match verdict {
+            Verdict::Pass(_) if shared.queue_len() >= super::owner::PENDING_LIMIT => {
+                send_refusal(shared, &request, "the owner's queue is full".to_owned())
+            }
             Verdict::Pass(value) => match postcard::to_stdvec(&value) {
                 Ok(payload) => {
                     request.payload = payload;

@@ -30,7 +30,7 @@
 //! they are other tasks, not sections of the module, and the order does not rank them.
 
 use std::any::Any;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::pin::pin;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, mpsc};
@@ -83,6 +83,9 @@ pub enum ModuleError {
     },
 }
 
+/// Handlers run that [`RunningModule::handled`] remembers, at most (the most recent).
+pub const HANDLED_KEPT: usize = 1024;
+
 /// How long a listener waits for a message before it looks whether the module stops.
 const LISTEN_SLICE: Duration = Duration::from_millis(100);
 
@@ -130,6 +133,8 @@ pub struct ModuleBuilder {
     children: Vec<ModuleBuilder>,
     schedule: Option<WorkSchedule<Call>>,
     schedule_problems: Vec<String>,
+    /// Owned ports with a filter of their own.
+    filtered: Vec<String>,
 }
 
 /// The module's state shared by its thread, its listeners and its context.
@@ -142,7 +147,7 @@ struct Shared {
     exceptions: Mutex<HashMap<String, ExceptionBody>>,
     /// Handlers run so far, in order, with the section they preempted (for tests and
     /// `ndds`' views).
-    log: Mutex<Vec<String>>,
+    log: Mutex<VecDeque<String>>,
     /// Children started by `costart`: they stop before their parent.
     started: Mutex<Vec<RunningModule>>,
 }
@@ -183,6 +188,7 @@ impl ModuleBuilder {
             children: Vec::new(),
             schedule: None,
             schedule_problems: Vec::new(),
+            filtered: Vec::new(),
         }
     }
 
@@ -289,6 +295,7 @@ impl ModuleBuilder {
             formats: Some(formats::<Q, R>()),
         });
         let name = port.to_owned();
+        self.filtered.push(name.clone());
         self.ports.push(Box::new(move |participant, task| {
             let (owner, filter) = PortOwner::<Q, R>::declare_filtered(
                 participant,
@@ -481,6 +488,19 @@ impl ModuleBuilder {
                 });
             }
         }
+        for handler in &self.spec.responses {
+            let port = handler
+                .rsplit_once('.')
+                .map_or(handler.as_str(), |(p, _)| p);
+            if self.filtered.iter().any(|f| f == port) {
+                problems.push(LoadProblem::HandlerWithoutUsage {
+                    handler: handler.clone(),
+                    why: format!(
+                        "port `{port}` has a filter of its own: its requests go to the filter, not to a response handler"
+                    ),
+                });
+            }
+        }
         problems.extend(
             self.schedule_problems
                 .iter()
@@ -540,7 +560,16 @@ impl ModuleBuilder {
         // Without an order, the body is the one section named.
         let order = match &self.spec.order {
             Some(order) => order.clone(),
-            None => Order::new([self.spec.name.clone()]).map_err(|err| LoadError {
+            // Without an order, every handler may interrupt the body at its points.
+            None => Order::new(
+                self.spec
+                    .exceptions
+                    .iter()
+                    .chain(&self.spec.responses)
+                    .cloned()
+                    .chain([self.spec.name.clone()]),
+            )
+            .map_err(|err| LoadError {
                 module: self.spec.name.clone(),
                 problems: vec![LoadProblem::UnknownSection {
                     section: format!("(the module's name is not a section name: {err})"),
@@ -558,7 +587,7 @@ impl ModuleBuilder {
                 stop: AtomicBool::new(false),
                 responses: Mutex::new(self.responses),
                 exceptions: Mutex::new(self.exceptions),
-                log: Mutex::new(Vec::new()),
+                log: Mutex::new(VecDeque::new()),
                 started: Mutex::new(Vec::new()),
             }),
             spec: self.spec,
@@ -715,6 +744,15 @@ impl Module {
     /// Starts the module: its listeners, its tasks, and its thread (the body, then its
     /// handlers until it stops).
     pub fn start(self) -> Result<RunningModule, ModuleError> {
+        let shared = Arc::clone(&self.shared);
+        self.start_threads().inspect_err(|_| {
+            // Whatever started stops.
+            shared.stop.store(true, Ordering::Release);
+            shared.events.notify();
+        })
+    }
+
+    fn start_threads(self) -> Result<RunningModule, ModuleError> {
         let info = ModuleInfo {
             name: self.spec.name.clone(),
             parent: self.parent.clone(),
@@ -770,7 +808,13 @@ impl Module {
             .name(name.clone())
             .spawn(move || {
                 if let Some(body) = body {
-                    context.in_section(&context.shared.name.clone(), || body(&context));
+                    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        context.in_section(&context.shared.name.clone(), || body(&context));
+                    }));
+                    if ran.is_err() {
+                        tracing::error!(module = %context.shared.name,
+                            "the module's body panicked: its handlers go on being served");
+                    }
                 }
                 // Serve the handlers until the module stops.
                 while !context.stopping() {
@@ -812,7 +856,9 @@ impl RunningModule {
             .log
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .clone()
+            .iter()
+            .cloned()
+            .collect()
     }
 
     /// Stops the module: its context's primitives fail with [`ModuleError::Stopping`], and
@@ -894,14 +940,16 @@ impl TaskContext {
         user.require(Usage::Send)?;
         let mut exchange = pin!(user.exchange(value, timeout));
         loop {
+            let seen = self.stop.events.generation();
             if self.stopping() {
                 return Err(ModuleError::Stopping(self.module.clone()));
             }
-            let seen = self.stop.events.generation();
-            let woke = wait::block_on(wait::race(
-                exchange.as_mut(),
-                self.stop.events.changed(seen),
-            ));
+            let woke = wait::parked_only(|| {
+                wait::block_on(wait::race(
+                    exchange.as_mut(),
+                    self.stop.events.changed(seen),
+                ))
+            });
             if let Either::Left(result) = woke {
                 return result.map_err(ModuleError::Port);
             }
@@ -957,9 +1005,12 @@ impl ModuleContext {
         let Some(mut schedule) = taken else {
             return Performed::Nothing;
         };
-        let performed = schedule.perform(|c| self.in_section(&c.name, || call(c)));
+        let performed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            schedule.perform(|c| self.in_section(&c.name, || call(c)))
+        }));
+        // Back in place whatever happened (a call that panicked left its step where it was).
         *self.schedule() = Some(schedule);
-        performed
+        performed.unwrap_or_else(|panic| std::panic::resume_unwind(panic))
     }
 
     /// The failed steps of the work schedule pending again (an operator refilled a feeder),
@@ -1001,14 +1052,16 @@ impl ModuleContext {
             let next = self.shared.sections().next_at_point();
             let Some((handler, event)) = next else { return };
             let innermost = self.shared.sections().innermost().map(str::to_owned);
-            self.shared
-                .log
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .push(match innermost {
+            {
+                let mut log = self.shared.log.lock().unwrap_or_else(|p| p.into_inner());
+                if log.len() >= HANDLED_KEPT {
+                    log.pop_front();
+                }
+                log.push_back(match innermost {
                     Some(section) => format!("{handler} in {section}"),
                     None => handler.clone(),
                 });
+            }
             self.in_section(&handler, || self.run_handler(&handler, event));
         }
     }
@@ -1060,15 +1113,24 @@ impl ModuleContext {
         }
     }
 
-    /// Runs `f` as section `name`: entered (a point), run, left (a point).
+    /// Runs `f` as section `name`: entered (a point), run, left (a point). The section is
+    /// left even if `f` panics.
     fn in_section<T>(&self, name: &str, f: impl FnOnce() -> T) -> T {
+        /// Leaves the section when dropped (also on a panic).
+        struct Leave<'a>(&'a Shared, &'a str);
+        impl Drop for Leave<'_> {
+            fn drop(&mut self) {
+                if let Err(err) = self.0.sections().leave(self.1) {
+                    tracing::error!(module = %self.0.name, error = %err, "sections left out of order");
+                }
+            }
+        }
         self.shared.sections().enter(name);
+        let leave = Leave(&self.shared, name);
         self.point();
         let out = f();
         self.point();
-        if let Err(err) = self.shared.sections().leave(name) {
-            tracing::error!(module = %self.shared.name, error = %err, "sections left out of order");
-        }
+        drop(leave);
         out
     }
 
@@ -1082,15 +1144,17 @@ impl ModuleContext {
     fn at_points<F: std::future::Future>(&self, future: F) -> Result<F::Output, ModuleError> {
         let mut future = pin!(future);
         loop {
+            let seen = self.shared.events.generation();
             if self.stopping() {
                 return Err(ModuleError::Stopping(self.shared.name.clone()));
             }
             self.point();
-            let seen = self.shared.events.generation();
-            let woke = wait::block_on(wait::timeout_at(
-                wait::deadline(Instant::now(), LISTEN_SLICE),
-                wait::race(future.as_mut(), self.shared.events.changed(seen)),
-            ));
+            let woke = wait::parked_only(|| {
+                wait::block_on(wait::timeout_at(
+                    wait::deadline(Instant::now(), LISTEN_SLICE),
+                    wait::race(future.as_mut(), self.shared.events.changed(seen)),
+                ))
+            });
             if let Some(Either::Left(out)) = woke {
                 return Ok(out);
             }

@@ -305,8 +305,10 @@ impl OwnerShared {
     /// The requests topic, taken again if this owner let go of it and is no longer replaced;
     /// `None` while it is replaced (or the topic cannot be taken: logged).
     pub(crate) fn requests(&self) -> Option<Arc<Consumer<Request>>> {
-        let superseded = self.superseded_by().is_some();
+        // Decided under the slot's lock, as `release_requests_if_replaced` does (the slot's
+        // lock before the presence's, in both).
         let mut slot = self.requests.lock().unwrap_or_else(|p| p.into_inner());
+        let superseded = self.superseded_by().is_some();
         if superseded {
             *slot = None;
             return None;
@@ -326,18 +328,18 @@ impl OwnerShared {
     /// Lets go of the requests topic if this owner was replaced (see `requests`), and of the
     /// requests it holds: their senders send them again to the replacement.
     pub(crate) fn release_requests_if_replaced(&self) {
-        if self.superseded_by().is_some() {
-            let released = self
-                .requests
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .take();
-            drop(released);
-            let held = std::mem::take(&mut *self.pending());
-            if !held.is_empty() {
-                tracing::debug!(port = %self.port, owner = %self.task, requests = held.len(),
-                    "replaced: the requests held here go to the replacement");
+        let released = {
+            let mut slot = self.requests.lock().unwrap_or_else(|p| p.into_inner());
+            if self.superseded_by().is_none() {
+                return;
             }
+            slot.take()
+        };
+        drop(released);
+        let held = std::mem::take(&mut *self.pending());
+        if !held.is_empty() {
+            tracing::debug!(port = %self.port, owner = %self.task, requests = held.len(),
+                "replaced: the requests held here go to the replacement");
         }
     }
 
@@ -1195,7 +1197,7 @@ impl<Q, R> Drop for PortOwner<Q, R> {
 }
 
 /// Requests `select` takes off the topic ahead of `receive`, at most.
-const PENDING_LIMIT: usize = 1024;
+pub(crate) const PENDING_LIMIT: usize = 1024;
 /// Withdrawals of requests already received that an owner remembers, at most.
 const WITHDRAWALS_KEPT: usize = 1024;
 /// Users whose reply streams an owner keeps at most (the least recently used goes first).

@@ -549,11 +549,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             // The owner is known once its message came, but it may not have heard (admitted)
             // this user yet: a reply sent now would be dropped as from a stranger. Refused,
             // the message is not answered; one from an owner replaced meanwhile is skipped.
-            if self
-                .answerable(&broadcast, operation, start, deadline)
-                .await?
-            {
-                break broadcast;
+            // Taken off the topic, the message is answered or lost: whatever the caller's
+            // timeout, the owner gets a moment to admit this user.
+            let grace = deadline.map(|at| at.max(Instant::now() + super::owner::REPLY_MATCH));
+            match self.answerable(&broadcast, operation, start, grace).await {
+                Ok(true) => break broadcast,
+                Ok(false) => {}
+                Err(err) => {
+                    tracing::warn!(port = %self.port, user = %self.task, error = %err,
+                        "a message from the owner could not be answered: dropped");
+                    return Err(err);
+                }
             }
             tracing::debug!(port = %self.port, user = %self.task,
                 "a message from a replaced owner: not answered");

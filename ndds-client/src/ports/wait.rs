@@ -87,10 +87,25 @@ pub(crate) fn block_on<F: Future>(future: F) -> F::Output {
     result
 }
 
+thread_local! {
+    /// Set by [`parked_only`]: waits must park in [`block_on`], never block on a condition
+    /// variable of their own (a module's thread must stay wakeable by its handlers' events).
+    static PARKED_ONLY: Cell<bool> = const { Cell::new(false) };
+}
+
 /// Whether the current poll runs inside [`block_on`] (so it may block on a condition
 /// variable of its own).
 pub(crate) fn blocking() -> bool {
-    PARK_UNTIL.with(Cell::get).is_some()
+    PARK_UNTIL.with(Cell::get).is_some() && !PARKED_ONLY.with(Cell::get)
+}
+
+/// Runs `f` with every wait inside it parking in [`block_on`] (woken by any waker), so that
+/// a race with another future (a module's events) stays a race.
+pub(crate) fn parked_only<T>(f: impl FnOnce() -> T) -> T {
+    let outer = PARKED_ONLY.with(|p| p.replace(true));
+    let out = f();
+    PARKED_ONLY.with(|p| p.set(outer));
+    out
 }
 
 /// The deadline `timeout` from `start`; `None` when it is too far to represent.
@@ -219,7 +234,9 @@ impl Timer {
 #[derive(Default)]
 pub(crate) struct Notify {
     generation: AtomicU64,
-    wakers: Mutex<Vec<Waker>>,
+    /// Wakers of the pending [`Changed`] futures, by registration; a future takes its own out
+    /// when it is dropped, so a waiter that gave up leaves nothing behind.
+    wakers: Mutex<(u64, Vec<(u64, Waker)>)>,
 }
 
 impl Notify {
@@ -231,31 +248,83 @@ impl Notify {
     /// Wakes every waiter.
     pub(crate) fn notify(&self) {
         self.generation.fetch_add(1, Ordering::SeqCst);
-        let wakers = std::mem::take(&mut *self.wakers.lock().unwrap_or_else(|p| p.into_inner()));
-        for waker in wakers {
+        let wakers = std::mem::take(&mut self.wakers.lock().unwrap_or_else(|p| p.into_inner()).1);
+        for (_, waker) in wakers {
             waker.wake();
         }
     }
 
     /// Ready once the generation is no longer `seen`.
-    pub(crate) fn changed(&self, seen: u64) -> impl Future<Output = ()> + '_ {
-        std::future::poll_fn(move |cx| {
-            if self.generation() != seen {
-                return Poll::Ready(());
-            }
+    pub(crate) fn changed(&self, seen: u64) -> Changed<'_> {
+        Changed {
+            notify: self,
+            seen,
+            registered: None,
+        }
+    }
+
+    /// Waiters registered now (for tests).
+    #[cfg(test)]
+    fn waiters(&self) -> usize {
+        self.wakers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .1
+            .len()
+    }
+}
+
+/// [`Notify::changed`]'s future.
+pub(crate) struct Changed<'a> {
+    notify: &'a Notify,
+    seen: u64,
+    registered: Option<u64>,
+}
+
+impl Future for Changed<'_> {
+    type Output = ();
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let notify = self.notify;
+        if notify.generation() != self.seen {
+            return Poll::Ready(());
+        }
+        {
+            let mut wakers = notify.wakers.lock().unwrap_or_else(|p| p.into_inner());
+            let (next, list) = &mut *wakers;
+            match self
+                .registered
+                .and_then(|id| list.iter_mut().find(|(i, _)| *i == id))
             {
-                let mut wakers = self.wakers.lock().unwrap_or_else(|p| p.into_inner());
-                if !wakers.iter().any(|w| w.will_wake(cx.waker())) {
-                    wakers.push(cx.waker().clone());
+                Some((_, waker)) => {
+                    if !waker.will_wake(cx.waker()) {
+                        *waker = cx.waker().clone();
+                    }
+                }
+                None => {
+                    *next += 1;
+                    let id = *next;
+                    list.push((id, cx.waker().clone()));
+                    drop(wakers);
+                    self.registered = Some(id);
                 }
             }
-            // A notify between the first look and the registration is seen here.
-            if self.generation() != seen {
-                Poll::Ready(())
-            } else {
-                Poll::Pending
-            }
-        })
+        }
+        // A notify between the first look and the registration is seen here.
+        if notify.generation() != self.seen {
+            Poll::Ready(())
+        } else {
+            Poll::Pending
+        }
+    }
+}
+
+impl Drop for Changed<'_> {
+    fn drop(&mut self) {
+        if let Some(id) = self.registered {
+            let mut wakers = self.notify.wakers.lock().unwrap_or_else(|p| p.into_inner());
+            wakers.1.retain(|(i, _)| *i != id);
+        }
     }
 }
 
@@ -405,5 +474,38 @@ mod tests {
         // Outside block_on, asking to spin does nothing.
         spin_until(Instant::now() + Duration::from_secs(60));
         assert_eq!(SPIN_UNTIL.with(Cell::get), None);
+    }
+
+    #[test]
+    fn a_waiter_that_gives_up_leaves_no_waker_behind() {
+        let notify = Notify::default();
+        for _ in 0..100 {
+            let seen = notify.generation();
+            let woke = block_on(timeout_at(
+                Some(Instant::now() + Duration::from_millis(1)),
+                notify.changed(seen),
+            ));
+            assert!(woke.is_none());
+        }
+        assert_eq!(notify.waiters(), 0);
+        // A pending waiter is there until it is woken or dropped.
+        let seen = notify.generation();
+        let mut waiting = Box::pin(notify.changed(seen));
+        let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+        assert!(
+            waiting
+                .as_mut()
+                .poll(&mut Context::from_waker(&waker))
+                .is_pending()
+        );
+        assert!(
+            waiting
+                .as_mut()
+                .poll(&mut Context::from_waker(&waker))
+                .is_pending()
+        );
+        assert_eq!(notify.waiters(), 1);
+        drop(waiting);
+        assert_eq!(notify.waiters(), 0);
     }
 }

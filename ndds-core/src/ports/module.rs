@@ -364,6 +364,37 @@ impl ModuleSpec {
                 }
             }
         }
+        // One response handler per port, and a port whose queries a handler answers is not
+        // also read by the body (both would take the same messages).
+        let mut answered = BTreeSet::new();
+        for handler in &self.responses {
+            let port = Self::handler_port(handler);
+            if !answered.insert(port) {
+                problems.push(LoadProblem::HandlerWithoutUsage {
+                    handler: handler.clone(),
+                    why: format!("port `{port}` has a response handler already (one per port)"),
+                });
+            }
+            if let Some((decl, owned)) = self.end(port) {
+                // Only where the handler answers at all (else its usage is the problem).
+                let read_too = if owned {
+                    decl.usages.is_empty()
+                        || (decl.usages.contains(&Usage::Receive)
+                            && decl.usages.contains(&Usage::Response))
+                } else {
+                    decl.usages.contains(&Usage::Receive) && decl.usages.contains(&Usage::Response)
+                };
+                if read_too {
+                    problems.push(LoadProblem::HandlerWithoutUsage {
+                        handler: handler.clone(),
+                        why: format!(
+                            "the body could take the same messages from port `{port}` (it declared {:?}): declare usage Response without Receive",
+                            decl.usages
+                        ),
+                    });
+                }
+            }
+        }
         for decl in &self.uses {
             let prefix = format!("{}.", decl.port);
             if decl.usages.contains(&Usage::Response)
@@ -585,6 +616,24 @@ mod tests {
                     .into(),
             }]
         );
+        // A port whose queries the handler answers and that the body also receives from.
+        m.uses[0].usages = vec![Usage::Receive, Usage::Response];
+        m.responses.push("SHARE_FEEDER1.OTHER".into());
+        let text: Vec<String> = m
+            .check(CHIP_IT_BODIES.into_iter().chain(["SHARE_FEEDER1.OTHER"]))
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(
+            text,
+            [
+                "handler `SHARE_FEEDER1.CRIT_SECTION`: the body could take the same messages from port `SHARE_FEEDER1` (it declared [Receive, Response]): declare usage Response without Receive",
+                "handler `SHARE_FEEDER1.OTHER`: port `SHARE_FEEDER1` has a response handler already (one per port)",
+                "handler `SHARE_FEEDER1.OTHER`: the body could take the same messages from port `SHARE_FEEDER1` (it declared [Receive, Response]): declare usage Response without Receive",
+            ]
+        );
+        m.responses.pop();
+        m.uses[0].usages = vec![Usage::Receive];
         m.tasks.push("FREEZE_CARD".into());
         assert_eq!(
             m.check(CHIP_IT_BODIES).first(),
