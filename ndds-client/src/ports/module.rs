@@ -1196,6 +1196,7 @@ impl ModuleContext {
         }
         result.map_err(ModuleError::Port)
     }
+
     /// `SEND`: on a port the module uses (usage `Send`), to the owner, waiting for its
     /// reply; on a port it owns (usage `Send`), to its user that receives (the first
     /// admitted), waiting for that user's answer — within the port's timeout.
@@ -1204,19 +1205,7 @@ impl ModuleContext {
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
         R: Serialize + DeserializeOwned + Send + Sync + 'static,
     {
-        if let Ok(owner) = self.port::<PortOwner<Q, R>>(port) {
-            let timeout = owner
-                .restrictions()
-                .timeout_ms
-                .map_or(Duration::MAX, Duration::from_millis);
-            let result = self.at_points(owner.send_any_future(value, timeout))?;
-            return self.on_timeout(port, result);
-        }
-        let used = self.port::<UsedPort<Q, R>>(port)?;
-        used.user.require(Usage::Send)?;
-        let timeout = used.timeout.unwrap_or(Duration::MAX);
-        let result = self.at_points(used.user.exchange(value, timeout))?;
-        self.on_timeout(port, result)
+        self.to_other_end(port, value, Usage::Send)
     }
 
     /// `QUERY` on a port: as a user, the owner's response handler answers; on a port the
@@ -1226,16 +1215,30 @@ impl ModuleContext {
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
         R: Serialize + DeserializeOwned + Send + Sync + 'static,
     {
+        self.to_other_end(port, value, Usage::Query)
+    }
+
+    /// `send` (`usage` Send) or `query` (Query) to the port's other end, as its owner or as
+    /// its user, at points, the port's timeout running the exception handler.
+    fn to_other_end<Q, R>(&self, port: &str, value: &Q, usage: Usage) -> Result<R, ModuleError>
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
         if let Ok(owner) = self.port::<PortOwner<Q, R>>(port) {
             let timeout = owner
                 .restrictions()
                 .timeout_ms
                 .map_or(Duration::MAX, Duration::from_millis);
-            let result = self.at_points(owner.query_future(value, timeout))?;
+            let result = if usage == Usage::Query {
+                self.at_points(owner.query_future(value, timeout))?
+            } else {
+                self.at_points(owner.send_any_future(value, timeout))?
+            };
             return self.on_timeout(port, result);
         }
         let used = self.port::<UsedPort<Q, R>>(port)?;
-        used.user.require(Usage::Query)?;
+        used.user.require(usage)?;
         let timeout = used.timeout.unwrap_or(Duration::MAX);
         let result = self.at_points(used.user.exchange(value, timeout))?;
         self.on_timeout(port, result)
