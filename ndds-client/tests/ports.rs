@@ -1382,3 +1382,75 @@ fn a_filter_of_the_owners_module_passes_answers_and_refuses_requests() {
     .unwrap();
     assert!(matches!(err, PortError::FilterCode { .. }), "{err}");
 }
+
+#[test]
+fn a_filter_at_the_users_end_answers_from_its_cache_passes_the_rest_and_refuses() {
+    use ndds_client::ports::{RequestFilter, Verdict};
+    use std::collections::HashMap;
+
+    /// Answers a position asked before from its cache; refuses joints above the limit its
+    /// module sets through FILTER; passes the rest to the owner.
+    struct Cache {
+        known: HashMap<u32, u32>,
+        limit: u32,
+    }
+    impl RequestFilter<u32, u32> for Cache {
+        type Message = (u32, u32); // (joint, position) learnt, or (u32::MAX, limit)
+        fn request(&mut self, _sender: &str, joint: u32) -> Verdict<u32, u32> {
+            if joint > self.limit {
+                return Verdict::Refuse(format!("joint {joint} is above {}", self.limit));
+            }
+            match self.known.get(&joint) {
+                Some(position) => Verdict::Answer(*position),
+                None => Verdict::Pass(joint),
+            }
+        }
+        fn message(&mut self, (joint, value): (u32, u32)) {
+            if joint == u32::MAX {
+                self.limit = value;
+            } else {
+                self.known.insert(joint, value);
+            }
+        }
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "user-filter");
+    let owner = PortOwner::<u32, u32>::declare(&p, "joints", "arm").unwrap();
+    let (user, filter) = PortUser::<u32, u32>::declare_filtered(
+        &p,
+        "joints",
+        "planner",
+        &[Usage::Send],
+        Cache {
+            known: HashMap::new(),
+            limit: 6,
+        },
+    )
+    .unwrap();
+    let served = std::sync::atomic::AtomicU32::new(0);
+    std::thread::scope(|s| {
+        let server = s.spawn(|| {
+            while let Ok((joint, reply)) = owner.receive(Duration::from_secs(2)) {
+                served.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                reply.reply(&(joint * 100)).unwrap();
+            }
+        });
+        // Passed to the owner; the module teaches the cache the answer.
+        assert_eq!(user.send(&3, WAIT).unwrap(), 300);
+        assert!(filter.send((3, 300)));
+        // Now answered at this end: the owner does not see it.
+        assert_eq!(user.send(&3, WAIT).unwrap(), 300);
+        // Refused at this end, naming the filter.
+        let err = user.send(&7, WAIT).unwrap_err();
+        assert!(
+            matches!(&err, PortError::Refused { restriction: "filter", detail, .. } if detail == "joint 7 is above 6"),
+            "{err}"
+        );
+        // The module raises the limit: passed again.
+        assert!(filter.send((u32::MAX, 10)));
+        assert_eq!(user.send(&7, WAIT).unwrap(), 700);
+        server.join().unwrap();
+    });
+    assert_eq!(served.load(std::sync::atomic::Ordering::Relaxed), 2);
+}

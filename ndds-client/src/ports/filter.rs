@@ -53,7 +53,9 @@ pub trait RequestFilter<Q, R>: Send + 'static {
 /// The predefined port `FILTER`: how the owner's module talks to the filter of its port.
 /// Sending never blocks; the filter takes the messages in order, before the next request.
 pub struct FilterPort<M> {
-    pub(crate) shared: Arc<OwnerShared>,
+    /// The owner whose filter thread to wake (`None` at a user's end: its filter runs on the
+    /// sender's thread and takes its messages before each request).
+    pub(crate) shared: Option<Arc<OwnerShared>>,
     pub(crate) inbox: Arc<Mutex<VecDeque<M>>>,
 }
 
@@ -70,7 +72,9 @@ impl<M> FilterPort<M> {
         }
         inbox.push_back(message);
         drop(inbox);
-        self.shared.changed.notify();
+        if let Some(shared) = &self.shared {
+            shared.changed.notify();
+        }
         true
     }
 }
@@ -170,6 +174,46 @@ where
             tracing::warn!(port = %shared.port, error = %err, "the filter could not answer a sender");
         }
     }
+}
+
+/// A filter at a user's end, as the user calls it: messages from its module first, then the
+/// verdict on `request` from `sender`. A panic refuses the request.
+pub(crate) type UserFilter<Q, R> = Box<dyn FnMut(&str, &Q) -> Verdict<Q, R> + Send>;
+
+/// `filter` at the user's end of `port`, with the inbox of its FILTER port.
+pub(crate) fn at_user<Q, R, F>(
+    port: &str,
+    mut filter: F,
+) -> (UserFilter<Q, R>, FilterPort<F::Message>)
+where
+    Q: Clone + 'static,
+    R: 'static,
+    F: RequestFilter<Q, R>,
+{
+    let inbox = Arc::new(Mutex::new(VecDeque::new()));
+    let taken = Arc::clone(&inbox);
+    let port = port.to_owned();
+    let decide: UserFilter<Q, R> = Box::new(move |sender: &str, request: &Q| {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            loop {
+                let next = taken.lock().unwrap_or_else(|p| p.into_inner()).pop_front();
+                let Some(message) = next else { break };
+                filter.message(message);
+            }
+            filter.request(sender, request.clone())
+        }))
+        .unwrap_or_else(|_| {
+            tracing::error!(port = %port, sender, "the user's filter panicked: request refused");
+            Verdict::Refuse("the user's filter failed (it panicked)".to_owned())
+        })
+    });
+    (
+        decide,
+        FilterPort {
+            shared: None,
+            inbox,
+        },
+    )
 }
 
 /// Gives the filter the messages its module sent, in order.

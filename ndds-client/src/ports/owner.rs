@@ -439,7 +439,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             .map_err(spawn_error(port, &name))?;
         owner.filter = Some(thread);
         let port = super::FilterPort {
-            shared: Arc::clone(&owner.shared),
+            shared: Some(Arc::clone(&owner.shared)),
             inbox,
         };
         Ok((owner, port))

@@ -45,6 +45,8 @@ pub struct PortUser<Q, R> {
     /// other senders waiting for an owner look again (the event is gone from the queue).
     owners_noted: Notify,
     formats: (u64, u64),
+    /// A filter at this user's end, if it was declared with one.
+    filter: Option<Mutex<super::filter::UserFilter<Q, R>>>,
     _types: PhantomData<fn(Q) -> R>,
 }
 
@@ -140,8 +142,34 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 TypeDescription::of::<Q>().fingerprint(),
                 TypeDescription::of::<R>().fingerprint(),
             ),
+            filter: None,
             _types: PhantomData,
         })
+    }
+
+    /// Declares `task` a user of `port` with these usages and a filter of its own spliced in
+    /// at its end (Shin's FILTER at the user's end): every `send` and `query` goes through
+    /// `filter` first, which passes it on to the owner (as it came or changed), answers it
+    /// itself (the owner never sees it), or refuses it (the caller gets
+    /// [`PortError::Refused`] with restriction `filter`). The filter runs on the sending
+    /// thread, one request at a time; its module talks to it through the returned
+    /// [`FilterPort`](super::FilterPort), whose messages it takes before the next request.
+    pub fn declare_filtered<F>(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        usages: &[Usage],
+        filter: F,
+    ) -> Result<(Self, super::FilterPort<F::Message>), PortError>
+    where
+        Q: Clone + 'static,
+        R: 'static,
+        F: super::RequestFilter<Q, R>,
+    {
+        let mut user = Self::declare_with(participant, port, task, usages)?;
+        let (decide, filter_port) = super::filter::at_user(port, filter);
+        user.filter = Some(Mutex::new(decide));
+        Ok((user, filter_port))
     }
 
     /// The port's name.
@@ -324,6 +352,30 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
 
     /// One request and its reply: `send` and `query` as a future.
     pub(crate) async fn exchange(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
+        // A filter at this end decides first (under its own lock, no port's).
+        let passed;
+        let value = match &self.filter {
+            None => value,
+            Some(filter) => {
+                let verdict = (filter.lock().unwrap_or_else(|p| p.into_inner()))(&self.task, value);
+                match verdict {
+                    super::Verdict::Pass(changed) => {
+                        passed = changed;
+                        &passed
+                    }
+                    super::Verdict::Answer(answer) => return Ok(answer),
+                    super::Verdict::Refuse(reason) => {
+                        return Err(PortError::Refused {
+                            port: self.port.clone(),
+                            owner: format!("{} (its own filter)", self.task),
+                            user: self.task.clone(),
+                            restriction: "filter",
+                            detail: reason,
+                        });
+                    }
+                }
+            }
+        };
         let start = Instant::now();
         let mut deadline = wait::deadline(start, timeout);
         let timed_out = |owner: Option<String>| PortError::Timeout {
