@@ -1454,3 +1454,39 @@ fn a_filter_at_the_users_end_answers_from_its_cache_passes_the_rest_and_refuses(
     });
     assert_eq!(served.load(std::sync::atomic::Ordering::Relaxed), 2);
 }
+
+#[test]
+fn an_async_send_dropped_before_its_reply_withdraws_its_request() {
+    use ndds_client::ports::Selectable;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "withdraw-async");
+    let owner = PortOwner::<u32, u32>::declare(&p, "slow.async", "server").unwrap();
+    let user = Arc::new(PortUser::<u32, u32>::declare(&p, "slow.async", "client").unwrap());
+    // Warm up: the user knows the owner, so the next request goes out at once.
+    let warm = {
+        let user = Arc::clone(&user);
+        std::thread::spawn(move || user.send(&0, WAIT))
+    };
+    let (value, reply) = owner.receive(WAIT).unwrap();
+    reply.reply(&value).unwrap();
+    assert_eq!(warm.join().unwrap().unwrap(), 0);
+    // The caller's executor gives up on the send (a `select!` elsewhere won): the future is
+    // dropped with its request out and unanswered.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let gave_up = runtime.block_on(async {
+        tokio::time::timeout(Duration::from_millis(300), user.send_async(7, WAIT)).await
+    });
+    assert!(gave_up.is_err(), "the owner never replied");
+    assert!(common::eventually(WAIT, || {
+        owner.waiting();
+        owner.withdrawn() == 1
+    }));
+    assert!(matches!(
+        owner.receive(Duration::from_millis(200)),
+        Err(PortError::Timeout { .. })
+    ));
+}

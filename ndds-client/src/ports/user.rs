@@ -80,6 +80,25 @@ impl Drop for Awaiting<'_> {
     }
 }
 
+/// A request written and not answered: withdrawn when its sender stops waiting — a
+/// timeout, and also an async `send` or `query` dropped before its reply.
+struct Outstanding<'a, Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> {
+    user: &'a PortUser<Q, R>,
+    id: u64,
+    owner: u64,
+    answered: bool,
+}
+
+impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> Drop
+    for Outstanding<'_, Q, R>
+{
+    fn drop(&mut self) {
+        if !self.answered {
+            self.user.withdraw(self.id, self.owner);
+        }
+    }
+}
+
 impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<Q, R> {
     /// Declares `task` a user of `port` that sends (usage [`Usage::Send`]).
     pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
@@ -405,6 +424,12 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             id,
         };
         self.write_request(id, incarnation, &payload)?;
+        let mut outstanding = Outstanding {
+            user: self,
+            id,
+            owner: incarnation,
+            answered: false,
+        };
         // A tightly-coupled port's reply is busy-waited for at first.
         let class = self
             .demux()
@@ -427,16 +452,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             )
             .await
             {
-                None => {
-                    self.withdraw(id, incarnation);
-                    return Err(timed_out(Some(owner)));
+                None => return Err(timed_out(Some(owner))), // `outstanding` withdraws it
+                Some(Either::Left(reply)) => {
+                    outstanding.answered = true;
+                    break reply;
                 }
-                Some(Either::Left(reply)) => break reply,
                 Some(Either::Right((task, replacement))) => {
                     tracing::info!(port = %self.port, user = %self.task, from = %owner, to = %task,
                         "the port's owner was replaced while a request waited: sent again to the replacement");
                     self.withdraw(id, incarnation);
                     (owner, incarnation) = (task, replacement);
+                    outstanding.owner = incarnation;
                     self.demux().awaiting.insert(id, incarnation);
                     self.write_request(id, incarnation, &payload)?;
                 }
@@ -493,9 +519,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     }
 
     /// Tells the owner that nobody waits for request `id` any more: it drops the request if
-    /// it has not received it yet, so a send that timed out is not acted on later. Best
-    /// effort: the owner may have received the request already (then its reply is dropped
-    /// here), and a withdrawal that cannot be written is only logged.
+    /// it has not received it yet, so a send that timed out (or an async send dropped) is
+    /// not acted on later. Best effort: the owner may have received the request already
+    /// (then its reply is dropped here), and a withdrawal that cannot be written is only
+    /// logged. The write may wait for the requests' reliable window, at most the producer's
+    /// write timeout (1 s by default).
     fn withdraw(&self, id: u64, owner: u64) {
         let withdrawal = Request {
             id,
