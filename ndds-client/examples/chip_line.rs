@@ -164,6 +164,11 @@ impl RequestFilter<(i32, f64), (i32, f64)> for BoundedBuffer {
     fn message(&mut self, gate: mpsc::SyncSender<(i32, f64)>) {
         let _ = gate.send(self.buffer.pop_front().unwrap_or((-1, -1.0)));
     }
+
+    /// `USAGE=RECEIVE`: it receives the users' messages (GATE asks it through FILTER).
+    fn usages(&self) -> Vec<Usage> {
+        vec![Usage::Receive]
+    }
 }
 
 /// GATE: releases a pallet every CYCLE_TIME through RELEASE, and adjusts CYCLE_TIME to the

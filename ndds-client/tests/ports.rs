@@ -1490,3 +1490,44 @@ fn an_async_send_dropped_before_its_reply_withdraws_its_request() {
         Err(PortError::Timeout { .. })
     ));
 }
+
+#[test]
+fn users_are_checked_against_the_usages_of_the_owners_filter() {
+    use ndds_client::ports::{RequestFilter, Verdict};
+
+    /// Answers queries itself (`USAGE=RESPONSE`): the port's users must query.
+    struct Clock;
+    impl RequestFilter<u32, u32> for Clock {
+        type Message = ();
+        fn request(&mut self, _sender: &str, n: u32) -> Verdict<u32, u32> {
+            Verdict::Answer(n + 1)
+        }
+        fn usages(&self) -> Vec<Usage> {
+            vec![Usage::Response]
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "filter-usages");
+    let (owner, _filter) = PortOwner::<u32, u32>::declare_filtered(
+        &p,
+        "tick",
+        "clock",
+        Restrictions {
+            usages: vec![Usage::Receive],
+            ..Restrictions::default()
+        },
+        Clock,
+    )
+    .unwrap();
+    assert_eq!(owner.restrictions().usages, [Usage::Response]);
+    let querier =
+        PortUser::<u32, u32>::declare_with(&p, "tick", "reader", &[Usage::Query]).unwrap();
+    assert_eq!(querier.query(&41, WAIT).unwrap(), 42);
+    let sender = PortUser::<u32, u32>::declare(&p, "tick", "writer").unwrap();
+    let err = sender.send(&1, WAIT).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("Send complements none of the owner's usages [Response]"),
+        "{err}"
+    );
+}

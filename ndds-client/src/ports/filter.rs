@@ -48,6 +48,15 @@ pub trait RequestFilter<Q, R>: Send + 'static {
     fn message(&mut self, message: Self::Message) {
         let _ = message;
     }
+
+    /// The filter's own usages (empty, the default: whatever the port declares). At the
+    /// owner's end they are what users must complement, since the filter is what takes their
+    /// messages (the paper's BOUNDED_BUFFER declares `USAGE=RECEIVE` while GATE, its owner,
+    /// declares `USAGE=SEND` towards it): they replace the restrictions' `usages`, users
+    /// whose usages do not complement them are refused at match time.
+    fn usages(&self) -> Vec<super::Usage> {
+        Vec::new()
+    }
 }
 
 /// The predefined port `FILTER`: how the owner's module talks to the filter of its port.

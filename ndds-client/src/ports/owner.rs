@@ -429,6 +429,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         F: super::RequestFilter<Q, R>,
     {
         restrictions.filter = Some(Filter::Task);
+        // Users deal with the filter: theirs are checked against its usages.
+        let usages = filter.usages();
+        if !usages.is_empty() {
+            restrictions.usages = usages;
+        }
         let mut owner = Self::declare_claiming(participant, port, task, restrictions, 0)?;
         let inbox = Arc::new(Mutex::new(VecDeque::new()));
         let (shared, taken) = (Arc::clone(&owner.shared), Arc::clone(&inbox));
