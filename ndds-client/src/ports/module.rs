@@ -632,6 +632,29 @@ fn spawn_listener(
         })
 }
 
+/// A listener's lasting failure (a replaced owner, a refusal), logged when it begins or
+/// changes and when it ends — not at every retry.
+#[derive(Default)]
+struct Failing(Option<String>);
+
+impl Failing {
+    fn report(&mut self, shared: &Shared, handler: &str, err: &PortError) {
+        let text = err.to_string();
+        if self.0.as_ref() != Some(&text) {
+            tracing::warn!(module = %shared.name, handler, error = %text,
+                "the response handler's port fails: its queries wait until it is resolved");
+            self.0 = Some(text);
+        }
+    }
+
+    fn over<T>(&mut self, shared: &Shared, handler: &str, taken: T) -> T {
+        if self.0.take().is_some() {
+            tracing::info!(module = %shared.name, handler, "the response handler's port works again");
+        }
+        taken
+    }
+}
+
 /// Posts a query for `handler` and waits for the module thread's answer (`None` when the
 /// module stops first).
 fn ask_module(shared: &Shared, handler: &str, payload: Vec<u8>) -> Option<Result<Vec<u8>, String>> {
@@ -654,12 +677,13 @@ where
     Q: Serialize + DeserializeOwned,
     R: Serialize + DeserializeOwned,
 {
+    let mut failing = Failing::default();
     while !shared.stop.load(Ordering::Acquire) {
         let (query, reply): (Q, ReplyHandle<R>) = match owner.receive(LISTEN_SLICE) {
-            Ok(taken) => taken,
+            Ok(taken) => failing.over(shared, handler, taken),
             Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
             Err(err) => {
-                tracing::warn!(module = %shared.name, handler, error = %err, "response handler's port");
+                failing.report(shared, handler, &err);
                 std::thread::sleep(LISTEN_SLICE);
                 continue;
             }
@@ -692,12 +716,13 @@ where
     Q: Serialize + DeserializeOwned,
     R: Serialize + DeserializeOwned,
 {
+    let mut failing = Failing::default();
     while !shared.stop.load(Ordering::Acquire) {
         let (message, query) = match wait::block_on(user.take_to_me(LISTEN_SLICE)) {
-            Ok(taken) => taken,
+            Ok(taken) => failing.over(shared, handler, taken),
             Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
             Err(err) => {
-                tracing::warn!(module = %shared.name, handler, error = %err, "response handler's port");
+                failing.report(shared, handler, &err);
                 std::thread::sleep(LISTEN_SLICE);
                 continue;
             }
