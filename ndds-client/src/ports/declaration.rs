@@ -190,7 +190,12 @@ fn on_owner(shared: &OwnerShared, mine: &OwnerInfo, event: Event<OwnerInfo>) {
                 format!("{} (pid {})", sample.value.task, sample.value.pid),
                 sample.value.claim,
             );
-            if claim > mine.claim {
+            // Said once per other owner (its declaration is rewritten whenever its users or
+            // queue change), and again only if its claim changes.
+            let known = presence.others.get(&sample.info.writer).map(|(_, c)| *c);
+            if known == Some(claim) {
+                // Nothing new about it.
+            } else if claim > mine.claim {
                 tracing::warn!(port = %shared.port, owner = %shared.task, by = %other,
                     "this owner was replaced (the port was taken over)");
             } else if claim == mine.claim && presence.others.is_empty() {
