@@ -677,37 +677,12 @@ where
     Q: Serialize + DeserializeOwned,
     R: Serialize + DeserializeOwned,
 {
-    let mut failing = Failing::default();
-    while !shared.stop.load(Ordering::Acquire) {
-        let (query, reply): (Q, ReplyHandle<R>) = match owner.receive(LISTEN_SLICE) {
-            Ok(taken) => failing.over(shared, handler, taken),
-            Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
-            Err(err) => {
-                failing.report(shared, handler, &err);
-                std::thread::sleep(LISTEN_SLICE);
-                continue;
-            }
-        };
-        let Ok(payload) = postcard::to_stdvec(&query) else {
-            continue;
-        };
-        match ask_module(shared, handler, payload) {
-            Some(Ok(answer)) => match postcard::from_bytes::<R>(&answer) {
-                Ok(answer) => {
-                    if let Err(err) = reply.reply(&answer) {
-                        tracing::warn!(module = %shared.name, handler, error = %err, "answer not sent");
-                    }
-                }
-                Err(err) => {
-                    tracing::warn!(module = %shared.name, handler, error = %err, "answer does not decode")
-                }
-            },
-            Some(Err(err)) => {
-                tracing::warn!(module = %shared.name, handler, error = %err, "handler failed")
-            }
-            None => return,
-        }
-    }
+    listen(
+        shared,
+        handler,
+        || owner.receive(LISTEN_SLICE),
+        |reply: ReplyHandle<R>, answer| reply.reply_encoded(answer),
+    );
 }
 
 /// The listener of a used port with usage `Response`: the owner's queries.
@@ -716,9 +691,27 @@ where
     Q: Serialize + DeserializeOwned,
     R: Serialize + DeserializeOwned,
 {
+    listen(
+        shared,
+        handler,
+        || wait::block_on(user.take_to_me(LISTEN_SLICE)).map(|(message, query)| (query, message)),
+        |message, answer| {
+            wait::block_on(user.answer_message(&message, answer, Duration::from_secs(2)))
+        },
+    );
+}
+
+/// A listener's loop until the module stops: `take` the next query (with what answers it),
+/// have the module thread run `handler` on it, and `answer` with the encoded reply.
+fn listen<Q: Serialize, T>(
+    shared: &Shared,
+    handler: &str,
+    mut take: impl FnMut() -> Result<(Q, T), PortError>,
+    mut answer: impl FnMut(T, Vec<u8>) -> Result<(), PortError>,
+) {
     let mut failing = Failing::default();
     while !shared.stop.load(Ordering::Acquire) {
-        let (message, query) = match wait::block_on(user.take_to_me(LISTEN_SLICE)) {
+        let (query, to) = match take() {
             Ok(taken) => failing.over(shared, handler, taken),
             Err(PortError::Timeout { .. } | PortError::Codec { .. }) => continue,
             Err(err) => {
@@ -731,10 +724,8 @@ where
             continue;
         };
         match ask_module(shared, handler, payload) {
-            Some(Ok(answer)) => {
-                if let Err(err) =
-                    wait::block_on(user.answer_message(&message, answer, Duration::from_secs(2)))
-                {
+            Some(Ok(encoded)) => {
+                if let Err(err) = answer(to, encoded) {
                     tracing::warn!(module = %shared.name, handler, error = %err, "answer not sent");
                 }
             }

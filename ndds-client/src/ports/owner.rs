@@ -1249,6 +1249,15 @@ impl<R: Serialize> ReplyHandle<R> {
             what: "encoding a reply",
             reason: e.to_string(),
         })?;
+        self.reply_encoded(payload)
+    }
+
+    /// Replies with `payload`, a reply encoded already (a module's response handler's).
+    pub(crate) fn reply_encoded(self, payload: Vec<u8>) -> Result<(), PortError> {
+        if self.answered {
+            return Ok(());
+        }
+        self.shared.check_superseded()?;
         send_reply(&self.shared, &self.user, &self.task, self.id, payload)
     }
 }
