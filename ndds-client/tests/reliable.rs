@@ -151,6 +151,19 @@ fn a_producer_that_drops_the_oldest_never_waits_and_reports_samples_lost() {
         producer.write(&i).unwrap();
     }
     assert!(started.elapsed() < Duration::from_secs(5), "writes waited");
+    // The consumer has fallen behind once its stream has dropped samples it had no room for
+    // (the producer's history, the newest 8, cannot repair them now). Without this wait, a
+    // consumer whose receive thread was held up while the writes went out reads the queued
+    // datagrams only while the loop below takes samples, keeps up, and loses nothing.
+    let deadline = Instant::now() + WAIT;
+    while consumer.stats().reliable.out_of_window == 0 {
+        assert!(
+            Instant::now() < deadline,
+            "no loss seen: {:?}",
+            consumer.stats()
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
     // Every seq is accounted for exactly once, in order: delivered, or inside a lost run.
     let mut next = 1u64;
     let mut lost_runs = 0;
