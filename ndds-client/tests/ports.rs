@@ -1531,3 +1531,88 @@ fn users_are_checked_against_the_usages_of_the_owners_filter() {
         "{err}"
     );
 }
+
+#[test]
+fn the_bounded_buffer_is_a_library_filter_any_owner_can_splice_in() {
+    use ndds_client::ports::{BoundedBuffer, Filter};
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "library-buffer");
+    // Written with the public filter API, so it also serves a port whose replies are not ().
+    let (owner, _filter) = PortOwner::<u32, u32>::declare_filtered(
+        &p,
+        "belt",
+        "gate",
+        Restrictions::default(),
+        BoundedBuffer::answering(2, || 0),
+    )
+    .unwrap();
+    // Users see the restriction it declares, and deal with its usages.
+    assert_eq!(
+        owner.restrictions().filter,
+        Some(Filter::BoundedBuffer { capacity: 2 })
+    );
+    assert_eq!(owner.restrictions().usages, [Usage::Receive]);
+    let user = PortUser::<u32, u32>::declare_with(&p, "belt", "loader", &[Usage::Send]).unwrap();
+    // Two sends are answered by the buffer at once; the owner has received nothing.
+    assert_eq!(user.send(&1, WAIT).unwrap(), 0);
+    assert_eq!(user.send(&2, WAIT).unwrap(), 0);
+    // The third waits for room, times out and is withdrawn before the buffer takes it.
+    let err = user.send(&3, Duration::from_millis(300)).unwrap_err();
+    assert!(matches!(err, PortError::Timeout { .. }), "{err}");
+    assert!(common::eventually(WAIT, || owner.withdrawn() == 1));
+    // The owner's reply to a request the buffer answered is not sent (nobody waits for it).
+    let (first, reply) = owner.receive(WAIT).unwrap();
+    assert_eq!(first, 1);
+    reply.reply(&99).unwrap();
+    // Room again: the next send is answered by the buffer, not by the owner.
+    assert_eq!(user.send(&4, WAIT).unwrap(), 0);
+    let rest: Vec<u32> = (0..2).map(|_| owner.receive(WAIT).unwrap().0).collect();
+    assert_eq!(rest, [2, 4]);
+    // A user that asks for an answer from the owner (a query) is refused by the buffer's usages.
+    let asker = PortUser::<u32, u32>::declare_with(&p, "belt", "asker", &[Usage::Query]).unwrap();
+    let err = asker.query(&5, Duration::from_secs(2)).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            PortError::Refused {
+                restriction: "usage",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_users_filter_that_accepts_sends_on_without_waiting_for_the_owner() {
+    use ndds_client::ports::{RequestFilter, Verdict};
+
+    /// Log-and-go: every request goes to the owner, and the sender goes on at once.
+    struct Forward;
+    impl RequestFilter<u32, u32> for Forward {
+        type Message = ();
+        fn request(&mut self, _sender: &str, request: u32) -> Verdict<u32, u32> {
+            Verdict::Accept(request + 1000, 0)
+        }
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "user-accept");
+    let owner = PortOwner::<u32, u32>::declare(&p, "log", "logger").unwrap();
+    let (user, _filter) =
+        PortUser::<u32, u32>::declare_filtered(&p, "log", "robot", &[Usage::Send], Forward)
+            .unwrap();
+    // Nobody receives yet: the sends return at once all the same.
+    for n in 1..=3 {
+        assert_eq!(user.send(&n, WAIT).unwrap(), 0);
+    }
+    let got: Vec<u32> = (0..3)
+        .map(|_| {
+            let (n, reply) = owner.receive(WAIT).unwrap();
+            reply.reply(&n).unwrap(); // reaches nobody, harmlessly
+            n
+        })
+        .collect();
+    assert_eq!(got, [1001, 1002, 1003]);
+}

@@ -19,8 +19,9 @@ use std::sync::{Arc, Mutex};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
-use super::owner::{OwnerShared, send_refusal, send_reply};
+use super::owner::{OwnerShared, PENDING_LIMIT, send_refusal, send_reply};
 use super::wait::{self, Either};
+use super::wire::Request;
 
 /// What a filter does with one request.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,6 +30,12 @@ pub enum Verdict<Q, R> {
     Pass(Q),
     /// Answer the sender now: the owner never sees the request.
     Answer(R),
+    /// Pass it on to the owner (with this message) *and* answer the sender now, so that it
+    /// goes on without waiting for the owner: the owner's own reply to it is not sent. This
+    /// is how a buffer decouples its senders from the owner (see [`BoundedBuffer`]). At a
+    /// user's end the request goes out and the sender gets the answer without waiting for
+    /// the owner's reply.
+    Accept(Q, R),
     /// Refuse it: the sender's `send` or `query` fails with [`PortError::Refused`]
     /// (restriction `filter`) carrying this reason.
     ///
@@ -56,6 +63,99 @@ pub trait RequestFilter<Q, R>: Send + 'static {
     /// whose usages do not complement them are refused at match time.
     fn usages(&self) -> Vec<super::Usage> {
         Vec::new()
+    }
+
+    /// Whether the filter decides the next request now; `queued` is how many requests it
+    /// passed on that the owner has not received yet (default: always). While it says no,
+    /// requests wait at the filter, in order (read off the port, so that a sender that stops
+    /// waiting withdraws its request before it is decided), and their senders wait for
+    /// their answers; it is asked again each time the owner receives a request, a message
+    /// comes through `FILTER` or a request arrives. Asked only at the owner's end (a user's
+    /// filter decides on its sender's thread, which has nothing to wait for).
+    fn room(&mut self, queued: usize) -> bool {
+        let _ = queued;
+        true
+    }
+
+    /// The restriction the port declares for this filter, which `ndds ports` shows and users
+    /// see (default [`Filter::Task`](super::Filter::Task), a filter of the owner's own).
+    fn declared(&self) -> super::Filter {
+        super::Filter::Task
+    }
+}
+
+/// The bounded buffer of Shin's paper, written as an ordinary [`RequestFilter`]: it takes up
+/// to `capacity` requests ahead of the owner and answers each sender at once (with
+/// `answer()`, `()` for [`BoundedBuffer::new`]), so a `send` returns as soon as the buffer has
+/// room; when `capacity` requests wait for the owner, senders wait for room (and time out as
+/// their ports say). `Restrictions { filter: Some(Filter::BoundedBuffer { capacity }) }` on
+/// [`PortOwner::declare`](super::PortOwner::declare) splices in this filter.
+pub struct BoundedBuffer<R = ()> {
+    capacity: usize,
+    answer: Box<dyn Fn() -> Option<R> + Send>,
+}
+
+impl BoundedBuffer<()> {
+    /// A buffer of `capacity` requests (at least 1) answering `()`.
+    pub fn new(capacity: usize) -> Self {
+        Self::answering(capacity, || ())
+    }
+}
+
+impl<R: 'static> BoundedBuffer<R> {
+    /// A buffer of `capacity` requests (at least 1) that answers each sender with
+    /// `answer()`.
+    pub fn answering(capacity: usize, answer: impl Fn() -> R + Send + 'static) -> Self {
+        BoundedBuffer {
+            capacity: capacity.max(1),
+            answer: Box::new(move || Some(answer())),
+        }
+    }
+
+    /// For a reply type whose encoding is empty (`()`-shaped, checked by its type
+    /// description): each answer is that empty encoding decoded.
+    pub(crate) fn unit_shaped(capacity: usize) -> Self
+    where
+        R: DeserializeOwned,
+    {
+        BoundedBuffer {
+            capacity: capacity.max(1),
+            answer: Box::new(|| postcard::from_bytes(&[]).ok()),
+        }
+    }
+}
+
+impl<R> std::fmt::Debug for BoundedBuffer<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BoundedBuffer")
+            .field("capacity", &self.capacity)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<Q, R: 'static> RequestFilter<Q, R> for BoundedBuffer<R> {
+    type Message = ();
+
+    fn request(&mut self, _sender: &str, request: Q) -> Verdict<Q, R> {
+        match (self.answer)() {
+            Some(answer) => Verdict::Accept(request, answer),
+            None => Verdict::Refuse("the buffer cannot make its answer".to_owned()),
+        }
+    }
+
+    /// It receives the users' messages (the paper's BOUNDED_BUFFER: `USAGE=RECEIVE`).
+    fn usages(&self) -> Vec<super::Usage> {
+        vec![super::Usage::Receive]
+    }
+
+    fn room(&mut self, queued: usize) -> bool {
+        queued < self.capacity
+    }
+
+    fn declared(&self) -> super::Filter {
+        super::Filter::BoundedBuffer {
+            capacity: u32::try_from(self.capacity).unwrap_or(u32::MAX),
+        }
     }
 }
 
@@ -96,23 +196,39 @@ where
     F: RequestFilter<Q, R>,
 {
     let _types = PhantomData::<fn(Q) -> R>;
+    // Read off the port, not decided yet (the filter had no room for them).
+    let mut waiting: VecDeque<Request> = VecDeque::new();
     loop {
-        // The generation first: a stop after it wakes the wait below.
+        // The generation first: a stop or a change after it wakes the waits below.
         let seen = shared.changed.generation();
         if shared.stop.load(Ordering::Acquire) {
             return;
         }
         take_messages(shared, &mut filter, inbox);
         let Some(requests) = shared.requests() else {
-            // Replaced: nothing comes here any more (until the replacement goes).
+            // Replaced: nothing comes here any more (until the replacement goes), and the
+            // senders of what waits here send it again to the replacement.
+            waiting.clear();
             wait::block_on(shared.changed.changed(seen));
             continue;
         };
+        while !waiting.is_empty() && has_room(shared, &mut filter) {
+            if let Some(request) = waiting.pop_front() {
+                // What the module sent before this request is decided is taken first.
+                take_messages(shared, &mut filter, inbox);
+                decide(shared, &mut filter, request);
+            }
+        }
+        if waiting.len() >= PENDING_LIMIT {
+            // Full: the rest waits on the port until the owner takes something.
+            wait::block_on(shared.changed.changed(seen));
+            continue;
+        }
         let arrived = wait::block_on(wait::race(
             wait::next_sample(&requests),
             shared.changed.changed(seen),
         ));
-        let mut request = match arrived {
+        let request = match arrived {
             Either::Left(Some(sample)) => sample.value,
             Either::Left(None) => {
                 wait::block_on(shared.changed.changed(seen));
@@ -124,64 +240,104 @@ where
             continue;
         }
         if request.withdraw {
-            // It may have been passed on: the owner's queue drops it, or remembers it.
-            shared.absorb(&mut shared.pending(), request);
-            shared.changed.notify();
+            // Not decided yet: dropped here. Passed on: the owner's queue drops it, or
+            // remembers it if the owner has it already.
+            if !shared.drop_withdrawn(&mut waiting, &request) {
+                shared.absorb(&mut shared.pending(), request);
+                shared.changed.notify();
+            }
             continue;
         }
         if !shared.admitted(&request.user) {
             continue; // refused users get no answer: their own side reports the refusal
         }
-        let value = match postcard::from_bytes::<Q>(&request.payload) {
-            Ok(value) => value,
-            Err(err) => {
-                tracing::debug!(port = %shared.port, sender = %request.task, error = %err,
-                    "a request the filter cannot decode: dropped");
-                continue;
-            }
-        };
-        // What the module sent before this request came is taken first.
-        take_messages(shared, &mut filter, inbox);
-        let verdict = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            filter.request(&request.task, value)
-        }))
+        waiting.push_back(request);
+    }
+}
+
+/// Whether `filter` takes a request now (a panic says no, and is logged).
+fn has_room<Q, R, F: RequestFilter<Q, R>>(shared: &OwnerShared, filter: &mut F) -> bool {
+    let queued = shared.queue_len();
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| filter.room(queued)))
         .unwrap_or_else(|_| {
-            tracing::error!(port = %shared.port, sender = %request.task,
-                "the port's filter panicked deciding a request: refused");
-            Verdict::Refuse("the port's filter failed (it panicked)".to_owned())
-        });
-        let answered = match verdict {
-            Verdict::Pass(_) if shared.queue_len() >= super::owner::PENDING_LIMIT => {
-                send_refusal(shared, &request, "the owner's queue is full".to_owned())
-            }
-            Verdict::Pass(value) => match postcard::to_stdvec(&value) {
-                Ok(payload) => {
-                    request.payload = payload;
-                    shared.pending().push_back(request);
-                    shared.changed.notify();
-                    Ok(())
-                }
-                Err(err) => send_refusal(
-                    shared,
-                    &request,
-                    format!("the filter's message does not encode: {err}"),
-                ),
-            },
-            Verdict::Answer(reply) => match postcard::to_stdvec(&reply) {
-                Ok(payload) => {
-                    send_reply(shared, &request.user, &request.task, request.id, payload)
-                }
-                Err(err) => send_refusal(
-                    shared,
-                    &request,
-                    format!("the filter's answer does not encode: {err}"),
-                ),
-            },
-            Verdict::Refuse(reason) => send_refusal(shared, &request, reason),
-        };
-        if let Err(err) = answered {
-            tracing::warn!(port = %shared.port, error = %err, "the filter could not answer a sender");
+            tracing::error!(port = %shared.port, "the port's filter panicked saying whether it has room");
+            false
+        })
+}
+
+/// Has `filter` decide `request` and carries its verdict out.
+fn decide<Q, R, F>(shared: &OwnerShared, filter: &mut F, mut request: Request)
+where
+    Q: Serialize + DeserializeOwned,
+    R: Serialize,
+    F: RequestFilter<Q, R>,
+{
+    let value = match postcard::from_bytes::<Q>(&request.payload) {
+        Ok(value) => value,
+        Err(err) => {
+            tracing::debug!(port = %shared.port, sender = %request.task, error = %err,
+                "a request the filter cannot decode: dropped");
+            return;
         }
+    };
+    let verdict = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        filter.request(&request.task, value)
+    }))
+    .unwrap_or_else(|_| {
+        tracing::error!(port = %shared.port, sender = %request.task,
+            "the port's filter panicked deciding a request: refused");
+        Verdict::Refuse("the port's filter failed (it panicked)".to_owned())
+    });
+    let (passed, answer) = match verdict {
+        Verdict::Pass(value) => (Some(value), None),
+        Verdict::Answer(reply) => (None, Some(reply)),
+        Verdict::Accept(value, reply) => (Some(value), Some(reply)),
+        Verdict::Refuse(reason) => {
+            report(shared, send_refusal(shared, &request, reason));
+            return;
+        }
+    };
+    // Encoded before anything is sent, so that a bad encoding refuses the request whole.
+    let passed = match passed.map(|value| postcard::to_stdvec(&value)).transpose() {
+        Ok(passed) => passed,
+        Err(err) => {
+            let reason = format!("the filter's message does not encode: {err}");
+            report(shared, send_refusal(shared, &request, reason));
+            return;
+        }
+    };
+    let answer = match answer.map(|reply| postcard::to_stdvec(&reply)).transpose() {
+        Ok(answer) => answer,
+        Err(err) => {
+            let reason = format!("the filter's answer does not encode: {err}");
+            report(shared, send_refusal(shared, &request, reason));
+            return;
+        }
+    };
+    if passed.is_some() && shared.queue_len() >= PENDING_LIMIT {
+        let reason = "the owner's queue is full".to_owned();
+        report(shared, send_refusal(shared, &request, reason));
+        return;
+    }
+    let answered = answer.is_some();
+    if let Some(answer) = answer {
+        report(
+            shared,
+            send_reply(shared, &request.user, &request.task, request.id, answer),
+        );
+    }
+    if let Some(payload) = passed {
+        request.payload = payload;
+        // Answered already: the owner's reply to it is not sent.
+        request.answered = answered;
+        shared.pending().push_back(request);
+        shared.changed.notify();
+    }
+}
+/// Logs a verdict that could not be carried out.
+fn report(shared: &OwnerShared, sent: Result<(), super::PortError>) {
+    if let Err(err) = sent {
+        tracing::warn!(port = %shared.port, error = %err, "the filter could not answer a sender");
     }
 }
 

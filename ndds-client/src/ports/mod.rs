@@ -48,7 +48,7 @@ use serde::de::DeserializeOwned;
 pub use declaration::QUEUE_REPORT;
 pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
-pub use filter::{FILTER_INBOX, FilterPort, RequestFilter, Verdict};
+pub use filter::{BoundedBuffer, FILTER_INBOX, FilterPort, RequestFilter, Verdict};
 pub use module::{Module, ModuleBuilder, ModuleContext, ModuleError, RunningModule, TaskContext};
 pub use ndds_core::ports::schedule::{Arg, Call};
 pub use ndds_core::ports::{LoadError, LoadProblem, Performed};

@@ -112,7 +112,11 @@ impl OwnerShared {
     }
 
     /// Drops from `queue` the request `withdrawal` names; whether it was there.
-    fn drop_withdrawn(&self, queue: &mut VecDeque<Request>, withdrawal: &Request) -> bool {
+    pub(crate) fn drop_withdrawn(
+        &self,
+        queue: &mut VecDeque<Request>,
+        withdrawal: &Request,
+    ) -> bool {
         let found = queue
             .iter()
             .position(|r| !r.withdraw && r.id == withdrawal.id && r.user == withdrawal.user);
@@ -390,7 +394,11 @@ pub struct ReplyHandle<R> {
 impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner<Q, R> {
     /// Declares `task` the owner of `port`. Another owner anywhere in the domain is reported
     /// to both (see [`receive`](Self::receive)).
-    pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError> {
+    pub fn declare(participant: &Participant, port: &str, task: &str) -> Result<Self, PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+    {
         Self::declare_with(participant, port, task, Restrictions::default())
     }
 
@@ -402,12 +410,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         port: &str,
         task: &str,
         restrictions: Restrictions,
-    ) -> Result<Self, PortError> {
-        if restrictions.filter == Some(Filter::Task) {
-            return Err(PortError::FilterCode {
-                port: port.to_owned(),
-            });
-        }
+    ) -> Result<Self, PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+    {
         Self::declare_claiming(participant, port, task, restrictions, 0)
     }
 
@@ -420,7 +427,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         participant: &Participant,
         port: &str,
         task: &str,
-        mut restrictions: Restrictions,
+        restrictions: Restrictions,
         filter: F,
     ) -> Result<(Self, super::FilterPort<F::Message>), PortError>
     where
@@ -428,13 +435,30 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         R: Send + 'static,
         F: super::RequestFilter<Q, R>,
     {
-        restrictions.filter = Some(Filter::Task);
+        Self::spliced(participant, port, task, restrictions, 0, filter)
+    }
+
+    /// Declares `task` the owner with `filter` spliced in, with claim `claim`.
+    fn spliced<F>(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        mut restrictions: Restrictions,
+        claim: u64,
+        filter: F,
+    ) -> Result<(Self, super::FilterPort<F::Message>), PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+        F: super::RequestFilter<Q, R>,
+    {
+        restrictions.filter = Some(filter.declared());
         // Users deal with the filter: theirs are checked against its usages.
         let usages = filter.usages();
         if !usages.is_empty() {
             restrictions.usages = usages;
         }
-        let mut owner = Self::declare_claiming(participant, port, task, restrictions, 0)?;
+        let mut owner = Self::declare_plain(participant, port, task, restrictions, claim)?;
         let inbox = Arc::new(Mutex::new(VecDeque::new()));
         let (shared, taken) = (Arc::clone(&owner.shared), Arc::clone(&inbox));
         let name = format!("port-filter-{port}");
@@ -464,7 +488,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         task: &str,
         restrictions: Restrictions,
         listen: Duration,
-    ) -> Result<Self, PortError> {
+    ) -> Result<Self, PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+    {
         check_name(port)?;
         let owner_topic = topic(port, "owner");
         let owners = reliable_consumer::<OwnerInfo>(participant, port, &owner_topic)?;
@@ -511,7 +539,51 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         Self::declare_claiming(participant, port, task, restrictions, claim)
     }
 
+    /// Declares the owner with claim `claim`, splicing in the library filter the restrictions
+    /// name ([`Filter::BoundedBuffer`]: [`BoundedBuffer`](super::BoundedBuffer)).
     fn declare_claiming(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        restrictions: Restrictions,
+        claim: u64,
+    ) -> Result<Self, PortError>
+    where
+        Q: Send + 'static,
+        R: Send + 'static,
+    {
+        match restrictions.filter {
+            None => Self::declare_plain(participant, port, task, restrictions, claim),
+            // `declare_filtered` brings the filter's code.
+            Some(Filter::Task) => Err(PortError::FilterCode {
+                port: port.to_owned(),
+            }),
+            Some(Filter::BoundedBuffer { capacity: 0 }) => Err(PortError::ZeroCapacity {
+                port: port.to_owned(),
+            }),
+            Some(Filter::BoundedBuffer { capacity }) => {
+                // It answers each sender with `()` before the owner replies.
+                if TypeDescription::of::<R>().fingerprint()
+                    != TypeDescription::of::<()>().fingerprint()
+                    || postcard::from_bytes::<R>(&[]).is_err()
+                {
+                    return Err(PortError::ReplyType {
+                        port: port.to_owned(),
+                        expected: std::any::type_name::<()>(),
+                        got: std::any::type_name::<R>(),
+                    });
+                }
+                let buffer = super::BoundedBuffer::<R>::unit_shaped(capacity as usize);
+                let (owner, _) =
+                    Self::spliced(participant, port, task, restrictions, claim, buffer)?;
+                Ok(owner)
+            }
+        }
+    }
+
+    /// Declares the owner with claim `claim` and no filter thread (a filter's caller starts
+    /// it).
+    fn declare_plain(
         participant: &Participant,
         port: &str,
         task: &str,
@@ -556,34 +628,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             misaddressed: AtomicU64::new(0),
             requests: Mutex::new(Some(Arc::new(requests))),
         });
-        let (direct, filter) = match shared.restrictions.filter {
-            None => (true, None),
-            // `declare_filtered` starts the filter's thread.
-            Some(Filter::Task) => (false, None),
-            Some(Filter::BoundedBuffer { capacity: 0 }) => {
-                return Err(PortError::ZeroCapacity {
-                    port: port.to_owned(),
-                });
-            }
-            Some(Filter::BoundedBuffer { capacity }) => {
-                if TypeDescription::of::<R>().fingerprint()
-                    != TypeDescription::of::<()>().fingerprint()
-                {
-                    return Err(PortError::ReplyType {
-                        port: port.to_owned(),
-                        expected: std::any::type_name::<()>(),
-                        got: std::any::type_name::<R>(),
-                    });
-                }
-                let shared = Arc::clone(&shared);
-                let name = format!("port-filter-{port}");
-                let thread = std::thread::Builder::new()
-                    .name(name.clone())
-                    .spawn(move || bounded_buffer(&shared, capacity as usize))
-                    .map_err(spawn_error(port, &name))?;
-                (false, Some(thread))
-            }
-        };
+        // With a filter, requests reach `receive` through it (its caller starts its thread).
+        let direct = shared.restrictions.filter.is_none();
         let declaring = Arc::clone(&shared);
         let thread = format!("port-{port}");
         let declaration = Declaration {
@@ -603,7 +649,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             demux: super::sendall::ReplyDemux::default(),
             shared,
             direct,
-            filter,
+            filter: None,
             priority: AtomicI64::new(priority.map_or(UNPRIORITISED, i64::from)),
             incarnation,
             declaration: Some(declaration),
@@ -1117,10 +1163,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             value,
             ReplyHandle {
                 shared: Arc::clone(&self.shared),
-                answered: matches!(
-                    self.shared.restrictions.filter,
-                    Some(Filter::BoundedBuffer { .. })
-                ),
+                answered: request.answered,
                 id: request.id,
                 user: request.user,
                 task: request.task,
@@ -1338,71 +1381,4 @@ fn write_reply(
     }
     replies.insert(user.to_owned(), (producer, Instant::now()));
     result
-}
-
-/// The bounded-buffer filter: takes requests into the buffer while it has room and answers
-/// each at once (so the sender goes on); when the buffer is full, senders wait for room. The
-/// requests that wait are read off the topic all the same (up to [`PENDING_LIMIT`], then
-/// they wait there), so that a sender that stops waiting withdraws its request before the
-/// buffer takes it. It sleeps on the topic and on the owner's changes.
-fn bounded_buffer(shared: &OwnerShared, capacity: usize) {
-    let empty = postcard::to_stdvec(&()).unwrap_or_default();
-    // Read and not yet taken into the buffer (not answered either).
-    let mut waiting: VecDeque<Request> = VecDeque::new();
-    while !shared.stop.load(Ordering::Acquire) {
-        let seen = shared.changed.generation();
-        let Some(requests) = shared.requests() else {
-            // Replaced: the senders of what waits here send it again to the replacement.
-            waiting.clear();
-            wait::block_on(shared.changed.changed(seen));
-            continue;
-        };
-        while shared.queue_len() < capacity
-            && let Some(request) = waiting.pop_front()
-        {
-            if let Err(err) = send_reply(
-                shared,
-                &request.user,
-                &request.task,
-                request.id,
-                empty.clone(),
-            ) {
-                tracing::warn!(port = %shared.port, error = %err, "filter could not answer a sender");
-            }
-            shared.pending().push_back(request);
-            shared.changed.notify();
-        }
-        if waiting.len() >= PENDING_LIMIT {
-            wait::block_on(shared.changed.changed(seen));
-            continue;
-        }
-        let arrived = wait::block_on(wait::race(
-            wait::next_sample(&requests),
-            shared.changed.changed(seen),
-        ));
-        let request = match arrived {
-            Either::Left(Some(sample)) => sample.value,
-            Either::Left(None) => {
-                wait::block_on(shared.changed.changed(seen));
-                continue;
-            }
-            Either::Right(()) => continue,
-        };
-        if !shared.addressed_here(&request) {
-            continue;
-        }
-        if request.withdraw {
-            // Not answered yet: dropped here. Answered (the answer and the sender's timeout
-            // crossed): dropped from the buffer, if the owner has not received it.
-            if !shared.drop_withdrawn(&mut waiting, &request) {
-                shared.absorb(&mut shared.pending(), request);
-                shared.changed.notify();
-            }
-            continue;
-        }
-        if !shared.admitted(&request.user) {
-            continue; // refused users get no answer: their own side reports the refusal
-        }
-        waiting.push_back(request);
-    }
 }

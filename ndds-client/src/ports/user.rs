@@ -373,6 +373,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
     pub(crate) async fn exchange(&self, value: &Q, timeout: Duration) -> Result<R, PortError> {
         // A filter at this end decides first (under its own lock, no port's).
         let passed;
+        let mut accepted = None;
         let value = match &self.filter {
             None => value,
             Some(filter) => {
@@ -380,6 +381,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 match verdict {
                     super::Verdict::Pass(changed) => {
                         passed = changed;
+                        &passed
+                    }
+                    super::Verdict::Accept(changed, answer) => {
+                        passed = changed;
+                        accepted = Some(answer);
                         &passed
                     }
                     super::Verdict::Answer(answer) => return Ok(answer),
@@ -424,6 +430,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             id,
         };
         self.write_request(id, incarnation, &payload)?;
+        if let Some(answer) = accepted {
+            // Answered by the filter: the owner's reply, when it comes, finds nobody waiting.
+            return Ok(answer);
+        }
         let mut outstanding = Outstanding {
             user: self,
             id,
@@ -494,6 +504,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 payload: payload.to_vec(),
                 withdraw: false,
                 owner,
+                answered: false,
             })
             .map_err(|source| PortError::Write {
                 port: self.port.clone(),
@@ -532,6 +543,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             payload: Vec::new(),
             withdraw: true,
             owner,
+            answered: false,
         };
         if let Err(err) = self.requests.write(&withdrawal) {
             tracing::debug!(port = %self.port, error = %err, "withdrawal of a timed-out request not sent");

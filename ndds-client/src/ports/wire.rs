@@ -22,6 +22,10 @@ pub struct Request {
     /// The incarnation of the owner it is for: another owner of the port (one being replaced,
     /// or its replacement) drops it, so that no request is run by two owners.
     pub owner: u64,
+    /// Not on the wire: the owner's filter answered the sender already
+    /// ([`Verdict::Accept`](super::Verdict::Accept)), so the owner's reply is not sent.
+    #[serde(skip)]
+    pub answered: bool,
 }
 
 /// A reply from the owner.
@@ -99,8 +103,10 @@ impl ProcessClass {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Filter {
     /// Accepts up to `capacity` requests ahead of the owner and answers each at once, so a
-    /// `send` does not block until the buffer is full (then it waits for room). Needs the
-    /// reply type `()`.
+    /// `send` does not block until the buffer is full (then it waits for room): the library
+    /// filter [`BoundedBuffer`](super::BoundedBuffer). In the restrictions given to
+    /// [`PortOwner::declare_with`](super::PortOwner::declare_with), it needs the reply type
+    /// `()`.
     BoundedBuffer {
         /// Requests held at most.
         capacity: u32,
