@@ -67,3 +67,44 @@ fn gethostname() -> String {
         .map(|h| h.trim().to_owned())
         .unwrap_or_default()
 }
+
+#[test]
+fn ndds_modules_check_reads_a_specification_file_without_a_daemon() {
+    // The appendix's specifications, as shipped with the example: they hold together.
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../ndds-client/examples/chip_line.toml"
+    );
+    let nowhere = std::path::Path::new("/nonexistent/ndds.sock");
+    let out = common::ndds_at(nowhere, &["modules", "--check", spec]);
+    assert!(
+        out.ok()
+            .contains("8 module(s) hold together: GATE, RELEASE, RELEASE2, LOAD_IT"),
+        "{out}"
+    );
+    // A file whose modules disagree: every problem, where it was written, and a failure.
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[[module]]\nname = \"OWNER\"\n[[module.owns]]\nport = \"P\"\nusages = [\"receive\"]\n\n\
+         [[module]]\nname = \"USER\"\nresponses = [\"P.ANSWER\"]\n[[module.uses]]\nport = \"P\"\nusages = [\"query\"]\n\
+         [[module.uses]]\nport = \"Q\"\nusages = [\"sned\"]\n",
+    )
+    .unwrap();
+    let out = common::ndds_at(nowhere, &["modules", "--check", bad.to_str().unwrap()]);
+    let printed = out.stdout.clone();
+    assert!(out.err().contains("1 problem(s)"), "{out}");
+    assert!(
+        printed.contains("bad.toml:15:11: unknown usage `sned`"),
+        "{out}"
+    );
+    std::fs::write(&bad, "[[module]]\nname = \"OWNER\"\n[[module.owns]]\nport = \"P\"\nusages = [\"receive\"]\n\n[[module]]\nname = \"USER\"\n[[module.uses]]\nport = \"P\"\nusages = [\"query\"]\n").unwrap();
+    let out = common::ndds_at(nowhere, &["modules", "--check", bad.to_str().unwrap()]);
+    assert!(out.err().contains("1 problem(s)"), "{out}");
+    assert!(
+        out.stdout
+            .contains("port `P`: `USER` uses it with Query, which complements none of the owner's usages [Receive]"),
+        "{out}"
+    );
+}

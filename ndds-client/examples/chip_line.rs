@@ -8,7 +8,13 @@
 //! ```text
 //! cargo run -p ndds-client --example chip_line                 # every module, 6 pallets
 //! cargo run -p ndds-client --example chip_line -- --pallets 20 --feeder4 5
+//! cargo run -p ndds-client --example chip_line -- --spec my_line.toml
 //! ```
+//!
+//! The modules' specifications — tasks, ports and their restrictions, handlers, subprograms,
+//! orders, work schedules, children — are a description file, `chip_line.toml` beside this
+//! one (built in; `--spec FILE` reads another, so that moving a chip is an edit of that file).
+//! This code binds what the file declares: each port's message types, and the bodies.
 //!
 //! Every event is one JSON line on stdout (`{"t_us":..,"module":..,"event":..}`); a summary
 //! goes to stderr at the end. Ctrl-C stops the modules cleanly. `--modules` runs some of the
@@ -34,20 +40,15 @@ use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use ndds_client::ports::{
-    Call, ModuleBuilder, ModuleContext, ModuleError, Performed, PortError, PortUser, RequestFilter,
-    Restrictions, RunningModule, Usage, Verdict,
+    Call, ModuleBuilder, ModuleContext, ModuleError, ModuleFile, Performed, PortError, PortUser,
+    RequestFilter, RunningModule, Usage, Verdict,
 };
 use ndds_client::{ConsumerQos, Participant, ProducerQos, Reliability};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-/// CHIP_IT's card: three chips, every one of the same priority.
-const CHIPS: &str = "\
--- every chip the same priority: an empty feeder holds nothing up
-1) GRASP(1), INSERT(10, 20, 3)
-1) GRASP(4), INSERT(12, 20, 3)
-1) GRASP(12), INSERT(14, 20, 3)
-";
+/// The modules' specifications (`--spec` reads another file).
+const SPEC: &str = include_str!("chip_line.toml");
 
 /// The feeders of the rack.
 const FEEDERS: [u32; 3] = [1, 4, 12];
@@ -82,6 +83,7 @@ struct Args {
     seconds: Option<f64>,
     release_name: String,
     feeder4: u32,
+    spec: Option<std::path::PathBuf>,
 }
 
 fn args() -> Result<Args, String> {
@@ -93,6 +95,7 @@ fn args() -> Result<Args, String> {
         seconds: None,
         release_name: "RELEASE".into(),
         feeder4: 4,
+        spec: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -108,12 +111,13 @@ fn args() -> Result<Args, String> {
                 args.seconds = Some(value()?.parse().map_err(|e| format!("--seconds: {e}"))?);
             }
             "--release-name" => args.release_name = value()?,
+            "--spec" => args.spec = Some(value()?.into()),
             "--feeder4" => {
                 args.feeder4 = value()?.parse().map_err(|e| format!("--feeder4: {e}"))?
             }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`; use --modules, --pallets, --seconds, --release-name, --feeder4"
+                    "unknown argument `{other}`; use --modules, --pallets, --seconds, --release-name, --feeder4, --spec"
                 ));
             }
         }
@@ -173,28 +177,19 @@ impl RequestFilter<(i32, f64), (i32, f64)> for BoundedBuffer {
 
 /// GATE: releases a pallet every CYCLE_TIME through RELEASE, and adjusts CYCLE_TIME to the
 /// faster of the two cells, from what BOUNDED_BUFFER holds.
-fn gate(participant: &Participant, pallets: u32) -> ModuleBuilder {
-    ModuleBuilder::new(participant, "GATE")
-        .owns_filtered::<(i32, f64), (i32, f64), _>(
+fn gate(
+    participant: &Participant,
+    spec: &ModuleFile,
+    pallets: u32,
+) -> Result<ModuleBuilder, ModuleError> {
+    Ok(ModuleBuilder::from_file(participant, spec, "GATE")?
+        .port_filtered::<(i32, f64), (i32, f64), _>(
             "FREQUENCY",
-            Restrictions {
-                usages: vec![Usage::Receive],
-                users: vec!["LOAD_IT".into(), "CHIP_IT".into()],
-                ..Restrictions::default()
-            },
             BoundedBuffer {
                 buffer: VecDeque::new(),
             },
         )
-        .owns::<u32, i32>(
-            "LET_1_GO",
-            Restrictions {
-                usages: vec![Usage::Send],
-                max_users: Some(1), // should RELEASE fail, another task can take over
-                timeout_ms: Some(2_000),
-                ..Restrictions::default()
-            },
-        )
+        .port::<u32, i32>("LET_1_GO")
         .exception("LET_1_GO.TIMEOUT", |ctx| {
             event(
                 ctx.name(),
@@ -202,7 +197,6 @@ fn gate(participant: &Participant, pallets: u32) -> ModuleBuilder {
                 json!({ "help": "RELEASE does not answer: restart it" }),
             );
         })
-        .order("ORDER(LET_1_GO.TIMEOUT, GATE)")
         .body(move |ctx| {
             let mut cycle = Duration::from_millis(400);
             let mut speeds = [0.8_f64, 1.6];
@@ -240,19 +234,23 @@ fn gate(participant: &Participant, pallets: u32) -> ModuleBuilder {
                 }
             }
             event("GATE", "all_released", json!({ "pallets": pallets }));
-        })
+        }))
 }
 
 /// RELEASE (under `name`): the one user of LET_1_GO; puts each pallet GATE lets go on the
 /// conveyor to the loading station.
-fn release(participant: &Participant, name: &str) -> Result<ModuleBuilder, ModuleError> {
+fn release(
+    participant: &Participant,
+    spec: &ModuleFile,
+    name: &str,
+) -> Result<ModuleBuilder, ModuleError> {
     let (producer_qos, _) = reliable();
     let conveyor = participant
         .producer::<u32>("line/load", producer_qos)
         .map_err(|e| ModuleError::Port(PortError::BadName(e.to_string())))?;
     let me = name.to_owned();
-    Ok(ModuleBuilder::new(participant, name)
-        .uses::<u32, i32>("LET_1_GO", &[Usage::Receive], None)
+    Ok(ModuleBuilder::from_file(participant, spec, name)?
+        .port::<u32, i32>("LET_1_GO")
         .body(move |ctx| {
             loop {
                 let released = ctx.receive_from_owner::<u32, i32>(
@@ -273,7 +271,7 @@ fn release(participant: &Participant, name: &str) -> Result<ModuleBuilder, Modul
 }
 
 /// LOAD_IT, with its children LOAD_CARD (and its task FREEZE_PALLET) and SCREW_IN_CARD.
-fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
+fn load_it(participant: &Participant, spec: &ModuleFile) -> Result<ModuleBuilder, ModuleError> {
     let (producer_qos, consumer_qos) = reliable();
     let state = Arc::new(Mutex::new((0_u32, 0.0_f64))); // cards loaded, last cycle time
     let status = Arc::clone(&state);
@@ -285,7 +283,7 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
     let arrivals = participant
         .consumer::<u32>("line/load", consumer_qos)
         .map_err(|e| ModuleError::Port(PortError::BadName(e.to_string())))?;
-    let load_card = ModuleBuilder::new(participant, "LOAD_CARD")
+    let load_card = ModuleBuilder::from_file(participant, spec, "LOAD_CARD")?
         .task("FREEZE_PALLET", move |task| {
             // Stops each pallet at the station, signals LOAD_CARD, and lets it go on when
             // LOAD_CARD replies (the card is on and screwed).
@@ -324,29 +322,13 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 }
             }
         })
-        .uses::<(), (i32, u32, f64)>("ASK_CHILD1", &[Usage::Response], None)
+        .port::<(), (i32, u32, f64)>("ASK_CHILD1")
         .response("ASK_CHILD1.STATUS", move |()| {
             let (loaded, cycle) = *status.lock().unwrap_or_else(|p| p.into_inner());
             (0, loaded, cycle)
         })
-        .owns::<u32, ()>(
-            "PALLET_IN_PLACE",
-            Restrictions {
-                usages: vec![Usage::Receive],
-                max_users: Some(1),
-                timeout_ms: Some(30_000),
-                ..Restrictions::default()
-            },
-        )
-        .owns::<u32, i32>(
-            "CARD_IN_PLACE",
-            Restrictions {
-                usages: vec![Usage::Send],
-                users: vec!["SCREW_IN_CARD".into()],
-                timeout_ms: Some(30_000),
-                ..Restrictions::default()
-            },
-        )
+        .port::<u32, ()>("PALLET_IN_PLACE")
+        .port::<u32, i32>("CARD_IN_PLACE")
         .exception("PALLET_IN_PLACE.TIMEOUT", |ctx| {
             event(ctx.name(), "no_pallet", json!({ "for_seconds": 30 }));
         })
@@ -357,7 +339,6 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 json!({ "help": "signal for help" }),
             );
         })
-        .order("ORDER(PALLET_IN_PLACE.TIMEOUT, ASK_CHILD1.STATUS, LOAD_CARD)")
         .body(move |ctx| {
             loop {
                 let started = Instant::now();
@@ -397,18 +378,13 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 }
             }
         });
-    let screw_in_card = ModuleBuilder::new(participant, "SCREW_IN_CARD")
-        .uses::<(), i32>("ASK_CHILD2", &[Usage::Response], None)
+    let screw_in_card = ModuleBuilder::from_file(participant, spec, "SCREW_IN_CARD")?
+        .port::<(), i32>("ASK_CHILD2")
         .response("ASK_CHILD2.STATUS", |()| 0)
-        .uses::<u32, i32>(
-            "CARD_IN_PLACE",
-            &[Usage::Receive],
-            Some(Duration::from_secs(30)),
-        )
+        .port::<u32, i32>("CARD_IN_PLACE")
         .exception("CARD_IN_PLACE.TIMEOUT", |ctx| {
             event(ctx.name(), "no_card", json!({ "for_seconds": 30 }));
         })
-        .order("ORDER(CARD_IN_PLACE.TIMEOUT, ASK_CHILD2.STATUS, SCREW_IN_CARD)")
         .body(|ctx| {
             loop {
                 let screwed = ctx.receive_from_owner::<u32, i32>(
@@ -423,16 +399,10 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 }
             }
         });
-    let ask = |child: &str| Restrictions {
-        usages: vec![Usage::Query],
-        users: vec![child.into()],
-        timeout_ms: Some(2_000), // the child could be dead
-        ..Restrictions::default()
-    };
-    Ok(ModuleBuilder::new(participant, "LOAD_IT")
-        .uses::<(i32, f64), (i32, f64)>("FREQUENCY", &[Usage::Send], Some(Duration::from_secs(2)))
-        .owns::<(), (i32, u32, f64)>("ASK_CHILD1", ask("LOAD_CARD"))
-        .owns::<(), i32>("ASK_CHILD2", ask("SCREW_IN_CARD"))
+    Ok(ModuleBuilder::from_file(participant, spec, "LOAD_IT")?
+        .port::<(i32, f64), (i32, f64)>("FREQUENCY")
+        .port::<(), (i32, u32, f64)>("ASK_CHILD1")
+        .port::<(), i32>("ASK_CHILD2")
         .exception("ASK_CHILD1.TIMEOUT", |ctx| {
             event(ctx.name(), "child_silent", json!({ "child": "LOAD_CARD" }));
         })
@@ -443,7 +413,6 @@ fn load_it(participant: &Participant) -> Result<ModuleBuilder, ModuleError> {
                 json!({ "child": "SCREW_IN_CARD" }),
             );
         })
-        .order("ORDER(ASK_CHILD1.TIMEOUT, ASK_CHILD2.TIMEOUT, LOAD_IT)")
         .child(load_card)
         .child(screw_in_card)
         .body(|ctx| {
@@ -533,10 +502,11 @@ impl Rack {
 /// CHIP_IT (`second`: CHIP_IT2, with the ports' roles and its timeout mirrored).
 fn chip_it(
     participant: &Participant,
+    spec: &ModuleFile,
     second: bool,
     rack: Arc<Mutex<Rack>>,
 ) -> Result<ModuleBuilder, ModuleError> {
-    let (me, other, ready, own_share, peer_share, station, timeout_ms) = if second {
+    let (me, other, ready, own_share, peer_share, station) = if second {
         (
             "CHIP_IT2",
             "CHIP_IT",
@@ -544,7 +514,6 @@ fn chip_it(
             "SHARE_FEEDER1",
             "SHARE_FEEDER",
             1,
-            2_000,
         )
     } else {
         (
@@ -554,7 +523,6 @@ fn chip_it(
             "SHARE_FEEDER",
             "SHARE_FEEDER1",
             0,
-            3_000,
         )
     };
     let (producer_qos, consumer_qos) = reliable();
@@ -565,7 +533,7 @@ fn chip_it(
         .consumer::<u32>(&format!("line/chip/{station}"), consumer_qos)
         .map_err(|e| ModuleError::Port(PortError::BadName(e.to_string())))?;
     let crit = format!("{peer_share}.CRIT_SECTION");
-    let mut builder = ModuleBuilder::new(participant, me)
+    let mut builder = ModuleBuilder::from_file(participant, spec, me)?
         .task("FREEZE_CARD", move |task| {
             let signal = PortUser::<u32, ()>::declare(task.participant(), ready, "FREEZE_CARD");
             let Ok(signal) = signal else { return };
@@ -583,27 +551,11 @@ fn chip_it(
                 }
             }
         })
-        .owns::<u32, ()>(
-            ready,
-            Restrictions {
-                usages: vec![Usage::Receive],
-                max_users: Some(1),
-                timeout_ms: Some(60_000),
-                ..Restrictions::default()
-            },
-        )
-        .owns::<(), i32>(
-            own_share,
-            Restrictions {
-                usages: vec![Usage::Query],
-                users: vec![other.into()],
-                // Not only for a failed peer: both querying at once is a deadlock, and the
-                // shorter timeout of CHIP_IT2 breaks it.
-                timeout_ms: Some(timeout_ms),
-                ..Restrictions::default()
-            },
-        )
-        .uses::<(), i32>(peer_share, &[Usage::Response], None)
+        .port::<u32, ()>(ready)
+        // Its timeout is not only for a failed peer: both querying at once is a deadlock,
+        // and the shorter timeout of CHIP_IT2 breaks it.
+        .port::<(), i32>(own_share)
+        .port::<(), i32>(peer_share)
         // Because of the order, permission is always given: the handler runs only when
         // this robot is not in the feeder area.
         .response(&crit, |()| 1)
@@ -612,19 +564,9 @@ fn chip_it(
         })
         .exception(&format!("{own_share}.TIMEOUT"), move |ctx| {
             event(ctx.name(), "share_timeout", json!({ "peer": other }));
-        })
-        .subprogram("GRASP")
-        .subprogram("INSERT")
-        .schedule(CHIPS)
-        .order(&format!(
-            "ORDER({ready}.TIMEOUT, {own_share}.TIMEOUT, {me}, GRASP, {crit}, INSERT)"
-        ));
+        });
     if !second {
-        builder = builder.uses::<(i32, f64), (i32, f64)>(
-            "FREQUENCY",
-            &[Usage::Send],
-            Some(Duration::from_secs(2)),
-        );
+        builder = builder.port::<(i32, f64), (i32, f64)>("FREQUENCY");
     }
     Ok(builder.body(move |ctx| robot(ctx, me, ready, own_share, !second, &rack)))
 }
@@ -772,6 +714,10 @@ fn main() {
 }
 
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
+    let spec = match &args.spec {
+        Some(path) => ModuleFile::read(path)?,
+        None => ModuleFile::parse("chip_line.toml (built in)", SPEC)?,
+    };
     let participant = Participant::connect()?;
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -786,25 +732,27 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         holder: None,
     }));
     let has = |m: &str| args.modules.contains(m);
-    let mut running: Vec<RunningModule> = Vec::new();
+    // Every module is loaded (checked, its ports declared) before any starts, so that a
+    // problem starts nothing.
+    let mut loaded = Vec::new();
     // Downstream first, so that nothing waits for a station that is not there yet.
     for second in [false, true] {
         if has(if second { "CHIP_IT2" } else { "CHIP_IT" }) {
-            running.push(
-                chip_it(&participant, second, Arc::clone(&rack))?
-                    .load()?
-                    .start()?,
-            );
+            loaded.push(chip_it(&participant, &spec, second, Arc::clone(&rack))?.load()?);
         }
     }
     if has("LOAD_IT") {
-        running.push(load_it(&participant)?.load()?.start()?);
+        loaded.push(load_it(&participant, &spec)?.load()?);
     }
     if has("RELEASE") {
-        running.push(release(&participant, &args.release_name)?.load()?.start()?);
+        loaded.push(release(&participant, &spec, &args.release_name)?.load()?);
     }
     if has("GATE") {
-        running.push(gate(&participant, args.pallets).load()?.start()?);
+        loaded.push(gate(&participant, &spec, args.pallets)?.load()?);
+    }
+    let mut running: Vec<RunningModule> = Vec::new();
+    for module in loaded {
+        running.push(module.start()?);
     }
     event(
         "chip_line",

@@ -474,3 +474,167 @@ fn without_an_order_handlers_interrupt_the_body_and_a_panic_leaves_the_sections_
     assert_eq!(running.handled(), ["STATUS.NOW in CELL"]);
     running.stop();
 }
+
+/// LOAD_IT's tree as a specification file: the code only binds what it declares.
+const LOAD_IT_FILE: &str = r#"
+[[module]]
+name = "LOAD_IT"
+children = ["LOAD_CARD", "SCREW_IN_CARD"]
+
+[[module.owns]]
+port = "ASK_CHILD1"
+usages = ["query"]
+users = ["LOAD_CARD"]
+timeout = 2.0
+
+[[module]]
+name = "LOAD_CARD"
+tasks = ["FREEZE_PALLET"]
+responses = ["ASK_CHILD1.STATUS"]
+
+[[module.uses]]
+port = "ASK_CHILD1"
+usages = ["response"]
+
+[[module]]
+name = "SCREW_IN_CARD"
+subprograms = ["SCREW"]
+schedule_file = "screw.schedule"
+"#;
+
+#[test]
+fn a_module_tree_from_a_specification_file_binds_its_code_and_runs() {
+    use ndds_client::ports::ModuleFile;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "file-tree");
+    std::fs::write(dir.path().join("load_it.toml"), LOAD_IT_FILE).unwrap();
+    std::fs::write(
+        dir.path().join("screw.schedule"),
+        "1) SCREW(1)\n2) SCREW(2)\n",
+    )
+    .unwrap();
+    let file = ModuleFile::read(dir.path().join("load_it.toml")).unwrap();
+    assert!(
+        file.check().is_empty(),
+        "the tree holds together: {:?}",
+        file.check()
+    );
+    let statuses = Log::default();
+    let (seen, screwed) = (statuses.clone(), statuses.clone());
+    let load_card = ModuleBuilder::from_file(&p, &file, "LOAD_CARD")
+        .unwrap()
+        .port::<(), u32>("ASK_CHILD1")
+        .response("ASK_CHILD1.STATUS", |()| 23u32)
+        .task("FREEZE_PALLET", |task| {
+            while !task.stopping() {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        });
+    let screw_in_card = ModuleBuilder::from_file(&p, &file, "SCREW_IN_CARD")
+        .unwrap()
+        .body(move |ctx| {
+            while ctx.more() > 0 {
+                ctx.perform(|call| {
+                    screwed.push(format!("{}({})", call.name, call.args[0]));
+                    0
+                });
+            }
+        });
+    let module = ModuleBuilder::from_file(&p, &file, "LOAD_IT")
+        .unwrap()
+        .port::<(), u32>("ASK_CHILD1")
+        .child(load_card)
+        .child(screw_in_card)
+        .body(move |ctx| {
+            // The file's restrictions are the port's.
+            let owner = ctx.owner::<(), u32>("ASK_CHILD1").unwrap();
+            let r = owner.restrictions();
+            seen.push(format!("{:?} {:?} {:?}", r.usages, r.users, r.timeout_ms));
+            ctx.costart(&["LOAD_CARD", "SCREW_IN_CARD"]).unwrap();
+            let status: u32 = ctx.query("ASK_CHILD1", &()).unwrap();
+            seen.push(format!("LOAD_CARD has loaded {status}"));
+        })
+        .load()
+        .unwrap();
+    let running = module.start().unwrap();
+    assert!(common::eventually(WAIT, || statuses.take().len() == 4));
+    let mut got = statuses.take();
+    got.sort();
+    assert_eq!(
+        got,
+        [
+            "LOAD_CARD has loaded 23",
+            "SCREW(1)",
+            "SCREW(2)",
+            "[Query] [\"LOAD_CARD\"] Some(2000)"
+        ]
+    );
+    running.stop();
+}
+
+#[test]
+fn code_that_disagrees_with_its_specification_file_is_refused_naming_where() {
+    use ndds_client::ports::ModuleFile;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "file-mismatch");
+    // A schedule file that is not there is reported where the file names it.
+    let err = ModuleFile::parse("load_it.toml", LOAD_IT_FILE).unwrap_err();
+    assert_eq!(err.problems.len(), 1, "{err}");
+    assert!(
+        err.problems[0].starts_with("load_it.toml:24:17: screw.schedule: "),
+        "{err}"
+    );
+    let file = ModuleFile::parse(
+        "load_it.toml",
+        &LOAD_IT_FILE.replace(
+            "schedule_file = \"screw.schedule\"",
+            "schedule = \"1) SCREW(1)\"",
+        ),
+    )
+    .unwrap();
+    // LOAD_CARD: the port's types not bound, the task without a body, a handler and a port
+    // the file does not declare.
+    let load_card = ModuleBuilder::from_file(&p, &file, "LOAD_CARD")
+        .unwrap()
+        .response("ASK_CHILD1.STATUS", |()| 0u32)
+        .response("ASK_CHILD1.OTHER", |()| 0u32)
+        .uses::<u32, u32>("EXTRA", &[Usage::Send], None);
+    let err = ModuleBuilder::from_file(&p, &file, "LOAD_IT")
+        .unwrap()
+        .port::<(), u32>("ASK_CHILD1")
+        .port::<(), u32>("ASK_CHILD1")
+        .child(load_card)
+        .load()
+        .err()
+        .expect("refused")
+        .to_string();
+    for expected in [
+        "port binding `ASK_CHILD1` is declared twice",
+        "load_it.toml:4:26: child `SCREW_IN_CARD` is not given",
+        "in `LOAD_CARD`: load_it.toml:17:1: port `ASK_CHILD1` is declared here but its message types are not bound",
+        "in `LOAD_CARD`: load_it.toml:14:10: task `FREEZE_PALLET` has no body",
+        "in `LOAD_CARD`: load_it.toml: response handler `ASK_CHILD1.OTHER` is declared in code but not in the module's specification",
+        "in `LOAD_CARD`: load_it.toml: used port `EXTRA` is declared in code but not in the module's specification",
+    ] {
+        assert!(err.contains(expected), "missing {expected:?} in: {err}");
+    }
+    // And nothing else: every problem is said once.
+    assert_eq!(err.matches("; ").count(), 5, "{err}");
+    // A module the file does not declare.
+    let err = ModuleBuilder::from_file(&p, &file, "GATE").err().unwrap();
+    assert!(
+        err.to_string()
+            .contains("no module `GATE`; it declares `LOAD_IT`, `LOAD_CARD`, `SCREW_IN_CARD`"),
+        "{err}"
+    );
+    // A file's port bound on a module that has no file.
+    let err = ModuleBuilder::new(&p, "PLAIN")
+        .port::<u32, u32>("P")
+        .load()
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("binds a port of a module file"), "{err}");
+}

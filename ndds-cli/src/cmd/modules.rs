@@ -21,10 +21,44 @@ pub struct Args {
     /// they come as soon as discovery matched).
     #[arg(long, value_parser = seconds::parse, default_value = "0.8")]
     listen: Duration,
+    /// Check a module specification file (`[[module]]` tables, docs/ports.md) instead: its
+    /// form, and its modules against each other as one system; no daemon is needed.
+    #[arg(long, value_name = "FILE")]
+    check: Option<std::path::PathBuf>,
+}
+
+/// `ndds modules --check FILE`: every problem, one per line, and a failure if there is one.
+fn check(path: &std::path::Path) -> anyhow::Result<()> {
+    let file = match ndds_client::ports::ModuleFile::read(path) {
+        Ok(file) => file,
+        Err(err) => {
+            for problem in &err.problems {
+                outln!("{problem}")?;
+            }
+            anyhow::bail!("{}: {} problem(s)", path.display(), err.problems.len());
+        }
+    };
+    let problems = file.check();
+    for problem in &problems {
+        outln!("{problem}")?;
+    }
+    if !problems.is_empty() {
+        anyhow::bail!("{}: {} problem(s)", path.display(), problems.len());
+    }
+    outln!(
+        "{}: {} module(s) hold together: {}",
+        file.path(),
+        file.names().len(),
+        file.names().join(", ")
+    )?;
+    Ok(())
 }
 
 /// Runs `ndds modules`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    if let Some(path) = &args.check {
+        return check(path);
+    }
     let participant = connect(daemon)?;
     let graph = participant.graph()?;
     let topics: std::collections::BTreeSet<String> = graph

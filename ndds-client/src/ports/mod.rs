@@ -23,6 +23,7 @@
 
 mod asynch;
 mod declaration;
+mod description;
 mod error;
 mod existing;
 mod filter;
@@ -46,6 +47,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 pub use declaration::QUEUE_REPORT;
+pub use description::{ModuleFile, ModuleFileError};
 pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
 pub use filter::{BoundedBuffer, FILTER_INBOX, FilterPort, RequestFilter, Verdict};

@@ -44,6 +44,7 @@ use ndds_core::ports::{
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::description::{FileEnd, FilePort};
 use super::wait::{self, Either, Notify};
 use super::{ModuleInfo, PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage};
 use crate::{Participant, TypeDescription};
@@ -57,6 +58,9 @@ pub enum ModuleError {
     /// A port could not be declared, or a thread started.
     #[error(transparent)]
     Port(#[from] PortError),
+    /// Its specification file cannot be used (every problem is listed).
+    #[error(transparent)]
+    File(#[from] super::ModuleFileError),
     /// The module is stopping: the body should return.
     #[error("module `{0}` is stopping")]
     Stopping(String),
@@ -135,6 +139,40 @@ pub struct ModuleBuilder {
     schedule_problems: Vec<String>,
     /// Owned ports with a filter of their own.
     filtered: Vec<String>,
+    /// The module's specification file, when it was read from one: the code only binds.
+    file: Option<FileBinding>,
+    /// Calls that made no sense for this module (binding a file's port without a file).
+    misuse: Vec<LoadProblem>,
+}
+
+/// Where a handler is declared (see `ModuleBuilder::file_declares`).
+enum DeclaredBy {
+    InCode,
+    InFile,
+    NotInFile,
+}
+
+/// What a module read from a specification file still needs from its code, and what its
+/// code declared that the file does not.
+struct FileBinding {
+    path: String,
+    /// Ports declared there whose types are not bound yet.
+    unbound: Vec<FilePort>,
+    /// Tasks declared there (name, where).
+    tasks: Vec<(String, String)>,
+    /// Children declared there (name, where).
+    children: Vec<(String, String)>,
+    /// Problems found binding (something declared in code, or bound twice).
+    problems: Vec<LoadProblem>,
+}
+
+impl FileBinding {
+    fn not_in_file(&mut self, what: String) {
+        self.problems.push(LoadProblem::Specification {
+            at: self.path.clone(),
+            what: format!("{what} is declared in code but not in the module's specification: declare it in the file"),
+        });
+    }
 }
 
 /// The module's state shared by its thread, its listeners and its context.
@@ -189,6 +227,118 @@ impl ModuleBuilder {
             schedule: None,
             schedule_problems: Vec::new(),
             filtered: Vec::new(),
+            file: None,
+            misuse: Vec::new(),
+        }
+    }
+
+    /// Module `name` of a specification file (see [`ModuleFile`](super::ModuleFile)): its
+    /// tasks, ports and restrictions, handlers, subprograms, order, schedule and children are
+    /// the file's. The code binds them: [`port`](Self::port) (or
+    /// [`port_filtered`](Self::port_filtered)) gives a port its message types,
+    /// [`response`](Self::response), [`exception`](Self::exception) and
+    /// [`task`](Self::task) give bodies to what the file names, [`child`](Self::child)
+    /// gives a child's builder, [`body`](Self::body) the background code. Anything the file
+    /// declares and the code does not bind, and anything the code declares that the file does
+    /// not, is a load problem naming where ([`LoadProblem::Specification`]).
+    pub fn from_file(
+        participant: &Participant,
+        file: &super::ModuleFile,
+        name: &str,
+    ) -> Result<Self, super::ModuleFileError> {
+        let module = file.module(name)?;
+        let mut builder = Self::new(participant, name);
+        let spec = module.spec();
+        builder.spec = ModuleSpec {
+            owns: Vec::new(),
+            uses: Vec::new(),
+            ..spec
+        };
+        if let Some(text) = &module.schedule {
+            builder.schedule = WorkSchedule::parse(text).ok();
+        }
+        builder.file = Some(FileBinding {
+            path: file.path().to_owned(),
+            unbound: module.ports.clone(),
+            tasks: module.tasks.clone(),
+            children: module.children.clone(),
+            problems: Vec::new(),
+        });
+        Ok(builder)
+    }
+
+    /// Binds port `port` of the module's specification file to request type `Q` and reply
+    /// type `Q`: it is owned or used as the file declares, with the file's restrictions
+    /// (see [`from_file`](Self::from_file)).
+    pub fn port<Q, R>(mut self, port: &str) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        match self.take_file_port(port) {
+            Some(FileEnd::Owner(restrictions)) => self.own_port::<Q, R>(port, restrictions),
+            Some(FileEnd::User { usages, timeout }) => {
+                self.use_port::<Q, R>(port, &usages, timeout)
+            }
+            None => self,
+        }
+    }
+
+    /// Binds owned port `port` of the module's specification file to its types, with
+    /// `filter` spliced in at its end (see [`owns_filtered`](Self::owns_filtered)).
+    pub fn port_filtered<Q, R, F>(mut self, port: &str, filter: F) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+        F: super::RequestFilter<Q, R>,
+        F::Message: Sync,
+    {
+        match self.take_file_port(port) {
+            Some(FileEnd::Owner(restrictions)) => {
+                self.own_filtered_port::<Q, R, F>(port, restrictions, filter)
+            }
+            Some(FileEnd::User { .. }) => {
+                if let Some(file) = &mut self.file {
+                    file.problems.push(LoadProblem::Specification {
+                        at: file.path.clone(),
+                        what: format!("port `{port}` is used, not owned: a filter of the module's own goes on a port it owns"),
+                    });
+                }
+                self
+            }
+            None => self,
+        }
+    }
+
+    /// The file's declaration of `port`, taken to be bound (a problem, and `None`, when
+    /// there is no file, no such port, or it was bound already).
+    fn take_file_port(&mut self, port: &str) -> Option<FileEnd> {
+        let Some(file) = &mut self.file else {
+            self.misuse.push(LoadProblem::Specification {
+                at: format!("module `{}`", self.spec.name),
+                what: format!("`port(\"{port}\")` binds a port of a module file, and this module was not read from one: declare the port with `owns` or `uses`"),
+            });
+            return None;
+        };
+        match file.unbound.iter().position(|p| p.port == port) {
+            Some(at) => Some(file.unbound.remove(at).end),
+            None => {
+                let bound = self
+                    .spec
+                    .owns
+                    .iter()
+                    .chain(&self.spec.uses)
+                    .any(|d| d.port == port);
+                if bound {
+                    file.problems.push(LoadProblem::Duplicate {
+                        kind: "port binding",
+                        name: port.to_owned(),
+                    });
+                } else {
+                    file.not_in_file(format!("port `{port}`"));
+                }
+                None
+            }
         }
     }
 
@@ -196,6 +346,10 @@ impl ModuleBuilder {
     /// `1) GRASP(1), INSERT(10.5, 20, 3)`). Each call must name a subprogram of the module
     /// ([`subprogram`](Self::subprogram)); the body runs it with [`ModuleContext::perform`].
     pub fn schedule(mut self, text: &str) -> Self {
+        if let Some(file) = &mut self.file {
+            file.not_in_file("a work schedule".to_owned());
+            return self;
+        }
         match WorkSchedule::parse(text) {
             Ok(schedule) => self.schedule = Some(schedule),
             Err(err) => self.schedule_problems.push(err.to_string()),
@@ -230,13 +384,51 @@ impl ModuleBuilder {
     /// A child module this one may start with [`ModuleContext::costart`]; it is checked (and
     /// its ports declared) when this one loads, with the parent.
     pub fn child(mut self, child: ModuleBuilder) -> Self {
-        self.spec.children.push(child.spec.name.clone());
+        match &mut self.file {
+            Some(file) if !file.children.iter().any(|(c, _)| *c == child.spec.name) => {
+                file.not_in_file(format!("child `{}`", child.spec.name));
+                return self;
+            }
+            Some(_) => {}
+            None => self.spec.children.push(child.spec.name.clone()),
+        }
         self.children.push(child);
         self
     }
 
+    /// Where `name` (of `list`) is declared: by the code (no specification file), in the
+    /// file, or nowhere (a file that does not declare it: a problem, recorded here).
+    fn file_declares(
+        &mut self,
+        name: &str,
+        list: impl Fn(&ModuleSpec) -> &Vec<String>,
+        kind: &str,
+    ) -> DeclaredBy {
+        let declared = list(&self.spec).iter().any(|h| h == name);
+        match &mut self.file {
+            None => DeclaredBy::InCode,
+            Some(_) if declared => DeclaredBy::InFile,
+            Some(file) => {
+                file.not_in_file(format!("{kind} `{name}`"));
+                DeclaredBy::NotInFile
+            }
+        }
+    }
+
     /// The module owns `port`, with `restrictions` (its usages, timeout, ...).
     pub fn owns<Q, R>(mut self, port: &str, restrictions: Restrictions) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        if let Some(file) = &mut self.file {
+            file.not_in_file(format!("owned port `{port}`"));
+            return self;
+        }
+        self.own_port::<Q, R>(port, restrictions)
+    }
+
+    fn own_port<Q, R>(mut self, port: &str, restrictions: Restrictions) -> Self
     where
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
         R: Serialize + DeserializeOwned + Send + Sync + 'static,
@@ -288,6 +480,25 @@ impl ModuleBuilder {
         F: super::RequestFilter<Q, R>,
         F::Message: Sync,
     {
+        if let Some(file) = &mut self.file {
+            file.not_in_file(format!("owned port `{port}`"));
+            return self;
+        }
+        self.own_filtered_port::<Q, R, F>(port, restrictions, filter)
+    }
+
+    fn own_filtered_port<Q, R, F>(
+        mut self,
+        port: &str,
+        restrictions: Restrictions,
+        filter: F,
+    ) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+        F: super::RequestFilter<Q, R>,
+        F::Message: Sync,
+    {
         self.spec.owns.push(PortDecl {
             port: port.to_owned(),
             usages: restrictions.usages.clone(),
@@ -320,6 +531,18 @@ impl ModuleBuilder {
     /// The module uses `port` with `usages`; `timeout`, if given, bounds every operation on
     /// it through the module context (and allows a `PORT.TIMEOUT` handler).
     pub fn uses<Q, R>(mut self, port: &str, usages: &[Usage], timeout: Option<Duration>) -> Self
+    where
+        Q: Serialize + DeserializeOwned + Send + Sync + 'static,
+        R: Serialize + DeserializeOwned + Send + Sync + 'static,
+    {
+        if let Some(file) = &mut self.file {
+            file.not_in_file(format!("used port `{port}`"));
+            return self;
+        }
+        self.use_port::<Q, R>(port, usages, timeout)
+    }
+
+    fn use_port<Q, R>(mut self, port: &str, usages: &[Usage], timeout: Option<Duration>) -> Self
     where
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
         R: Serialize + DeserializeOwned + Send + Sync + 'static,
@@ -365,7 +588,11 @@ impl ModuleBuilder {
         Q: Serialize + DeserializeOwned + 'static,
         R: Serialize + DeserializeOwned + 'static,
     {
-        self.spec.responses.push(handler.to_owned());
+        match self.file_declares(handler, |spec| &spec.responses, "response handler") {
+            DeclaredBy::InCode => self.spec.responses.push(handler.to_owned()),
+            DeclaredBy::InFile => {}
+            DeclaredBy::NotInFile => return self,
+        }
         self.response_formats
             .push((handler.to_owned(), formats::<Q, R>()));
         self.responses.insert(
@@ -384,7 +611,11 @@ impl ModuleBuilder {
         handler: &str,
         body: impl FnMut(&ModuleContext) + Send + 'static,
     ) -> Self {
-        self.spec.exceptions.push(handler.to_owned());
+        match self.file_declares(handler, |spec| &spec.exceptions, "exception handler") {
+            DeclaredBy::InCode => self.spec.exceptions.push(handler.to_owned()),
+            DeclaredBy::InFile => {}
+            DeclaredBy::NotInFile => return self,
+        }
         self.exceptions.insert(handler.to_owned(), Box::new(body));
         self
     }
@@ -392,12 +623,20 @@ impl ModuleBuilder {
     /// Declares a named subprogram (a section the body enters with
     /// [`ModuleContext::section`]).
     pub fn subprogram(mut self, name: &str) -> Self {
+        if let Some(file) = &mut self.file {
+            file.not_in_file(format!("subprogram `{name}`"));
+            return self;
+        }
         self.spec.subprograms.push(name.to_owned());
         self
     }
 
     /// The module's order, in the paper's notation (`ORDER(A, B, C)`) or as names.
     pub fn order(mut self, text: &str) -> Self {
+        if let Some(file) = &mut self.file {
+            file.not_in_file("an order".to_owned());
+            return self;
+        }
         match Order::parse(text) {
             Ok(order) => self.spec.order = Some(order),
             Err(err) => self.order_problem = Some(err.to_string()),
@@ -407,7 +646,14 @@ impl ModuleBuilder {
 
     /// A task created with the module, on a thread of its own.
     pub fn task(mut self, name: &str, body: impl FnOnce(&TaskContext) + Send + 'static) -> Self {
-        self.spec.tasks.push(name.to_owned());
+        match &mut self.file {
+            Some(file) if !file.tasks.iter().any(|(t, _)| t == name) => {
+                file.not_in_file(format!("task `{name}`"));
+                return self;
+            }
+            Some(_) => {}
+            None => self.spec.tasks.push(name.to_owned()),
+        }
         self.tasks.push((name.to_owned(), Box::new(body)));
         self
     }
@@ -446,7 +692,13 @@ impl ModuleBuilder {
     }
 
     fn collect_specs(&self, specs: &mut Vec<ModuleSpec>) {
-        specs.push(self.spec.clone());
+        let mut spec = self.spec.clone();
+        if self.file.is_some() {
+            // A child the file declares and the code did not give is reported as such.
+            spec.children
+                .retain(|c| self.children.iter().any(|given| given.spec.name == *c));
+        }
+        specs.push(spec);
         for child in &self.children {
             child.collect_specs(specs);
         }
@@ -460,6 +712,13 @@ impl ModuleBuilder {
                 .chain(self.exceptions.keys())
                 .map(String::as_str),
         );
+        if let Some(file) = &self.file {
+            // A port whose types are not bound is reported as such, not as unknown.
+            problems.retain(|p| {
+                !matches!(p, LoadProblem::UnknownPort { port, .. }
+                    if file.unbound.iter().any(|u| u.port == *port))
+            });
+        }
         if let Some(problem) = &self.order_problem {
             problems.push(LoadProblem::UnknownSection {
                 section: format!("(the order does not read: {problem})"),
@@ -519,6 +778,37 @@ impl ModuleBuilder {
                             step.line.map(|l| format!("line {l} ")).unwrap_or_default(),
                             call.name
                         ),
+                    });
+                }
+            }
+        }
+        problems.extend(self.misuse.iter().cloned());
+        if let Some(file) = &self.file {
+            problems.extend(file.problems.iter().cloned());
+            for port in &file.unbound {
+                problems.push(LoadProblem::Specification {
+                    at: port.at.clone(),
+                    what: format!(
+                        "port `{}` is declared here but its message types are not bound: call `.port::<Q, R>(\"{}\")` on module `{}`'s builder",
+                        port.port, port.port, self.spec.name
+                    ),
+                });
+            }
+            for (task, at) in &file.tasks {
+                if !self.tasks.iter().any(|(t, _)| t == task) {
+                    problems.push(LoadProblem::Specification {
+                        at: at.clone(),
+                        what: format!(
+                            "task `{task}` has no body: give it with `.task(\"{task}\", body)`"
+                        ),
+                    });
+                }
+            }
+            for (child, at) in &file.children {
+                if !self.children.iter().any(|c| c.spec.name == *child) {
+                    problems.push(LoadProblem::Specification {
+                        at: at.clone(),
+                        what: format!("child `{child}` is not given: build it and pass it with `.child(builder)`"),
                     });
                 }
             }

@@ -90,6 +90,10 @@ pub enum ProcessClass {
 }
 
 impl ProcessClass {
+    /// The busy-wait a tightly-coupled port is given when none is named (a module file's
+    /// `class = "tight"` without `spin_us`): 100 µs.
+    pub const DEFAULT_SPIN_US: u32 = 100;
+
     /// How long this class busy-waits before parking (zero for [`ProcessClass::Loose`]).
     pub fn spin(self) -> std::time::Duration {
         match self {

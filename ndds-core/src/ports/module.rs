@@ -163,6 +163,15 @@ pub enum LoadProblem {
         /// The child named.
         child: String,
     },
+    /// A module whose specification was read from a description file, and whose code does
+    /// not agree with it: something declared there and not given in code (a port's types, a
+    /// handler's or a task's body, a child), or declared in code and not there.
+    Specification {
+        /// Where: `FILE:LINE:COLUMN` of the declaration, or the file.
+        at: String,
+        /// What is wrong, and what to do.
+        what: String,
+    },
 }
 
 impl fmt::Display for LoadProblem {
@@ -227,6 +236,7 @@ impl fmt::Display for LoadProblem {
             ),
             LoadProblem::InChild { module, problem } => write!(f, "in `{module}`: {problem}"),
             LoadProblem::Schedule { what } => write!(f, "work schedule: {what}"),
+            LoadProblem::Specification { at, what } => write!(f, "{at}: {what}"),
             LoadProblem::UnknownChild { parent, child } => {
                 write!(
                     f,
