@@ -99,7 +99,8 @@ impl Order {
 
     /// Reads an order as the paper writes it — `ORDER(A.TIMEOUT, B, C.RESPONSE, D);`, over
     /// several lines if need be, with `--` or `#` comments — or just the list, with `,` or `;`
-    /// between the names.
+    /// between the names (a `;` after the last name ends the order). `ORDER()` is the empty
+    /// order, as an empty order displays itself.
     pub fn parse(text: &str) -> Result<Order, OrderError> {
         let tokens = tokenize(text)?;
         let mut at = 0;
@@ -120,6 +121,14 @@ impl Order {
         }
         let parenthesized = eat(&mut at, "(");
         let mut order = Order::default();
+        if parenthesized && tokens.get(at).is_some_and(|t| t.text == ")") {
+            at += 1;
+            eat(&mut at, ";");
+            if at < tokens.len() {
+                return Err(syntax(&tokens, at, "the end of the order"));
+            }
+            return Ok(order);
+        }
         loop {
             let Some(token) = tokens.get(at).filter(|t| t.is_name()) else {
                 return Err(syntax(&tokens, at, "a section name"));
@@ -132,7 +141,14 @@ impl Order {
             }
             order.names.push(token.text.clone());
             at += 1;
-            if eat(&mut at, ",") || (parenthesized && eat(&mut at, ";")) {
+            if eat(&mut at, ",") {
+                continue;
+            }
+            // `;` separates names; in a bare list, one that no name follows ends the order.
+            if tokens.get(at).is_some_and(|t| t.text == ";")
+                && (parenthesized || tokens.get(at + 1).is_some_and(Token::is_name))
+            {
+                at += 1;
                 continue;
             }
             break;
@@ -414,6 +430,17 @@ INSERT);                        -- inserts a chip at X,Y,Z.
         // The grammar's `;` between names, and a bare list.
         assert_eq!(Order::parse("(A; B; C)").unwrap().names(), ["A", "B", "C"]);
         assert_eq!(Order::parse("A, B").unwrap().names(), ["A", "B"]);
+        assert_eq!(Order::parse("A; B").unwrap().names(), ["A", "B"]);
+        assert_eq!(Order::parse("A; B;").unwrap().names(), ["A", "B"]);
+        assert_eq!(Order::parse("A, B;").unwrap().names(), ["A", "B"]);
+        assert!(Order::parse("A; B; ;").is_err());
+        // The empty order reads back as it displays.
+        let empty = Order::default();
+        assert_eq!(empty.to_string(), "ORDER()");
+        assert_eq!(Order::parse(&empty.to_string()).unwrap(), empty);
+        assert_eq!(Order::parse("();").unwrap(), empty);
+        assert!(Order::parse("ORDER() B").is_err());
+        assert!(Order::parse("").is_err());
     }
 
     #[test]
@@ -597,6 +624,14 @@ INSERT);                        -- inserts a chip at X,Y,Z.
         #[test]
         fn no_text_panics_the_reader(text in "\\PC{0,200}") {
             let _ = Order::parse(&text);
+        }
+
+        #[test]
+        fn every_order_reads_back_as_it_displays(
+            names in proptest::collection::btree_set("[A-Z][A-Z0-9_]{0,6}(\\.[A-Z]{1,8})?", 0..8)
+        ) {
+            let order = Order::new(names).unwrap();
+            proptest::prop_assert_eq!(Order::parse(&order.to_string()).unwrap(), order);
         }
     }
 }
