@@ -1616,3 +1616,47 @@ fn a_users_filter_that_accepts_sends_on_without_waiting_for_the_owner() {
         .collect();
     assert_eq!(got, [1001, 1002, 1003]);
 }
+
+#[test]
+fn a_message_taken_while_the_owner_is_in_question_is_answered_by_the_next_receive() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "held");
+    let parent = Arc::new(PortOwner::<u32, u32>::declare(&p, "held", "parent").unwrap());
+    let child = Arc::new(
+        PortUser::<u32, u32>::declare_with(&p, "held", "child", &[Usage::Receive]).unwrap(),
+    );
+    assert!(common::eventually(WAIT, || parent.present_users().len() == 1));
+    // The user waits for a message; a second owner comes, and makes the port's owner
+    // uncertain just as the parent's message arrives: the user takes it, cannot answer it,
+    // and must not lose it.
+    let waiting = {
+        let child = Arc::clone(&child);
+        std::thread::spawn(move || child.receive(WAIT, |n| n * 2))
+    };
+    std::thread::sleep(Duration::from_millis(200)); // it waits on the topic now
+    let second = PortOwner::<u32, u32>::declare(&p, "held", "usurper").unwrap();
+    let watcher =
+        PortUser::<u32, u32>::declare_with(&p, "held", "watcher", &[Usage::Receive]).unwrap();
+    assert!(common::eventually(WAIT, || matches!(
+        watcher.receive(Duration::from_millis(10), |n| *n),
+        Err(PortError::SecondOwner { .. })
+    )));
+    let sending = {
+        let parent = Arc::clone(&parent);
+        std::thread::spawn(move || parent.send_to("child", &5, Duration::from_secs(20)))
+    };
+    let taken = waiting.join().unwrap();
+    assert!(
+        matches!(taken, Err(PortError::SecondOwner { .. })),
+        "{taken:?}"
+    );
+    drop(second);
+    // The owner is clear again: the kept message is answered.
+    let mut answered = None;
+    let deadline = Instant::now() + WAIT;
+    while answered.is_none() && Instant::now() < deadline {
+        answered = child.receive(Duration::from_millis(500), |n| n * 2).ok();
+    }
+    assert_eq!(answered, Some(5));
+    assert_eq!(sending.join().unwrap().unwrap(), 10);
+}

@@ -1,7 +1,7 @@
 //! [`PortUser`]: a task that uses a port — `send` blocks until the owner replies (or the
 //! timeout). Several threads may send through one user at once; each gets its own reply.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
@@ -20,6 +20,10 @@ use crate::{Consumer, Event, Guid, Notification, Participant, Producer, TypeDesc
 /// How long a user of a port with a maximum of active users waits to be admitted once it
 /// knows the owner; past that, the port is full.
 pub const ADMISSION_WAIT: Duration = Duration::from_secs(1);
+
+/// Messages from the owner a user keeps for its next call when they cannot be answered yet,
+/// per operation, at most.
+pub const HELD_MESSAGES: usize = 16;
 
 /// A user of a port: sends requests of type `Q`, gets replies of type `R`.
 pub struct PortUser<Q, R> {
@@ -63,6 +67,10 @@ struct Demux {
     first_seen: HashMap<Guid, Instant>,
     /// Not admitted yet by a port with a maximum of active users: refused from then on.
     admission_ends: Option<Instant>,
+    /// Messages from the owner taken off their topic that could not be answered then (the
+    /// owner was in question: a second owner, a refusal): the next `receive` or
+    /// `receive_all` tries them first (per operation, at most [`HELD_MESSAGES`]).
+    held: HashMap<&'static str, VecDeque<Broadcast>>,
 }
 
 /// Forgets a request's reply when its sender stops waiting (also when an async `send` is
@@ -633,11 +641,21 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             waited: start.elapsed(),
         };
         let broadcast = loop {
-            let broadcast = wait::timeout_at(deadline, wait::next_sample(source))
-                .await
-                .flatten()
-                .ok_or_else(timed_out)?
-                .value;
+            let held = self
+                .demux()
+                .held
+                .get_mut(operation)
+                .and_then(VecDeque::pop_front);
+            let broadcast = match held {
+                Some(broadcast) => broadcast,
+                None => {
+                    wait::timeout_at(deadline, wait::next_sample(source))
+                        .await
+                        .flatten()
+                        .ok_or_else(timed_out)?
+                        .value
+                }
+            };
             // The owner is known once its message came, but it may not have heard (admitted)
             // this user yet: a reply sent now would be dropped as from a stranger. Refused,
             // the message is not answered; one from an owner replaced meanwhile is skipped.
@@ -648,8 +666,17 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 Ok(true) => break broadcast,
                 Ok(false) => {}
                 Err(err) => {
-                    tracing::warn!(port = %self.port, user = %self.task, error = %err,
-                        "a message from the owner could not be answered: dropped");
+                    // Kept, not lost: the next call answers it once the owner is clear.
+                    let mut demux = self.demux();
+                    let held = demux.held.entry(operation).or_default();
+                    held.push_front(broadcast);
+                    if held.len() > HELD_MESSAGES {
+                        held.pop_back();
+                        tracing::warn!(port = %self.port, user = %self.task,
+                            "too many messages from the owner wait to be answered: the newest dropped");
+                    }
+                    tracing::debug!(port = %self.port, user = %self.task, error = %err,
+                        "a message from the owner cannot be answered yet: kept for the next call");
                     return Err(err);
                 }
             }
