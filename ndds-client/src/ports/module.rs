@@ -415,7 +415,8 @@ impl ModuleBuilder {
         }
     }
 
-    /// The module owns `port`, with `restrictions` (its usages, timeout, ...).
+    /// The module owns `port`, with `restrictions` (its usages, timeout, ...). A module read
+    /// from a specification file declares its ports there instead ([`port`](Self::port)).
     pub fn owns<Q, R>(mut self, port: &str, restrictions: Restrictions) -> Self
     where
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,
@@ -529,7 +530,8 @@ impl ModuleBuilder {
     }
 
     /// The module uses `port` with `usages`; `timeout`, if given, bounds every operation on
-    /// it through the module context (and allows a `PORT.TIMEOUT` handler).
+    /// it through the module context (and allows a `PORT.TIMEOUT` handler). A module read
+    /// from a specification file declares its ports there instead ([`port`](Self::port)).
     pub fn uses<Q, R>(mut self, port: &str, usages: &[Usage], timeout: Option<Duration>) -> Self
     where
         Q: Serialize + DeserializeOwned + Send + Sync + 'static,

@@ -422,7 +422,9 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     /// (see [`RequestFilter`](super::RequestFilter)): every request goes through `filter`,
     /// which passes it on, answers it or refuses it. Returns the owner and the port `FILTER`
     /// through which the owner's module talks to its filter. The restrictions' `filter` is
-    /// set to [`Filter::Task`], so users and `ndds ports` see that a filter sits there.
+    /// set to what the filter declares ([`RequestFilter::declared`](super::RequestFilter::declared):
+    /// [`Filter::Task`] unless it says otherwise), so users and `ndds ports` see that a filter
+    /// sits there, and its usages (if it has any) replace the restrictions' `usages`.
     pub fn declare_filtered<F>(
         participant: &Participant,
         port: &str,
