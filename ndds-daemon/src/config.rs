@@ -230,6 +230,13 @@ impl ConfigFile {
                 .identity
                 .unwrap_or_else(security::default_identity_path);
             let (identity, created) = security::load_or_create_identity(&identity_file)?;
+            // The agreement key is this run's (forward secrecy: docs/security.md).
+            let session =
+                crate::keys::random_bytes().map_err(|source| security::SecurityError::Io {
+                    path: "/dev/urandom".into(),
+                    source,
+                })?;
+            let identity = identity.with_session_agreement(session);
             if created {
                 tracing::info!(
                     file = %identity_file.display(),

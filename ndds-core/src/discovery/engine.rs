@@ -1091,7 +1091,7 @@ impl Engine {
             return None;
         }
         let shared = match theirs.origin {
-            Origin::Local => guard.identity.derive(b"local data pairs"),
+            Origin::Local => guard.identity.derive_agreement(b"local data pairs"),
             Origin::Remote(node) => self.nodes.get(&node)?.shared?.0,
         };
         Some(DataKeys::derive(

@@ -98,6 +98,9 @@ impl<'de> serde::Deserialize<'de> for PublicId {
 #[derive(Clone)]
 pub struct Identity {
     key: ed25519_dalek::SigningKey,
+    /// The secret of the X25519 agreement key: derived from the identity's secret, or drawn
+    /// for one run of a daemon ([`Identity::with_session_agreement`]).
+    agreement_secret: [u8; 32],
     /// The public half of the agreement key (computed once: every signed datagram carries it).
     agreement: [u8; 32],
 }
@@ -108,10 +111,29 @@ impl Identity {
     pub fn from_secret(secret: [u8; 32]) -> Self {
         let mut identity = Identity {
             key: ed25519_dalek::SigningKey::from_bytes(&secret),
+            agreement_secret: [0; 32],
             agreement: [0; 32],
         };
-        identity.agreement = x25519_dalek::PublicKey::from(&identity.agreement_secret()).to_bytes();
+        let derived = identity.derive(b"x25519 agreement");
+        identity.set_agreement(derived);
         identity
+    }
+
+    /// The same identity with an agreement key of this run only, its secret `random` (32
+    /// bytes from the operating system's random source, never written anywhere). A daemon
+    /// takes one at each start: the secrets it shares with other daemons, and the data keys
+    /// derived from them, then come from keys that die with the process, so someone who later
+    /// steals the identity file cannot open data recorded before (forward secrecy, per run of
+    /// the daemon). The agreement key is announced signed by the identity, so peers trust it
+    /// as they trust the identity.
+    pub fn with_session_agreement(mut self, random: [u8; 32]) -> Self {
+        self.set_agreement(random);
+        self
+    }
+
+    fn set_agreement(&mut self, secret: [u8; 32]) {
+        self.agreement_secret = secret;
+        self.agreement = x25519_dalek::PublicKey::from(&self.agreement_secret()).to_bytes();
     }
 
     /// The public half.
@@ -166,7 +188,19 @@ impl Identity {
     }
 
     fn agreement_secret(&self) -> x25519_dalek::StaticSecret {
-        x25519_dalek::StaticSecret::from(self.derive(b"x25519 agreement"))
+        x25519_dalek::StaticSecret::from(self.agreement_secret)
+    }
+
+    /// 32 secret bytes for `purpose`, derived from the agreement key's secret: of this run
+    /// only when the agreement key is a session's (the data keys of two participants of one
+    /// daemon).
+    pub fn derive_agreement(&self, purpose: &[u8]) -> [u8; 32] {
+        let hkdf =
+            hkdf::Hkdf::<sha2::Sha256>::new(Some(b"ndds-agreement-v1"), &self.agreement_secret);
+        let mut out = [0u8; 32];
+        // 32 bytes is far below HKDF-SHA256's limit: this cannot fail.
+        let _ = hkdf.expand(purpose, &mut out);
+        out
     }
 
     /// The text of an identity file: the secret and, for reading by eye, the public key.
@@ -240,4 +274,43 @@ pub enum IdentityFileError {
     /// The `public` line is not the secret's public key.
     #[error("the `public` line is not the public key of the `secret` line (edited by hand?)")]
     Mismatch,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_identities_agree_on_their_secret_and_a_session_key_keeps_it_from_the_file() {
+        let (a, b) = (Identity::from_secret([1; 32]), Identity::from_secret([2; 32]));
+        let shared = a.shared_secret(&b.agreement_public()).unwrap();
+        assert_eq!(b.shared_secret(&a.agreement_public()), Some(shared));
+        // A daemon's run draws its agreement key: the two runs still agree with each other ...
+        let (a_run, b_run) = (
+            a.clone().with_session_agreement([3; 32]),
+            b.clone().with_session_agreement([4; 32]),
+        );
+        assert_eq!(a_run.public(), a.public(), "the identity is the same");
+        let run_shared = a_run.shared_secret(&b_run.agreement_public()).unwrap();
+        assert_eq!(
+            b_run.shared_secret(&a_run.agreement_public()),
+            Some(run_shared)
+        );
+        // ... and what the identity files give cannot make that secret: neither side's file
+        // with the other's announced key, nor the files' own agreement keys.
+        let a_file = Identity::parse(&a.to_file_text()).unwrap();
+        assert_ne!(a_file.agreement_public(), a_run.agreement_public());
+        assert_ne!(
+            a_file.shared_secret(&b_run.agreement_public()),
+            Some(run_shared)
+        );
+        assert_ne!(shared, run_shared);
+        // Two participants of one daemon: their keys are of the run too.
+        assert_ne!(
+            a_run.derive_agreement(b"local data pairs"),
+            a_file.derive_agreement(b"local data pairs")
+        );
+        // A low-order peer key gives no secret.
+        assert_eq!(a_run.shared_secret(&[0; 32]), None);
+    }
 }
