@@ -290,7 +290,12 @@ fn named_example_files_exist() {
                 {
                     count += 1;
                     let path = &word[start..];
-                    if !root.join(path).exists() && !root.join("examples").join(path).exists() {
+                    // As written from the repository's root (`ndds-client/examples/...`), or
+                    // from `examples/`.
+                    if !root.join(word).exists()
+                        && !root.join(path).exists()
+                        && !root.join("examples").join(path).exists()
+                    {
                         problems.at(&doc, line, format!("`{path}` does not exist"));
                     }
                 }
