@@ -6,9 +6,9 @@
 //! SHARE_FEEDER queries under their `order`, and a work schedule of chips).
 //!
 //! ```text
-//! cargo run -p ndds-client --example chip_line                 # every module, 6 pallets
-//! cargo run -p ndds-client --example chip_line -- --pallets 20 --feeder4 5
-//! cargo run -p ndds-client --example chip_line -- --spec my_line.toml
+//! cargo run -p ndds-client --features module-files --example chip_line    # every module, 6 pallets
+//! cargo run -p ndds-client --features module-files --example chip_line -- --pallets 20 --feeder4 5
+//! cargo run -p ndds-client --features module-files --example chip_line -- --spec my_line.toml
 //! ```
 //!
 //! The modules' specifications — tasks, ports and their restrictions, handlers, subprograms,

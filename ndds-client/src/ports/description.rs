@@ -6,6 +6,9 @@
 //! child — and [`ModuleBuilder::load`] reports every disagreement between the two, with where
 //! the declaration was written (see docs/ports.md, "Module specifications in a file").
 //!
+//! Reading the files takes the crate's `module-files` feature (off by default, so that a
+//! program that only publishes compiles no TOML); `ndds modules --check` has it.
+//!
 //! ```toml
 //! [[module]]
 //! name = "CHIP_IT"
@@ -28,19 +31,13 @@
 //! timeout = 3.0
 //! ```
 
-use std::collections::BTreeSet;
-use std::ops::Range;
-use std::path::{Path, PathBuf};
+#![cfg_attr(not(feature = "module-files"), allow(dead_code))]
+
 use std::time::Duration;
 
 use ndds_core::ports::Usage;
-use serde::Deserialize;
-use toml::Spanned;
 
-use super::wire::{Filter, ProcessClass, Restrictions};
-
-/// Largest module file read, in bytes.
-const MAX_FILE: u64 = 1 << 20;
+use super::wire::Restrictions;
 
 /// A module file that cannot be used: every problem found, each with where it was written.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -91,157 +88,7 @@ pub(crate) enum FileEnd {
     },
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Doc {
-    #[serde(default)]
-    module: Vec<Spanned<ModuleDoc>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ModuleDoc {
-    name: Spanned<String>,
-    #[serde(default)]
-    tasks: Vec<Spanned<String>>,
-    #[serde(default)]
-    subprograms: Vec<Spanned<String>>,
-    #[serde(default)]
-    responses: Vec<Spanned<String>>,
-    #[serde(default)]
-    exceptions: Vec<Spanned<String>>,
-    order: Option<Spanned<String>>,
-    schedule: Option<Spanned<String>>,
-    schedule_file: Option<Spanned<String>>,
-    #[serde(default)]
-    children: Vec<Spanned<String>>,
-    #[serde(default)]
-    owns: Vec<Spanned<PortDoc>>,
-    #[serde(default)]
-    uses: Vec<Spanned<PortDoc>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PortDoc {
-    port: Spanned<String>,
-    #[serde(default)]
-    usages: Vec<Spanned<String>>,
-    #[serde(default)]
-    users: Vec<String>,
-    max_users: Option<u32>,
-    timeout: Option<Spanned<f64>>,
-    priority: Option<i32>,
-    class: Option<Spanned<String>>,
-    spin_us: Option<Spanned<u32>>,
-    buffer: Option<Spanned<u32>>,
-}
-
-/// Turns byte offsets into `FILE:LINE:COLUMN` and collects problems.
-struct Places<'a> {
-    path: &'a str,
-    text: &'a str,
-    problems: Vec<String>,
-}
-
-impl Places<'_> {
-    fn at(&self, span: Range<usize>) -> String {
-        let before = &self.text[..span.start.min(self.text.len())];
-        let line = before.matches('\n').count() + 1;
-        let column = before
-            .rsplit_once('\n')
-            .map_or(before, |(_, last)| last)
-            .chars()
-            .count()
-            + 1;
-        format!("{}:{line}:{column}", self.path)
-    }
-
-    fn problem(&mut self, span: Range<usize>, what: impl std::fmt::Display) {
-        let at = self.at(span);
-        self.problems.push(format!("{at}: {what}"));
-    }
-}
-
 impl ModuleFile {
-    /// Reads and checks `path` (at most 1 MiB). A schedule file it names is read relative to
-    /// it.
-    pub fn read(path: impl AsRef<Path>) -> Result<Self, ModuleFileError> {
-        let path = path.as_ref();
-        let shown = path.display().to_string();
-        let fail = |what: String| ModuleFileError {
-            problems: vec![format!("{shown}: {what}")],
-        };
-        let meta = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?;
-        if !meta.is_file() {
-            return Err(fail("not a regular file".to_owned()));
-        }
-        if meta.len() > MAX_FILE {
-            return Err(fail(format!(
-                "{} bytes: larger than the {MAX_FILE} a module file may have",
-                meta.len()
-            )));
-        }
-        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
-        Self::parse_at(&shown, &text, path.parent().map(Path::to_path_buf))
-    }
-
-    /// Reads `text` as a module file named `name` in messages (schedule files are then read
-    /// relative to the current directory).
-    pub fn parse(name: &str, text: &str) -> Result<Self, ModuleFileError> {
-        Self::parse_at(name, text, None)
-    }
-
-    fn parse_at(name: &str, text: &str, dir: Option<PathBuf>) -> Result<Self, ModuleFileError> {
-        let mut places = Places {
-            path: name,
-            text,
-            problems: Vec::new(),
-        };
-        let doc: Doc = match toml::from_str(text) {
-            Ok(doc) => doc,
-            Err(err) => {
-                let what = err.message().to_owned();
-                match err.span() {
-                    Some(span) => places.problem(span, what),
-                    None => places.problems.push(format!("{name}: {what}")),
-                }
-                return Err(ModuleFileError {
-                    problems: places.problems,
-                });
-            }
-        };
-        let mut modules: Vec<FileModule> = Vec::new();
-        if doc.module.is_empty() {
-            places
-                .problems
-                .push(format!("{name}: no [[module]] table: nothing to load"));
-        }
-        for module in doc.module {
-            let span = module.span();
-            let read = read_module(module.into_inner(), span, &mut places, dir.as_deref());
-            if let Some(first) = modules.iter().find(|m| m.name == read.name) {
-                let what = format!(
-                    "module `{}` is declared twice (first at {})",
-                    read.name, first.at
-                );
-                places.problems.push(format!("{}: {what}", read.at));
-                continue;
-            }
-            modules.push(read);
-        }
-        if places.problems.is_empty() {
-            Ok(ModuleFile {
-                path: name.to_owned(),
-                modules,
-            })
-        } else {
-            Err(ModuleFileError {
-                problems: places.problems,
-            })
-        }
-    }
-
     /// The file's name, as messages give it.
     pub fn path(&self) -> &str {
         &self.path
@@ -344,280 +191,457 @@ impl FileModule {
     }
 }
 
-fn read_module(
-    doc: ModuleDoc,
-    span: Range<usize>,
-    places: &mut Places<'_>,
-    dir: Option<&Path>,
-) -> FileModule {
-    let at = places.at(span);
-    let names = |list: Vec<Spanned<String>>, kind: &str, places: &mut Places<'_>| {
-        let mut seen = BTreeSet::new();
-        let mut out = Vec::new();
-        for name in list {
-            let span = name.span();
-            let name = name.into_inner();
-            if !good_name(&name) {
-                places.problem(
-                    span.clone(),
-                    format!(
-                        "{kind} `{name}`: names are letters, digits, `_`, `-` and `.`, not empty"
-                    ),
-                );
-            } else if !seen.insert(name.clone()) {
-                places.problem(span.clone(), format!("{kind} `{name}` is declared twice"));
-            } else {
-                out.push((name, places.at(span)));
-            }
-        }
-        out
-    };
-    let name_span = doc.name.span();
-    let name = doc.name.into_inner();
-    if !good_name(&name) {
-        places.problem(
-            name_span,
-            format!("module name `{name}`: names are letters, digits, `_`, `-` and `.`, not empty"),
-        );
+/// Reading module files (the `module-files` feature).
+#[cfg(feature = "module-files")]
+mod reader {
+    use std::collections::BTreeSet;
+    use std::ops::Range;
+    use std::path::{Path, PathBuf};
+    use std::time::Duration;
+
+    use ndds_core::ports::Usage;
+    use serde::Deserialize;
+    use toml::Spanned;
+
+    use super::{FileEnd, FileModule, FilePort, ModuleFile, ModuleFileError};
+    use crate::ports::wire::{Filter, ProcessClass, Restrictions};
+
+    /// Largest module file read, in bytes.
+    const MAX_FILE: u64 = 1 << 20;
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Doc {
+        #[serde(default)]
+        module: Vec<Spanned<ModuleDoc>>,
     }
-    let mut module = FileModule {
-        name,
-        at,
-        tasks: names(doc.tasks, "task", places),
-        subprograms: strip(names(doc.subprograms, "subprogram", places)),
-        responses: strip(names(doc.responses, "response handler", places)),
-        exceptions: strip(names(doc.exceptions, "exception handler", places)),
-        children: names(doc.children, "child", places),
-        ..FileModule::default()
-    };
-    for handler in &module.responses {
-        if !handler.contains('.') {
-            let at = module.at.clone();
-            places.problems.push(format!(
-                "{at}: response handler `{handler}` should be named `PORT.NAME`"
-            ));
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct ModuleDoc {
+        name: Spanned<String>,
+        #[serde(default)]
+        tasks: Vec<Spanned<String>>,
+        #[serde(default)]
+        subprograms: Vec<Spanned<String>>,
+        #[serde(default)]
+        responses: Vec<Spanned<String>>,
+        #[serde(default)]
+        exceptions: Vec<Spanned<String>>,
+        order: Option<Spanned<String>>,
+        schedule: Option<Spanned<String>>,
+        schedule_file: Option<Spanned<String>>,
+        #[serde(default)]
+        children: Vec<Spanned<String>>,
+        #[serde(default)]
+        owns: Vec<Spanned<PortDoc>>,
+        #[serde(default)]
+        uses: Vec<Spanned<PortDoc>>,
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct PortDoc {
+        port: Spanned<String>,
+        #[serde(default)]
+        usages: Vec<Spanned<String>>,
+        #[serde(default)]
+        users: Vec<String>,
+        max_users: Option<u32>,
+        timeout: Option<Spanned<f64>>,
+        priority: Option<i32>,
+        class: Option<Spanned<String>>,
+        spin_us: Option<Spanned<u32>>,
+        buffer: Option<Spanned<u32>>,
+    }
+
+    /// Turns byte offsets into `FILE:LINE:COLUMN` and collects problems.
+    struct Places<'a> {
+        path: &'a str,
+        text: &'a str,
+        problems: Vec<String>,
+    }
+
+    impl Places<'_> {
+        fn at(&self, span: Range<usize>) -> String {
+            let before = &self.text[..span.start.min(self.text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before
+                .rsplit_once('\n')
+                .map_or(before, |(_, last)| last)
+                .chars()
+                .count()
+                + 1;
+            format!("{}:{line}:{column}", self.path)
+        }
+
+        fn problem(&mut self, span: Range<usize>, what: impl std::fmt::Display) {
+            let at = self.at(span);
+            self.problems.push(format!("{at}: {what}"));
         }
     }
-    for handler in &module.exceptions {
-        if !handler.ends_with(".TIMEOUT") {
-            let at = module.at.clone();
-            places.problems.push(format!(
-                "{at}: exception handler `{handler}` should be named `PORT.TIMEOUT`"
-            ));
-        }
-    }
-    if let Some(order) = doc.order {
-        let span = order.span();
-        let text = order.into_inner();
-        match ndds_core::ports::Order::parse(&text) {
-            Ok(_) => module.order = Some(text),
-            Err(err) => places.problem(span, format!("the order does not read: {err}")),
-        }
-    }
-    match (doc.schedule, doc.schedule_file) {
-        (Some(_), Some(file)) => places.problem(
-            file.span(),
-            "`schedule` and `schedule_file` both given: keep one",
-        ),
-        (Some(text), None) => {
-            let span = text.span();
-            let text = text.into_inner();
-            match ndds_core::ports::WorkSchedule::parse(&text) {
-                Ok(_) => module.schedule = Some(text),
-                Err(err) => places.problem(span, format!("the work schedule does not read: {err}")),
-            }
-        }
-        (None, Some(file)) => {
-            let span = file.span();
-            let relative = PathBuf::from(file.into_inner());
-            let path = match dir {
-                Some(dir) if relative.is_relative() => dir.join(&relative),
-                _ => relative,
+
+    impl ModuleFile {
+        /// Reads and checks `path` (at most 1 MiB). A schedule file it names is read relative to
+        /// it.
+        pub fn read(path: impl AsRef<Path>) -> Result<Self, ModuleFileError> {
+            let path = path.as_ref();
+            let shown = path.display().to_string();
+            let fail = |what: String| ModuleFileError {
+                problems: vec![format!("{shown}: {what}")],
             };
-            match std::fs::read_to_string(&path) {
-                Ok(text) => match ndds_core::ports::WorkSchedule::parse(&text) {
-                    Ok(_) => module.schedule = Some(text),
-                    Err(err) => places.problem(
-                        span,
-                        format!("the work schedule {} does not read: {err}", path.display()),
-                    ),
-                },
-                Err(err) => places.problem(span, format!("{}: {err}", path.display())),
+            let meta = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?;
+            if !meta.is_file() {
+                return Err(fail("not a regular file".to_owned()));
             }
-        }
-        (None, None) => {}
-    }
-    let mut seen = BTreeSet::new();
-    for (port, owner) in doc
-        .owns
-        .into_iter()
-        .map(|p| (p, true))
-        .chain(doc.uses.into_iter().map(|p| (p, false)))
-    {
-        let span = port.span();
-        if let Some(read) = read_port(port.into_inner(), span.clone(), owner, places) {
-            if !seen.insert(read.port.clone()) {
-                places.problem(
-                    span,
-                    format!("port `{}` is declared twice in this module", read.port),
-                );
-                continue;
+            if meta.len() > MAX_FILE {
+                return Err(fail(format!(
+                    "{} bytes: larger than the {MAX_FILE} a module file may have",
+                    meta.len()
+                )));
             }
-            module.ports.push(read);
+            let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+            Self::parse_at(&shown, &text, path.parent().map(Path::to_path_buf))
         }
-    }
-    module
-}
 
-fn strip(named: Vec<(String, String)>) -> Vec<String> {
-    named.into_iter().map(|(name, _)| name).collect()
-}
+        /// Reads `text` as a module file named `name` in messages (schedule files are then read
+        /// relative to the current directory).
+        pub fn parse(name: &str, text: &str) -> Result<Self, ModuleFileError> {
+            Self::parse_at(name, text, None)
+        }
 
-fn read_port(
-    doc: PortDoc,
-    span: Range<usize>,
-    owner: bool,
-    places: &mut Places<'_>,
-) -> Option<FilePort> {
-    let before = places.problems.len();
-    let port_span = doc.port.span();
-    let port = doc.port.into_inner();
-    if !good_name(&port) {
-        places.problem(
-            port_span,
-            format!("port `{port}`: names are letters, digits, `_`, `-` and `.`, not empty"),
-        );
-    }
-    let mut usages = Vec::new();
-    for usage in doc.usages {
-        let span = usage.span();
-        match parse_usage(usage.get_ref()) {
-            Some(u) if owner && u == Usage::ReceiveAll => places.problem(
-                span,
-                "`receive_all` is a user's usage; an owner sends to all with `sendall` or `callall`",
-            ),
-            Some(u) if !owner && !u.of_user() => places.problem(
-                span,
-                format!("`{}` is an owner's usage, not a user's", usage.get_ref()),
-            ),
-            Some(u) if usages.contains(&u) => {
-                places.problem(span, format!("usage `{}` is given twice", usage.get_ref()))
-            }
-            Some(u) => usages.push(u),
-            None => places.problem(
-                span,
-                format!(
-                    "unknown usage `{}`; expected one of send, receive, query, response, sendall, callall, receive_all",
-                    usage.get_ref()
-                ),
-            ),
-        }
-    }
-    let timeout = match doc.timeout {
-        Some(t) if !(t.get_ref().is_finite() && (0.001..=86_400.0).contains(t.get_ref())) => {
-            places.problem(t.span(), "a timeout is in seconds, from 0.001 to 86400");
-            None
-        }
-        Some(t) => Some(Duration::from_secs_f64(*t.get_ref())),
-        None => None,
-    };
-    let owner_only = [
-        ("users", !doc.users.is_empty()),
-        ("max_users", doc.max_users.is_some()),
-        ("priority", doc.priority.is_some()),
-        ("class", doc.class.is_some()),
-        ("spin_us", doc.spin_us.is_some()),
-        ("buffer", doc.buffer.is_some()),
-    ];
-    if !owner {
-        for (key, given) in owner_only {
-            if given {
-                places.problem(
-                    span.clone(),
-                    format!("`{key}` is a restriction of the port's owner: give it under [[module.owns]]"),
-                );
-            }
-        }
-    }
-    let class = match (doc.class, doc.spin_us) {
-        (None, None) => ProcessClass::Loose,
-        (None, Some(spin)) => {
-            places.problem(spin.span(), "`spin_us` goes with class = \"tight\"");
-            ProcessClass::Loose
-        }
-        (Some(class), spin) => match class.get_ref().as_str() {
-            "loose" => {
-                if let Some(spin) = spin {
-                    places.problem(spin.span(), "`spin_us` goes with class = \"tight\"");
+        fn parse_at(name: &str, text: &str, dir: Option<PathBuf>) -> Result<Self, ModuleFileError> {
+            let mut places = Places {
+                path: name,
+                text,
+                problems: Vec::new(),
+            };
+            let doc: Doc = match toml::from_str(text) {
+                Ok(doc) => doc,
+                Err(err) => {
+                    let what = err.message().to_owned();
+                    match err.span() {
+                        Some(span) => places.problem(span, what),
+                        None => places.problems.push(format!("{name}: {what}")),
+                    }
+                    return Err(ModuleFileError {
+                        problems: places.problems,
+                    });
                 }
-                ProcessClass::Loose
+            };
+            let mut modules: Vec<FileModule> = Vec::new();
+            if doc.module.is_empty() {
+                places
+                    .problems
+                    .push(format!("{name}: no [[module]] table: nothing to load"));
             }
-            "tight" => ProcessClass::Tight {
-                spin_us: spin.map_or(ProcessClass::DEFAULT_SPIN_US, |s| *s.get_ref()),
-            },
-            other => {
-                places.problem(
-                    class.span(),
-                    format!("unknown class `{other}`; expected \"loose\" or \"tight\""),
-                );
-                ProcessClass::Loose
+            for module in doc.module {
+                let span = module.span();
+                let read = read_module(module.into_inner(), span, &mut places, dir.as_deref());
+                if let Some(first) = modules.iter().find(|m| m.name == read.name) {
+                    let what = format!(
+                        "module `{}` is declared twice (first at {})",
+                        read.name, first.at
+                    );
+                    places.problems.push(format!("{}: {what}", read.at));
+                    continue;
+                }
+                modules.push(read);
             }
-        },
-    };
-    let filter = match doc.buffer {
-        Some(b) if *b.get_ref() == 0 => {
-            places.problem(b.span(), "a buffer holds at least 1 request");
-            None
+            if places.problems.is_empty() {
+                Ok(ModuleFile {
+                    path: name.to_owned(),
+                    modules,
+                })
+            } else {
+                Err(ModuleFileError {
+                    problems: places.problems,
+                })
+            }
         }
-        Some(b) => Some(Filter::BoundedBuffer {
-            capacity: *b.get_ref(),
-        }),
-        None => None,
-    };
-    if places.problems.len() > before {
-        return None;
     }
-    let at = places.at(span);
-    let end = if owner {
-        FileEnd::Owner(Restrictions {
-            usages,
-            users: doc.users,
-            max_users: doc.max_users,
-            timeout_ms: timeout.map(|t| u64::try_from(t.as_millis()).unwrap_or(u64::MAX).max(1)),
-            priority: doc.priority,
-            filter,
-            class,
+
+    fn read_module(
+        doc: ModuleDoc,
+        span: Range<usize>,
+        places: &mut Places<'_>,
+        dir: Option<&Path>,
+    ) -> FileModule {
+        let at = places.at(span);
+        let names = |list: Vec<Spanned<String>>, kind: &str, places: &mut Places<'_>| {
+            let mut seen = BTreeSet::new();
+            let mut out = Vec::new();
+            for name in list {
+                let span = name.span();
+                let name = name.into_inner();
+                if !good_name(&name) {
+                    places.problem(
+                        span.clone(),
+                        format!(
+                            "{kind} `{name}`: names are letters, digits, `_`, `-` and `.`, not empty"
+                        ),
+                    );
+                } else if !seen.insert(name.clone()) {
+                    places.problem(span.clone(), format!("{kind} `{name}` is declared twice"));
+                } else {
+                    out.push((name, places.at(span)));
+                }
+            }
+            out
+        };
+        let name_span = doc.name.span();
+        let name = doc.name.into_inner();
+        if !good_name(&name) {
+            places.problem(
+                name_span,
+                format!(
+                    "module name `{name}`: names are letters, digits, `_`, `-` and `.`, not empty"
+                ),
+            );
+        }
+        let mut module = FileModule {
+            name,
+            at,
+            tasks: names(doc.tasks, "task", places),
+            subprograms: strip(names(doc.subprograms, "subprogram", places)),
+            responses: strip(names(doc.responses, "response handler", places)),
+            exceptions: strip(names(doc.exceptions, "exception handler", places)),
+            children: names(doc.children, "child", places),
+            ..FileModule::default()
+        };
+        for handler in &module.responses {
+            if !handler.contains('.') {
+                let at = module.at.clone();
+                places.problems.push(format!(
+                    "{at}: response handler `{handler}` should be named `PORT.NAME`"
+                ));
+            }
+        }
+        for handler in &module.exceptions {
+            if !handler.ends_with(".TIMEOUT") {
+                let at = module.at.clone();
+                places.problems.push(format!(
+                    "{at}: exception handler `{handler}` should be named `PORT.TIMEOUT`"
+                ));
+            }
+        }
+        if let Some(order) = doc.order {
+            let span = order.span();
+            let text = order.into_inner();
+            match ndds_core::ports::Order::parse(&text) {
+                Ok(_) => module.order = Some(text),
+                Err(err) => places.problem(span, format!("the order does not read: {err}")),
+            }
+        }
+        match (doc.schedule, doc.schedule_file) {
+            (Some(_), Some(file)) => places.problem(
+                file.span(),
+                "`schedule` and `schedule_file` both given: keep one",
+            ),
+            (Some(text), None) => {
+                let span = text.span();
+                let text = text.into_inner();
+                match ndds_core::ports::WorkSchedule::parse(&text) {
+                    Ok(_) => module.schedule = Some(text),
+                    Err(err) => {
+                        places.problem(span, format!("the work schedule does not read: {err}"))
+                    }
+                }
+            }
+            (None, Some(file)) => {
+                let span = file.span();
+                let relative = PathBuf::from(file.into_inner());
+                let path = match dir {
+                    Some(dir) if relative.is_relative() => dir.join(&relative),
+                    _ => relative,
+                };
+                match std::fs::read_to_string(&path) {
+                    Ok(text) => match ndds_core::ports::WorkSchedule::parse(&text) {
+                        Ok(_) => module.schedule = Some(text),
+                        Err(err) => places.problem(
+                            span,
+                            format!("the work schedule {} does not read: {err}", path.display()),
+                        ),
+                    },
+                    Err(err) => places.problem(span, format!("{}: {err}", path.display())),
+                }
+            }
+            (None, None) => {}
+        }
+        let mut seen = BTreeSet::new();
+        for (port, owner) in doc
+            .owns
+            .into_iter()
+            .map(|p| (p, true))
+            .chain(doc.uses.into_iter().map(|p| (p, false)))
+        {
+            let span = port.span();
+            if let Some(read) = read_port(port.into_inner(), span.clone(), owner, places) {
+                if !seen.insert(read.port.clone()) {
+                    places.problem(
+                        span,
+                        format!("port `{}` is declared twice in this module", read.port),
+                    );
+                    continue;
+                }
+                module.ports.push(read);
+            }
+        }
+        module
+    }
+
+    fn strip(named: Vec<(String, String)>) -> Vec<String> {
+        named.into_iter().map(|(name, _)| name).collect()
+    }
+
+    fn read_port(
+        doc: PortDoc,
+        span: Range<usize>,
+        owner: bool,
+        places: &mut Places<'_>,
+    ) -> Option<FilePort> {
+        let before = places.problems.len();
+        let port_span = doc.port.span();
+        let port = doc.port.into_inner();
+        if !good_name(&port) {
+            places.problem(
+                port_span,
+                format!("port `{port}`: names are letters, digits, `_`, `-` and `.`, not empty"),
+            );
+        }
+        let mut usages = Vec::new();
+        for usage in doc.usages {
+            let span = usage.span();
+            match parse_usage(usage.get_ref()) {
+                Some(u) if owner && u == Usage::ReceiveAll => places.problem(
+                    span,
+                    "`receive_all` is a user's usage; an owner sends to all with `sendall` or `callall`",
+                ),
+                Some(u) if !owner && !u.of_user() => places.problem(
+                    span,
+                    format!("`{}` is an owner's usage, not a user's", usage.get_ref()),
+                ),
+                Some(u) if usages.contains(&u) => {
+                    places.problem(span, format!("usage `{}` is given twice", usage.get_ref()))
+                }
+                Some(u) => usages.push(u),
+                None => places.problem(
+                    span,
+                    format!(
+                        "unknown usage `{}`; expected one of send, receive, query, response, sendall, callall, receive_all",
+                        usage.get_ref()
+                    ),
+                ),
+            }
+        }
+        let timeout = match doc.timeout {
+            Some(t) if !(t.get_ref().is_finite() && (0.001..=86_400.0).contains(t.get_ref())) => {
+                places.problem(t.span(), "a timeout is in seconds, from 0.001 to 86400");
+                None
+            }
+            Some(t) => Some(Duration::from_secs_f64(*t.get_ref())),
+            None => None,
+        };
+        let owner_only = [
+            ("users", !doc.users.is_empty()),
+            ("max_users", doc.max_users.is_some()),
+            ("priority", doc.priority.is_some()),
+            ("class", doc.class.is_some()),
+            ("spin_us", doc.spin_us.is_some()),
+            ("buffer", doc.buffer.is_some()),
+        ];
+        if !owner {
+            for (key, given) in owner_only {
+                if given {
+                    places.problem(
+                        span.clone(),
+                        format!("`{key}` is a restriction of the port's owner: give it under [[module.owns]]"),
+                    );
+                }
+            }
+        }
+        let class = match (doc.class, doc.spin_us) {
+            (None, None) => ProcessClass::Loose,
+            (None, Some(spin)) => {
+                places.problem(spin.span(), "`spin_us` goes with class = \"tight\"");
+                ProcessClass::Loose
+            }
+            (Some(class), spin) => match class.get_ref().as_str() {
+                "loose" => {
+                    if let Some(spin) = spin {
+                        places.problem(spin.span(), "`spin_us` goes with class = \"tight\"");
+                    }
+                    ProcessClass::Loose
+                }
+                "tight" => ProcessClass::Tight {
+                    spin_us: spin.map_or(ProcessClass::DEFAULT_SPIN_US, |s| *s.get_ref()),
+                },
+                other => {
+                    places.problem(
+                        class.span(),
+                        format!("unknown class `{other}`; expected \"loose\" or \"tight\""),
+                    );
+                    ProcessClass::Loose
+                }
+            },
+        };
+        let filter = match doc.buffer {
+            Some(b) if *b.get_ref() == 0 => {
+                places.problem(b.span(), "a buffer holds at least 1 request");
+                None
+            }
+            Some(b) => Some(Filter::BoundedBuffer {
+                capacity: *b.get_ref(),
+            }),
+            None => None,
+        };
+        if places.problems.len() > before {
+            return None;
+        }
+        let at = places.at(span);
+        let end = if owner {
+            FileEnd::Owner(Restrictions {
+                usages,
+                users: doc.users,
+                max_users: doc.max_users,
+                timeout_ms: timeout
+                    .map(|t| u64::try_from(t.as_millis()).unwrap_or(u64::MAX).max(1)),
+                priority: doc.priority,
+                filter,
+                class,
+            })
+        } else {
+            FileEnd::User { usages, timeout }
+        };
+        Some(FilePort { port, at, end })
+    }
+
+    /// A usage as the file writes it (the paper's upper case works too).
+    fn parse_usage(text: &str) -> Option<Usage> {
+        Some(match text.to_ascii_lowercase().as_str() {
+            "send" => Usage::Send,
+            "receive" => Usage::Receive,
+            "query" => Usage::Query,
+            "response" => Usage::Response,
+            "sendall" | "send_all" => Usage::SendAll,
+            "callall" | "call_all" => Usage::CallAll,
+            "receive_all" | "receiveall" => Usage::ReceiveAll,
+            _ => return None,
         })
-    } else {
-        FileEnd::User { usages, timeout }
-    };
-    Some(FilePort { port, at, end })
+    }
+
+    fn good_name(name: &str) -> bool {
+        !name.is_empty()
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+    }
 }
 
-/// A usage as the file writes it (the paper's upper case works too).
-fn parse_usage(text: &str) -> Option<Usage> {
-    Some(match text.to_ascii_lowercase().as_str() {
-        "send" => Usage::Send,
-        "receive" => Usage::Receive,
-        "query" => Usage::Query,
-        "response" => Usage::Response,
-        "sendall" | "send_all" => Usage::SendAll,
-        "callall" | "call_all" => Usage::CallAll,
-        "receive_all" | "receiveall" => Usage::ReceiveAll,
-        _ => return None,
-    })
-}
-
-fn good_name(name: &str) -> bool {
-    !name.is_empty()
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
-}
-
-#[cfg(test)]
+#[cfg(all(test, feature = "module-files"))]
 mod tests {
     use super::*;
+    use crate::ports::wire::ProcessClass;
 
     const CHIP_IT: &str = r#"
 [[module]]

@@ -282,7 +282,10 @@ mod tests {
 
     #[test]
     fn two_identities_agree_on_their_secret_and_a_session_key_keeps_it_from_the_file() {
-        let (a, b) = (Identity::from_secret([1; 32]), Identity::from_secret([2; 32]));
+        let (a, b) = (
+            Identity::from_secret([1; 32]),
+            Identity::from_secret([2; 32]),
+        );
         let shared = a.shared_secret(&b.agreement_public()).unwrap();
         assert_eq!(b.shared_secret(&a.agreement_public()), Some(shared));
         // A daemon's run draws its agreement key: the two runs still agree with each other ...
