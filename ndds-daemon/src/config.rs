@@ -391,6 +391,49 @@ pub enum ConfigError {
 mod tests {
     use super::*;
 
+    #[cfg(feature = "cli")]
+    #[test]
+    fn each_run_of_a_daemon_draws_its_own_agreement_key() {
+        use ndds_core::security::{Identity, sign};
+        let dir = tempfile::tempdir().unwrap();
+        let path = |name: &str| dir.path().join(name);
+        crate::keys::create(&path("domain.key"), ndds_core::seal::Cipher::default()).unwrap();
+        let (identity, created) = security::load_or_create_identity(&path("daemon.id")).unwrap();
+        assert!(created);
+        let admin = Identity::from_secret([9; 32]);
+        let text = format!(
+            "serial = 1\ndomain = 0\nnot_before = \"2000-01-01T00:00:00Z\"\n\
+             not_after = \"2100-01-01T00:00:00Z\"\n\n[[subject]]\nname = \"a\"\nkey = \"{}\"\n\
+             publish = [\"*\"]\nsubscribe = [\"*\"]\n",
+            identity.public()
+        );
+        std::fs::write(path("permissions.toml"), sign(&text, &admin)).unwrap();
+        let run = || {
+            ConfigFile {
+                key_file: Some(path("domain.key")),
+                permissions: Some(path("permissions.toml")),
+                admin_key: Some(admin.public().to_string()),
+                identity: Some(path("daemon.id")),
+                ..Default::default()
+            }
+            .resolve()
+            .unwrap()
+            .security
+            .unwrap()
+            .identity
+        };
+        let (first, second) = (run(), run());
+        // One identity (the file's), but an agreement key of each run: not the one the file
+        // alone gives, so the file opens no data keys of either run.
+        assert_eq!(
+            (first.public(), second.public()),
+            (identity.public(), identity.public())
+        );
+        assert_ne!(first.agreement_public(), second.agreement_public());
+        assert_ne!(first.agreement_public(), identity.agreement_public());
+        assert_ne!(second.agreement_public(), identity.agreement_public());
+    }
+
     #[test]
     fn defaults_follow_the_domain() {
         let config = ConfigFile {
