@@ -599,6 +599,7 @@ fn code_that_disagrees_with_its_specification_file_is_refused_naming_where() {
     let load_card = ModuleBuilder::from_file(&p, &file, "LOAD_CARD")
         .unwrap()
         .response("ASK_CHILD1.STATUS", |()| 0u32)
+        .response("ASK_CHILD1.STATUS", |()| 1u32)
         .response("ASK_CHILD1.OTHER", |()| 0u32)
         .uses::<u32, u32>("EXTRA", &[Usage::Send], None);
     let err = ModuleBuilder::from_file(&p, &file, "LOAD_IT")
@@ -617,11 +618,12 @@ fn code_that_disagrees_with_its_specification_file_is_refused_naming_where() {
         "in `LOAD_CARD`: load_it.toml:14:10: task `FREEZE_PALLET` has no body",
         "in `LOAD_CARD`: load_it.toml: response handler `ASK_CHILD1.OTHER` is declared in code but not in the module's specification",
         "in `LOAD_CARD`: load_it.toml: used port `EXTRA` is declared in code but not in the module's specification",
+        "in `LOAD_CARD`: load_it.toml: response handler `ASK_CHILD1.STATUS` is given a body twice in code",
     ] {
         assert!(err.contains(expected), "missing {expected:?} in: {err}");
     }
     // And nothing else: every problem is said once.
-    assert_eq!(err.matches("; ").count(), 5, "{err}");
+    assert_eq!(err.matches("; ").count(), 6, "{err}");
     // A module the file does not declare.
     let err = ModuleBuilder::from_file(&p, &file, "GATE").err().unwrap();
     assert!(

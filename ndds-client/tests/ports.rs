@@ -638,6 +638,8 @@ fn a_bounded_buffer_filter_makes_sends_non_blocking_until_it_is_full() {
         },
     )
     .unwrap();
+    // The buffer keeps the usages the owner declared (none: any).
+    assert!(owner.restrictions().usages.is_empty());
     let user = PortUser::<u32, ()>::declare(&p, "conveyor", "loader").unwrap();
     // Three sends return without the owner receiving anything.
     for n in 1..=3 {

@@ -230,13 +230,6 @@ impl ConfigFile {
                 .identity
                 .unwrap_or_else(security::default_identity_path);
             let (identity, created) = security::load_or_create_identity(&identity_file)?;
-            // The agreement key is this run's (forward secrecy: docs/security.md).
-            let session =
-                crate::keys::random_bytes().map_err(|source| security::SecurityError::Io {
-                    path: "/dev/urandom".into(),
-                    source,
-                })?;
-            let identity = identity.with_session_agreement(session);
             if created {
                 tracing::info!(
                     file = %identity_file.display(),
@@ -408,20 +401,19 @@ mod tests {
             identity.public()
         );
         std::fs::write(path("permissions.toml"), sign(&text, &admin)).unwrap();
-        let run = || {
-            ConfigFile {
-                key_file: Some(path("domain.key")),
-                permissions: Some(path("permissions.toml")),
-                admin_key: Some(admin.public().to_string()),
-                identity: Some(path("daemon.id")),
-                ..Default::default()
-            }
-            .resolve()
-            .unwrap()
-            .security
-            .unwrap()
-            .identity
-        };
+        let security = ConfigFile {
+            key_file: Some(path("domain.key")),
+            permissions: Some(path("permissions.toml")),
+            admin_key: Some(admin.public().to_string()),
+            identity: Some(path("daemon.id")),
+            ..Default::default()
+        }
+        .resolve()
+        .unwrap()
+        .security
+        .unwrap();
+        // What a daemon's engine gets at each start (`Daemon::bind`): a guard of its own.
+        let run = || security.guard().unwrap().identity;
         let (first, second) = (run(), run());
         // One identity (the file's), but an agreement key of each run: not the one the file
         // alone gives, so the file opens no data keys of either run.

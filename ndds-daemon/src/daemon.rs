@@ -154,7 +154,11 @@ impl Daemon {
             );
         }
         if let Some(security) = &config.security {
-            engine.guard_with(security.guard());
+            let guard = security.guard().map_err(|source| DaemonError::Listen {
+                path: PathBuf::from("/dev/urandom"),
+                source,
+            })?;
+            engine.guard_with(guard);
             let identity = security.identity.public();
             tracing::info!(
                 %identity,

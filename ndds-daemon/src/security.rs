@@ -32,13 +32,18 @@ pub struct Security {
 }
 
 impl Security {
-    /// The engine's guard: the document's end converted to the monotonic clock.
-    pub fn guard(&self) -> ndds_core::security::Guard {
-        ndds_core::security::Guard {
-            identity: self.identity.clone(),
+    /// The engine's guard for one run of a daemon: the document's end converted to the
+    /// monotonic clock, and the identity with an agreement key drawn for this run (an error
+    /// only if the operating system's random source cannot be read).
+    pub fn guard(&self) -> Result<ndds_core::security::Guard, std::io::Error> {
+        // The agreement key is this run's, drawn here and never written: a stolen identity
+        // file opens nothing recorded (forward secrecy per run, docs/security.md).
+        let session = crate::keys::random_bytes()?;
+        Ok(ndds_core::security::Guard {
+            identity: self.identity.clone().with_session_agreement(session),
             permissions: self.permissions.clone(),
             valid_until: valid_until(&self.permissions),
-        }
+        })
     }
 }
 

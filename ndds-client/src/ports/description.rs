@@ -590,6 +590,13 @@ mod reader {
                 places.problem(b.span(), "a buffer holds at least 1 request");
                 None
             }
+            Some(b) if usages.iter().any(|u| *u != Usage::Receive) => {
+                places.problem(
+                    b.span(),
+                    "a buffer answers its senders itself: its port's usages are [\"receive\"] (or none)",
+                );
+                None
+            }
             Some(b) => Some(Filter::BoundedBuffer {
                 capacity: *b.get_ref(),
             }),
@@ -716,6 +723,11 @@ port = "Q"
 max_users = 2
 timeout = -1.0
 
+[[module.owns]]
+port = "B"
+usages = ["query"]
+buffer = 4
+
 [[module]]
 name = "A"
 "#;
@@ -729,11 +741,12 @@ name = "A"
             "bad.toml:10:10: a buffer holds at least 1 request",
             "`max_users` is a restriction of the port's owner",
             "bad.toml:15:11: a timeout is in seconds",
-            "bad.toml:17:1: module `A` is declared twice (first at bad.toml:2:1)",
+            "bad.toml:20:10: a buffer answers its senders itself",
+            "bad.toml:22:1: module `A` is declared twice (first at bad.toml:2:1)",
         ] {
             assert!(all.contains(expected), "missing {expected:?} in:\n{all}");
         }
-        assert_eq!(err.problems.len(), 8, "{all}");
+        assert_eq!(err.problems.len(), 9, "{all}");
     }
 
     #[test]

@@ -89,7 +89,7 @@ pub trait RequestFilter<Q, R>: Send + 'static {
 /// `answer()`, `()` for [`BoundedBuffer::new`]), so a `send` returns as soon as the buffer has
 /// room; when `capacity` requests wait for the owner, senders wait for room (and time out as
 /// their ports say). `Restrictions { filter: Some(Filter::BoundedBuffer { capacity }) }` on
-/// [`PortOwner::declare`](super::PortOwner::declare) splices in this filter.
+/// [`PortOwner::declare_with`](super::PortOwner::declare_with) splices in this filter.
 pub struct BoundedBuffer<R = ()> {
     capacity: usize,
     answer: Box<dyn Fn() -> Option<R> + Send>,
@@ -255,9 +255,13 @@ where
     }
 }
 
-/// Whether `filter` takes a request now (a panic says no, and is logged).
+/// Whether `filter` takes a request now (a panic says no, and is logged). Never while the
+/// owner's queue is full: what waits is held, not refused.
 fn has_room<Q, R, F: RequestFilter<Q, R>>(shared: &OwnerShared, filter: &mut F) -> bool {
     let queued = shared.queue_len();
+    if queued >= PENDING_LIMIT {
+        return false;
+    }
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| filter.room(queued)))
         .unwrap_or_else(|_| {
             tracing::error!(port = %shared.port, "the port's filter panicked saying whether it has room");
@@ -275,8 +279,9 @@ where
     let value = match postcard::from_bytes::<Q>(&request.payload) {
         Ok(value) => value,
         Err(err) => {
-            tracing::debug!(port = %shared.port, sender = %request.task, error = %err,
-                "a request the filter cannot decode: dropped");
+            // Another format than the port's: its sender is told rather than left waiting.
+            let reason = format!("the request does not decode as the port's message: {err}");
+            report(shared, send_refusal(shared, &request, reason));
             return;
         }
     };
@@ -319,12 +324,12 @@ where
         report(shared, send_refusal(shared, &request, reason));
         return;
     }
-    let answered = answer.is_some();
+    // Answered only if the answer went out: else the owner's reply still reaches the sender.
+    let mut answered = false;
     if let Some(answer) = answer {
-        report(
-            shared,
-            send_reply(shared, &request.user, &request.task, request.id, answer),
-        );
+        let sent = send_reply(shared, &request.user, &request.task, request.id, answer);
+        answered = sent.is_ok();
+        report(shared, sent);
     }
     if let Some(payload) = passed {
         request.payload = payload;

@@ -268,7 +268,7 @@ impl ModuleBuilder {
     }
 
     /// Binds port `port` of the module's specification file to request type `Q` and reply
-    /// type `Q`: it is owned or used as the file declares, with the file's restrictions
+    /// type `R`: it is owned or used as the file declares, with the file's restrictions
     /// (see [`from_file`](Self::from_file)).
     pub fn port<Q, R>(mut self, port: &str) -> Self
     where
@@ -295,6 +295,31 @@ impl ModuleBuilder {
     {
         match self.take_file_port(port) {
             Some(FileEnd::Owner(restrictions)) => {
+                // The code's filter is the one: a file's buffer, or usages other than the
+                // filter's own, would be silently replaced.
+                let own = filter.usages();
+                let what = if restrictions.filter.is_some() {
+                    Some(
+                        "has a `buffer`, and the code splices in a filter of its own: keep one"
+                            .to_owned(),
+                    )
+                } else if !own.is_empty()
+                    && !restrictions.usages.is_empty()
+                    && own != restrictions.usages
+                {
+                    Some(format!(
+                        "declares usages {:?}, and the code's filter takes the users' messages with {own:?}: declare those",
+                        restrictions.usages
+                    ))
+                } else {
+                    None
+                };
+                if let (Some(what), Some(file)) = (what, &mut self.file) {
+                    file.problems.push(LoadProblem::Specification {
+                        at: file.path.clone(),
+                        what: format!("port `{port}` {what}"),
+                    });
+                }
                 self.own_filtered_port::<Q, R, F>(port, restrictions, filter)
             }
             Some(FileEnd::User { .. }) => {
@@ -384,9 +409,14 @@ impl ModuleBuilder {
     /// A child module this one may start with [`ModuleContext::costart`]; it is checked (and
     /// its ports declared) when this one loads, with the parent.
     pub fn child(mut self, child: ModuleBuilder) -> Self {
+        let bound = self.children.iter().any(|c| c.spec.name == child.spec.name);
         match &mut self.file {
             Some(file) if !file.children.iter().any(|(c, _)| *c == child.spec.name) => {
                 file.not_in_file(format!("child `{}`", child.spec.name));
+                return self;
+            }
+            Some(_) if bound => {
+                self.bound_twice("child", &child.spec.name);
                 return self;
             }
             Some(_) => {}
@@ -394,6 +424,16 @@ impl ModuleBuilder {
         }
         self.children.push(child);
         self
+    }
+
+    /// A name of the specification file given a body (or a builder) twice.
+    fn bound_twice(&mut self, kind: &'static str, name: &str) {
+        if let Some(file) = &mut self.file {
+            file.problems.push(LoadProblem::Specification {
+                at: file.path.clone(),
+                what: format!("{kind} `{name}` is given a body twice in code"),
+            });
+        }
     }
 
     /// Where `name` (of `list`) is declared: by the code (no specification file), in the
@@ -592,6 +632,10 @@ impl ModuleBuilder {
     {
         match self.file_declares(handler, |spec| &spec.responses, "response handler") {
             DeclaredBy::InCode => self.spec.responses.push(handler.to_owned()),
+            DeclaredBy::InFile if self.responses.contains_key(handler) => {
+                self.bound_twice("response handler", handler);
+                return self;
+            }
             DeclaredBy::InFile => {}
             DeclaredBy::NotInFile => return self,
         }
@@ -615,6 +659,10 @@ impl ModuleBuilder {
     ) -> Self {
         match self.file_declares(handler, |spec| &spec.exceptions, "exception handler") {
             DeclaredBy::InCode => self.spec.exceptions.push(handler.to_owned()),
+            DeclaredBy::InFile if self.exceptions.contains_key(handler) => {
+                self.bound_twice("exception handler", handler);
+                return self;
+            }
             DeclaredBy::InFile => {}
             DeclaredBy::NotInFile => return self,
         }
@@ -648,9 +696,14 @@ impl ModuleBuilder {
 
     /// A task created with the module, on a thread of its own.
     pub fn task(mut self, name: &str, body: impl FnOnce(&TaskContext) + Send + 'static) -> Self {
+        let bound = self.tasks.iter().any(|(t, _)| t == name);
         match &mut self.file {
             Some(file) if !file.tasks.iter().any(|(t, _)| t == name) => {
                 file.not_in_file(format!("task `{name}`"));
+                return self;
+            }
+            Some(_) if bound => {
+                self.bound_twice("task", name);
                 return self;
             }
             Some(_) => {}

@@ -437,10 +437,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         R: Send + 'static,
         F: super::RequestFilter<Q, R>,
     {
-        Self::spliced(participant, port, task, restrictions, 0, filter)
+        Self::spliced(participant, port, task, restrictions, 0, filter, true)
     }
 
-    /// Declares `task` the owner with `filter` spliced in, with claim `claim`.
+    /// Declares `task` the owner with `filter` spliced in, with claim `claim`; the filter's
+    /// usages (if it has any) replace the restrictions' when `filter_usages` is true.
     fn spliced<F>(
         participant: &Participant,
         port: &str,
@@ -448,6 +449,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         mut restrictions: Restrictions,
         claim: u64,
         filter: F,
+        filter_usages: bool,
     ) -> Result<(Self, super::FilterPort<F::Message>), PortError>
     where
         Q: Send + 'static,
@@ -457,7 +459,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         restrictions.filter = Some(filter.declared());
         // Users deal with the filter: theirs are checked against its usages.
         let usages = filter.usages();
-        if !usages.is_empty() {
+        if filter_usages && !usages.is_empty() {
             restrictions.usages = usages;
         }
         let mut owner = Self::declare_plain(participant, port, task, restrictions, claim)?;
@@ -575,9 +577,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
                         got: std::any::type_name::<R>(),
                     });
                 }
+                // The port's usages stay the owner's, as they were declared.
                 let buffer = super::BoundedBuffer::<R>::unit_shaped(capacity as usize);
                 let (owner, _) =
-                    Self::spliced(participant, port, task, restrictions, claim, buffer)?;
+                    Self::spliced(participant, port, task, restrictions, claim, buffer, false)?;
                 Ok(owner)
             }
         }

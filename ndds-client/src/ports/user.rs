@@ -68,8 +68,8 @@ struct Demux {
     /// Not admitted yet by a port with a maximum of active users: refused from then on.
     admission_ends: Option<Instant>,
     /// Messages from the owner taken off their topic that could not be answered then (the
-    /// owner was in question: a second owner, a refusal): the next `receive` or
-    /// `receive_all` tries them first (per operation, at most [`HELD_MESSAGES`]).
+    /// owner was in question: a second owner): the next `receive` or `receive_all` tries them
+    /// first, while their owner is there (per operation, at most [`HELD_MESSAGES`]).
     held: HashMap<&'static str, VecDeque<Broadcast>>,
 }
 
@@ -647,6 +647,19 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
                 .get_mut(operation)
                 .and_then(VecDeque::pop_front);
             let broadcast = match held {
+                // Kept from a call that found the owner in question: worth trying again only
+                // while its owner is there (not waited for: it was heard already).
+                Some(broadcast)
+                    if !self
+                        .demux()
+                        .owners
+                        .values()
+                        .any(|o| o.incarnation == broadcast.owner) =>
+                {
+                    tracing::debug!(port = %self.port, user = %self.task,
+                        "a kept message from an owner that is gone: dropped");
+                    continue;
+                }
                 Some(broadcast) => broadcast,
                 None => {
                     wait::timeout_at(deadline, wait::next_sample(source))
@@ -665,18 +678,24 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             match self.answerable(&broadcast, operation, start, grace).await {
                 Ok(true) => break broadcast,
                 Ok(false) => {}
-                Err(err) => {
-                    // Kept, not lost: the next call answers it once the owner is clear.
+                Err(err @ PortError::SecondOwner { .. }) => {
+                    // A conflict between owners passes (one of them goes): kept, not lost, for
+                    // the next call, which answers it if its owner is the one that stays.
                     let mut demux = self.demux();
                     let held = demux.held.entry(operation).or_default();
-                    held.push_front(broadcast);
-                    if held.len() > HELD_MESSAGES {
-                        held.pop_back();
+                    if held.len() < HELD_MESSAGES {
+                        held.push_back(broadcast);
+                        tracing::debug!(port = %self.port, user = %self.task, error = %err,
+                            "a message from the owner cannot be answered yet: kept for the next call");
+                    } else {
                         tracing::warn!(port = %self.port, user = %self.task,
-                            "too many messages from the owner wait to be answered: the newest dropped");
+                            "too many messages from the owner wait to be answered: one dropped");
                     }
-                    tracing::debug!(port = %self.port, user = %self.task, error = %err,
-                        "a message from the owner cannot be answered yet: kept for the next call");
+                    return Err(err);
+                }
+                Err(err) => {
+                    tracing::warn!(port = %self.port, user = %self.task, error = %err,
+                        "a message from the owner could not be answered: dropped");
                     return Err(err);
                 }
             }

@@ -1082,7 +1082,7 @@ impl Engine {
 
     /// The data keys of the pair of `local`'s participant and `other`'s, in a domain with
     /// permissions: derived from the secret this daemon shares with `other`'s daemon (or, for
-    /// two participants of this node, from this identity alone). `None` without permissions,
+    /// two participants of this node, from this daemon's agreement secret alone). `None` without permissions,
     /// or for a pair the document does not allow, or an endpoint not known.
     pub fn data_keys(&self, local: &Guid, other: &Guid) -> Option<DataKeys> {
         let guard = self.guard.as_ref()?;
