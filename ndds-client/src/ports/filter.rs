@@ -339,6 +339,7 @@ where
         shared.changed.notify();
     }
 }
+
 /// Logs a verdict that could not be carried out.
 fn report(shared: &OwnerShared, sent: Result<(), super::PortError>) {
     if let Err(err) = sent {
