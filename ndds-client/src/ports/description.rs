@@ -65,6 +65,8 @@ pub(crate) struct FileModule {
     pub(crate) responses: Vec<String>,
     pub(crate) exceptions: Vec<String>,
     pub(crate) order: Option<String>,
+    /// Where the order is written (`FILE:LINE:COLUMN`).
+    pub(crate) order_at: Option<String>,
     pub(crate) schedule: Option<String>,
     pub(crate) children: Vec<(String, String)>,
     pub(crate) ports: Vec<FilePort>,
@@ -132,10 +134,12 @@ impl ModuleFile {
                 .map(String::as_str)
                 .collect();
             for problem in spec.check(declared) {
-                problems.push(format!(
-                    "{}: module `{}`: {problem}",
-                    module.at, module.name
-                ));
+                // An order's problem is shown where the order is written.
+                let at = match (&problem, &module.order_at) {
+                    (ndds_core::ports::LoadProblem::UnknownSection { .. }, Some(at)) => at,
+                    _ => &module.at,
+                };
+                problems.push(format!("{}: module `{}`: {problem}", at, module.name));
             }
             if let Some(text) = &module.schedule
                 && let Err(err) = ndds_core::ports::WorkSchedule::parse(text)
@@ -429,7 +433,10 @@ mod reader {
             let span = order.span();
             let text = order.into_inner();
             match ndds_core::ports::Order::parse(&text) {
-                Ok(_) => module.order = Some(text),
+                Ok(_) => {
+                    module.order = Some(text);
+                    module.order_at = Some(places.at(span));
+                }
                 Err(err) => places.problem(span, format!("the order does not read: {err}")),
             }
         }
@@ -747,6 +754,18 @@ name = "A"
             assert!(all.contains(expected), "missing {expected:?} in:\n{all}");
         }
         assert_eq!(err.problems.len(), 9, "{all}");
+    }
+
+    #[test]
+    fn a_modules_order_naming_no_section_is_reported_where_the_order_is() {
+        let text = "[[module]]\nname = \"M\"\nsubprograms = [\"A\"]\norder = \"ORDER(M, B)\"\n";
+        let problems = ModuleFile::parse("o.toml", text).unwrap().check();
+        assert_eq!(
+            problems,
+            [
+                "o.toml:4:9: module `M`: the order names `B`, which is not the module, a subprogram, or a declared handler"
+            ]
+        );
     }
 
     #[test]
