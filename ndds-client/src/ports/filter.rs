@@ -303,18 +303,9 @@ where
         }
     };
     // Encoded before anything is sent, so that a bad encoding refuses the request whole.
-    let passed = match passed.map(|value| postcard::to_stdvec(&value)).transpose() {
-        Ok(passed) => passed,
-        Err(err) => {
-            let reason = format!("the filter's message does not encode: {err}");
-            report(shared, send_refusal(shared, &request, reason));
-            return;
-        }
-    };
-    let answer = match answer.map(|reply| postcard::to_stdvec(&reply)).transpose() {
-        Ok(answer) => answer,
-        Err(err) => {
-            let reason = format!("the filter's answer does not encode: {err}");
+    let (passed, answer) = match (encode(passed, "message"), encode(answer, "answer")) {
+        (Ok(passed), Ok(answer)) => (passed, answer),
+        (Err(reason), _) | (_, Err(reason)) => {
             report(shared, send_refusal(shared, &request, reason));
             return;
         }
@@ -338,6 +329,13 @@ where
         shared.pending().push_back(request);
         shared.changed.notify();
     }
+}
+
+/// `part` of a verdict (the filter's `what`) encoded, or why it does not encode.
+fn encode<T: Serialize>(part: Option<T>, what: &str) -> Result<Option<Vec<u8>>, String> {
+    part.map(|value| postcard::to_stdvec(&value))
+        .transpose()
+        .map_err(|err| format!("the filter's {what} does not encode: {err}"))
 }
 
 /// Logs a verdict that could not be carried out.

@@ -145,13 +145,6 @@ pub struct ModuleBuilder {
     misuse: Vec<LoadProblem>,
 }
 
-/// Where a handler is declared (see `ModuleBuilder::file_declares`).
-enum DeclaredBy {
-    InCode,
-    InFile,
-    NotInFile,
-}
-
 /// What a module read from a specification file still needs from its code, and what its
 /// code declared that the file does not.
 struct FileBinding {
@@ -436,23 +429,29 @@ impl ModuleBuilder {
         }
     }
 
-    /// Where `name` (of `list`) is declared: by the code (no specification file), in the
-    /// file, or nowhere (a file that does not declare it: a problem, recorded here).
-    fn file_declares(
+    /// Takes handler `handler` (a `kind`, declared in `list`): without a specification file
+    /// the code declares it; with one, the file must declare it and the code bind it once.
+    /// False (and the problem recorded) when its body is not to be taken.
+    fn take_handler(
         &mut self,
-        name: &str,
-        list: impl Fn(&ModuleSpec) -> &Vec<String>,
-        kind: &str,
-    ) -> DeclaredBy {
-        let declared = list(&self.spec).iter().any(|h| h == name);
-        match &mut self.file {
-            None => DeclaredBy::InCode,
-            Some(_) if declared => DeclaredBy::InFile,
-            Some(file) => {
-                file.not_in_file(format!("{kind} `{name}`"));
-                DeclaredBy::NotInFile
-            }
+        handler: &str,
+        kind: &'static str,
+        bound: bool,
+        list: impl Fn(&mut ModuleSpec) -> &mut Vec<String>,
+    ) -> bool {
+        let Some(file) = &mut self.file else {
+            list(&mut self.spec).push(handler.to_owned());
+            return true;
+        };
+        if !list(&mut self.spec).iter().any(|h| h == handler) {
+            file.not_in_file(format!("{kind} `{handler}`"));
+            return false;
         }
+        if bound {
+            self.bound_twice(kind, handler);
+            return false;
+        }
+        true
     }
 
     /// The module owns `port`, with `restrictions` (its usages, timeout, ...). A module read
@@ -630,14 +629,9 @@ impl ModuleBuilder {
         Q: Serialize + DeserializeOwned + 'static,
         R: Serialize + DeserializeOwned + 'static,
     {
-        match self.file_declares(handler, |spec| &spec.responses, "response handler") {
-            DeclaredBy::InCode => self.spec.responses.push(handler.to_owned()),
-            DeclaredBy::InFile if self.responses.contains_key(handler) => {
-                self.bound_twice("response handler", handler);
-                return self;
-            }
-            DeclaredBy::InFile => {}
-            DeclaredBy::NotInFile => return self,
+        let bound = self.responses.contains_key(handler);
+        if !self.take_handler(handler, "response handler", bound, |s| &mut s.responses) {
+            return self;
         }
         self.response_formats
             .push((handler.to_owned(), formats::<Q, R>()));
@@ -657,14 +651,9 @@ impl ModuleBuilder {
         handler: &str,
         body: impl FnMut(&ModuleContext) + Send + 'static,
     ) -> Self {
-        match self.file_declares(handler, |spec| &spec.exceptions, "exception handler") {
-            DeclaredBy::InCode => self.spec.exceptions.push(handler.to_owned()),
-            DeclaredBy::InFile if self.exceptions.contains_key(handler) => {
-                self.bound_twice("exception handler", handler);
-                return self;
-            }
-            DeclaredBy::InFile => {}
-            DeclaredBy::NotInFile => return self,
+        let bound = self.exceptions.contains_key(handler);
+        if !self.take_handler(handler, "exception handler", bound, |s| &mut s.exceptions) {
+            return self;
         }
         self.exceptions.insert(handler.to_owned(), Box::new(body));
         self
