@@ -306,3 +306,153 @@ async fn the_graph_of_a_large_table_comes_in_bounded_pages() {
     assert!(seen.windows(2).all(|w| w[0] < w[1]));
     assert_eq!(driver.graph().endpoints.len() as u64, remote + 1);
 }
+
+/// One step of the coalescing property below.
+#[derive(Debug, Clone)]
+enum Step {
+    /// Remote producer `n` announced (again), of a compatible type or not.
+    Announce { n: u64, compatible: bool },
+    /// Remote producer `n` withdrawn.
+    Withdraw { n: u64 },
+    /// The client reads up to this many frames.
+    Read(usize),
+}
+
+fn step() -> impl proptest::strategy::Strategy<Value = Step> {
+    use proptest::prelude::*;
+    prop_oneof![
+        (0..6u64, any::<bool>()).prop_map(|(n, compatible)| Step::Announce { n, compatible }),
+        (0..6u64).prop_map(|n| Step::Withdraw { n }),
+        (0..4usize).prop_map(Step::Read),
+    ]
+}
+
+/// What the client knows of a pair from the last message about it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Seen {
+    Matched,
+    Incompatible,
+    Unmatched,
+}
+
+fn apply(seen: &mut std::collections::BTreeMap<Guid, Seen>, message: DaemonMessage) {
+    match message {
+        DaemonMessage::Matched { local: 5, remote } => {
+            seen.insert(remote.guid, Seen::Matched);
+        }
+        DaemonMessage::Incompatible { local: 5, remote } => {
+            seen.insert(remote.guid, Seen::Incompatible);
+        }
+        DaemonMessage::Unmatched { local: 5, remote } => {
+            seen.insert(remote, Seen::Unmatched);
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// Whatever happens to pairs while a client's outbox is full, and however little it reads
+    /// in between, once it has read everything its view of every pair is the engine's: the
+    /// backlog coalesces transitions and never loses the last one.
+    #[test]
+    fn a_client_that_reads_slowly_ends_with_the_engines_state_of_every_pair(
+        steps in proptest::collection::vec(step(), 1..120),
+    ) {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            let (mut driver, mut inbox, cancel, _counters) = setup().await;
+            assert!(matches!(inbox.recv().await, Some(DaemonMessage::Welcome(_))));
+            assert!(matches!(
+                inbox.recv().await,
+                Some(DaemonMessage::Declared { entity: 5, result: Ok(()) })
+            ));
+            // Fill the outbox with a burst of other producers first, so the steps below start
+            // behind a backlog and go on filling it.
+            announce(&mut driver, 40);
+            driver.flush().await;
+            let node = NodeInfo {
+                hostname: "remote".into(),
+                pid: 9,
+                unicast: REMOTE,
+                lease_ms: 30_000,
+                announce_period_ms: 1000,
+                version: String::new(),
+            };
+            let mut seen = std::collections::BTreeMap::new();
+            // The engine's truth: producer n present, and whether its type is compatible.
+            let mut truth: std::collections::BTreeMap<Guid, bool> =
+                (1..=40).map(|p| (producer(0x1000 + p).guid, true)).collect();
+            for step in steps {
+                match step {
+                    Step::Announce { n, compatible } => {
+                        let mut info = producer(0x5000 + n);
+                        if !compatible {
+                            info.type_desc = TypeDescription::of::<u32>();
+                            info.fingerprint = info.type_desc.fingerprint();
+                        }
+                        truth.insert(info.guid, compatible);
+                        let message = Message::Announce(Announce {
+                            node: node.clone(),
+                            endpoints: vec![info],
+                            withdrawn: vec![],
+                        });
+                        driver.on_input(Input::Datagram {
+                            from: SocketAddr::V4(REMOTE.into()),
+                            via: Via::Unicast,
+                            bytes: datagram(&message),
+                        });
+                    }
+                    Step::Withdraw { n } => {
+                        let guid = producer(0x5000 + n).guid;
+                        truth.remove(&guid);
+                        driver.on_input(Input::Datagram {
+                            from: SocketAddr::V4(REMOTE.into()),
+                            via: Via::Unicast,
+                            bytes: datagram(&Message::Withdraw(Withdraw {
+                                endpoints: vec![guid],
+                            })),
+                        });
+                    }
+                    Step::Read(frames) => {
+                        for _ in 0..frames {
+                            match inbox.try_recv() {
+                                Ok(message) => apply(&mut seen, message),
+                                Err(_) => break,
+                            }
+                        }
+                    }
+                }
+                driver.flush().await;
+            }
+            // Read everything that is left.
+            loop {
+                while let Ok(message) = inbox.try_recv() {
+                    apply(&mut seen, message);
+                }
+                driver.flush().await;
+                if inbox.is_empty() {
+                    break;
+                }
+            }
+            assert!(!cancel.is_cancelled(), "a client that reads is never dropped");
+            assert_eq!(driver.backlog_pairs(), 0);
+            for (guid, state) in &seen {
+                let expected = match truth.get(guid) {
+                    Some(true) => Seen::Matched,
+                    Some(false) => Seen::Incompatible,
+                    None => Seen::Unmatched,
+                };
+                assert_eq!(*state, expected, "pair with {guid}");
+            }
+            for (guid, compatible) in &truth {
+                let expected = if *compatible { Seen::Matched } else { Seen::Incompatible };
+                assert_eq!(seen.get(guid), Some(&expected), "pair with {guid} never told");
+            }
+        });
+    }
+}
