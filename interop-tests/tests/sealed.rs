@@ -20,6 +20,13 @@ fn new_key(domain: &TestDomain, name: &str) -> PathBuf {
         WAIT,
     );
     assert_eq!(out.code, Some(0), "ndds key new: {}", out.stderr);
+    // Without --cipher, the one for this processor, said with the reason.
+    let cipher = ndds_daemon::keys::suggested_cipher().name();
+    assert!(
+        out.stdout.contains(&format!("cipher {cipher} (")),
+        "ndds key new: {}",
+        out.stdout
+    );
     path
 }
 

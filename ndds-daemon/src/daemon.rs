@@ -149,9 +149,13 @@ impl Daemon {
             engine.seal_with(crate::keys::setup(keyring.clone(), config.seal_mode));
             tracing::info!(
                 epochs = ?keyring.epochs().collect::<Vec<_>>(),
+                cipher = keyring.cipher().name(),
                 mode = ?config.seal_mode,
                 "sealed domain: only datagrams sealed with the domain key are accepted"
             );
+            if let Some(warning) = crate::keys::slow_cipher_warning(keyring.cipher()) {
+                tracing::warn!("{warning}");
+            }
         }
         if let Some(security) = &config.security {
             let guard = security.guard().map_err(|source| DaemonError::Listen {

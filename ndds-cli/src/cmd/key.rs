@@ -22,11 +22,12 @@ enum Action {
     New {
         /// Where to write it.
         file: PathBuf,
-        /// The domain's cipher: chacha20-poly1305 (any processor), aes-256-gcm or
-        /// aes-128-gcm (several times faster on processors with AES instructions; see
+        /// The domain's cipher: auto (aes-128-gcm if this processor has AES instructions,
+        /// else chacha20-poly1305), chacha20-poly1305 (fast on any processor), aes-128-gcm
+        /// or aes-256-gcm (several times faster where every host has AES instructions; see
         /// docs/security.md).
-        #[arg(long, default_value = "chacha20-poly1305", value_parser = parse_cipher)]
-        cipher: Cipher,
+        #[arg(long, default_value = "auto", value_parser = parse_cipher)]
+        cipher: CipherChoice,
     },
     /// Show a key file's epochs and which one is sealed with (never the keys).
     Show {
@@ -59,7 +60,24 @@ enum Action {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     match &args.action {
         Action::New { file, cipher } => {
-            keys::create(file, *cipher)?;
+            let chosen = match cipher {
+                CipherChoice::Auto => keys::suggested_cipher(),
+                CipherChoice::Named(cipher) => *cipher,
+            };
+            keys::create(file, chosen)?;
+            let why = match (cipher, keys::hardware_aes()) {
+                (CipherChoice::Named(_), _) => "as asked".to_owned(),
+                (CipherChoice::Auto, true) => format!(
+                    "this processor has AES instructions; if a host of the domain lacks them \
+                     (many ARM boards), make the key with --cipher {} instead",
+                    Cipher::ChaCha20Poly1305.name()
+                ),
+                (CipherChoice::Auto, false) => "this processor has no AES instructions".to_owned(),
+            };
+            outln!("cipher {} ({why})", chosen.name())?;
+            if let Some(warning) = keys::slow_cipher_warning(chosen) {
+                outln!("note: {warning}")?;
+            }
             outln!(
                 "wrote a new domain key to {} (mode 0600): copy it to every host of the domain, \
                  then start daemons with --key-file {0} and programs with NDDS_KEY_FILE={0}",
@@ -143,9 +161,26 @@ fn edit<T>(
     Ok(done)
 }
 
-fn parse_cipher(text: &str) -> Result<Cipher, String> {
-    Cipher::from_name(text).ok_or_else(|| {
-        let names: Vec<&str> = Cipher::ALL.iter().map(|c| c.name()).collect();
-        format!("unknown cipher `{text}` (one of: {})", names.join(", "))
-    })
+/// `--cipher`: a cipher by name, or `auto`.
+#[derive(Clone, Copy, Debug)]
+enum CipherChoice {
+    /// Chosen for this processor ([`keys::suggested_cipher`]).
+    Auto,
+    /// The one named.
+    Named(Cipher),
+}
+
+fn parse_cipher(text: &str) -> Result<CipherChoice, String> {
+    if text == "auto" {
+        return Ok(CipherChoice::Auto);
+    }
+    Cipher::from_name(text)
+        .map(CipherChoice::Named)
+        .ok_or_else(|| {
+            let names: Vec<&str> = Cipher::ALL.iter().map(|c| c.name()).collect();
+            format!(
+                "unknown cipher `{text}` (one of: auto, {})",
+                names.join(", ")
+            )
+        })
 }

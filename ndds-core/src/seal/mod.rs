@@ -39,10 +39,11 @@
 //! that sender. State is kept per sender only once a tag verified, so forged traffic costs a
 //! receiver no memory; the number of senders remembered is bounded ([`MAX_SENDERS`]).
 //!
-//! The cipher is the domain's, named in its key file: ChaCha20-Poly1305 by default (it is
-//! constant-time in software on every processor a robot may carry; AES-GCM is fast and safe
-//! only with AES and carry-less multiply instructions, which many ARM boards lack),
-//! AES-256-GCM or AES-128-GCM. All take the per-sender counter as their 96-bit nonce
+//! The cipher is the domain's, named in its key file: ChaCha20-Poly1305 (constant-time in
+//! software on every processor a robot may carry; what a file without a `cipher` line
+//! means), AES-128-GCM or AES-256-GCM (fast and safe only with AES and carry-less multiply
+//! instructions, which many ARM boards lack; `ndds key new` takes AES-128-GCM where its
+//! processor has them). All take the per-sender counter as their 96-bit nonce
 //! directly. With the `ring` feature (the daemon and the SDK turn it on) they come from ring,
 //! whose assembly is several times faster than RustCrypto's pure Rust; without it, from
 //! RustCrypto. The two seal the same bytes, so hosts built either way share a domain.
