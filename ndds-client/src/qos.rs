@@ -125,6 +125,10 @@ pub struct ConsumerQos {
     /// history could not repair a gap), and slows its producers down instead of dropping when
     /// it falls behind (`depth` bounds its reordering buffer per producer).
     pub reliability: Reliability,
+    /// Take every producer's samples, not only those of the producer in charge: no
+    /// arbitration by strength and persistence, and no minimum separation (for recorders and
+    /// monitors; `false` by default, as NDDS consumers arbitrate).
+    pub every_producer: bool,
 }
 
 impl Default for ConsumerQos {
@@ -135,6 +139,7 @@ impl Default for ConsumerQos {
             min_separation: Duration::ZERO,
             deadline: None,
             reliability: Reliability::BestEffort,
+            every_producer: false,
         }
     }
 }
@@ -153,6 +158,7 @@ impl ConsumerQos {
         Rules {
             min_separation: self.min_separation,
             deadline: self.deadline.filter(|d| !d.is_zero()),
+            every_producer: self.every_producer,
         }
     }
 }

@@ -20,6 +20,9 @@
 //! - **Minimum separation**: at most one delivery per window; a sample accepted inside the
 //!   window is held, a newer one replaces it, and the held one is delivered when the window
 //!   ends, so a slow consumer always gets the newest data.
+//! - **Every producer** ([`Rules::every_producer`], for recorders and monitors): no
+//!   arbitration and no minimum separation; every sample is delivered as it arrives, marked
+//!   fresh, and nobody is in charge. Deadlines still apply.
 //! - **Deadline**: when no sample was accepted for a deadline, [`Notification::NoNewData`]
 //!   (or [`Notification::NeverReceived`] before the first sample), repeated each deadline.
 
@@ -36,6 +39,10 @@ pub struct Rules {
     pub min_separation: Duration,
     /// Notify when no sample was accepted for this long (`None`: never).
     pub deadline: Option<Duration>,
+    /// No arbitration: every producer's samples are delivered as they arrive, whatever its
+    /// strength, and minimum separation does not apply (for tools that must see everything on
+    /// a topic, such as a recorder; see the module docs).
+    pub every_producer: bool,
 }
 
 /// What arbitration needs to know of an arriving sample.
@@ -140,6 +147,12 @@ impl<S> Arbiter<S> {
 
     /// Offers an arriving sample.
     pub fn handle_sample(&mut self, now: Instant, meta: Incoming, sample: S) {
+        if self.rules.every_producer {
+            self.stats.accepted += 1;
+            self.next_deadline = self.rules.deadline.and_then(|d| now.checked_add(d));
+            self.deliver(now, sample, SampleStatus::Fresh);
+            return;
+        }
         let status = match self.in_charge {
             Some(current) if current.writer == meta.writer => {
                 if meta.seq <= current.seq {

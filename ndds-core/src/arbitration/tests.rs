@@ -200,6 +200,7 @@ fn minimum_separation_delivers_the_newest_at_the_end_of_each_window() {
     let rules = Rules {
         min_separation: MS * 100,
         deadline: None,
+        every_producer: false,
     };
     let mut a = Arbiter::new(rules, t0);
     for i in 0..25u64 {
@@ -223,6 +224,7 @@ fn a_takeover_inside_a_window_keeps_its_status() {
     let rules = Rules {
         min_separation: MS * 100,
         deadline: None,
+        every_producer: false,
     };
     let mut a = Arbiter::new(rules, t0);
     a.handle_sample(t0, incoming(1, 1, 0, 0), 1);
@@ -247,6 +249,7 @@ fn deadlines_repeat_while_silent_and_say_never_received_before_the_first_sample(
     let rules = Rules {
         min_separation: Duration::ZERO,
         deadline: Some(MS * 50),
+        every_producer: false,
     };
     let mut a = Arbiter::new(rules, t0);
     assert_eq!(a.poll_timeout(), Some(t0 + MS * 50));
@@ -300,6 +303,7 @@ proptest! {
         let rules = Rules {
             min_separation: MS * separation_ms as u32,
             deadline: deadline_ms.map(|d| MS * d as u32),
+            every_producer: false,
         };
         let mut a = Arbiter::new(rules, t0);
         let mut now = t0;
@@ -368,6 +372,7 @@ fn a_sample_at_the_end_of_a_window_whose_timer_has_not_run_replaces_the_held_one
     let rules = Rules {
         min_separation: MS * 100,
         deadline: None,
+        every_producer: false,
     };
     let mut a = Arbiter::new(rules, t0);
     a.handle_sample(t0, incoming(1, 0, 0, 1), 1);
@@ -377,4 +382,34 @@ fn a_sample_at_the_end_of_a_window_whose_timer_has_not_run_replaces_the_held_one
     a.handle_timeout(t0 + MS * 101);
     assert_eq!(delivered(&drain(&mut a)), vec![1, 3]);
     assert_eq!(a.stats().superseded, 1);
+}
+
+#[test]
+fn every_producer_delivers_all_samples_of_all_producers_without_arbitration() {
+    let t0 = Instant::now();
+    let rules = Rules {
+        min_separation: MS * 100,
+        deadline: Some(MS * 50),
+        every_producer: true,
+    };
+    let mut a = Arbiter::new(rules, t0);
+    // A strong producer, a weak one interleaved, and a repeated seq: all delivered, fresh.
+    a.handle_sample(t0, incoming(1, 9, 1000, 1), 1);
+    a.handle_sample(t0 + MS, incoming(2, 1, 0, 1), 2);
+    a.handle_sample(t0 + MS * 2, incoming(1, 9, 1000, 2), 3);
+    a.handle_sample(t0 + MS * 3, incoming(2, 1, 0, 1), 4);
+    let out = drain(&mut a);
+    assert_eq!(delivered(&out), vec![1, 2, 3, 4]);
+    assert!(out.iter().all(|o| matches!(
+        o,
+        Output::Deliver {
+            status: SampleStatus::Fresh,
+            ..
+        }
+    )));
+    assert_eq!(a.stats().weaker, 0);
+    assert_eq!(a.stats().superseded, 0);
+    assert_eq!(a.in_charge(), None);
+    // The deadline still runs from the last sample.
+    assert_eq!(a.poll_timeout(), Some(t0 + MS * 53));
 }

@@ -31,6 +31,7 @@ fn run(seed: u64) -> String {
     let separated = Rules {
         min_separation: 20 * MS,
         deadline: Some(40 * MS),
+        every_producer: false,
     };
     net.add_consumer(3, 2, best_effort_consumer(separated), App::Eager);
     for consumer in [(2, 1), (3, 1)] {

@@ -143,6 +143,7 @@ fn minimum_separation_delivers_the_newest_at_most_once_per_window() {
     let rules = Rules {
         min_separation: 100 * MS,
         deadline: None,
+        every_producer: false,
     };
     net.add_consumer(1, 2, best_effort_consumer(rules), App::Eager);
     net.connect((0, 1), (1, 2));
@@ -177,6 +178,7 @@ fn minimum_separation_never_delivers_an_older_sample_after_a_newer_one() {
     let rules = Rules {
         min_separation: 100 * MS,
         deadline: None,
+        every_producer: false,
     };
     net.add_consumer(1, 2, best_effort_consumer(rules), App::Eager);
     net.connect((0, 1), (1, 2));
@@ -196,6 +198,7 @@ fn a_deadline_reports_silence_and_only_silence() {
     let rules = Rules {
         min_separation: Duration::ZERO,
         deadline: Some(50 * MS),
+        every_producer: false,
     };
     net.add_consumer(1, 2, best_effort_consumer(rules), App::Eager);
     net.connect((0, 1), (1, 2));
