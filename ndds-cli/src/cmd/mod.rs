@@ -1,5 +1,6 @@
 //! The subcommands, one per file, collected in one clap enum.
 
+mod bag;
 mod echo;
 mod fsm;
 mod hz;
@@ -7,8 +8,10 @@ mod key;
 mod modules;
 mod nodes;
 mod perf;
+mod play;
 mod ports;
 mod publish;
+mod record;
 mod run;
 mod security;
 mod topics;
@@ -49,6 +52,12 @@ enum Command {
     Modules(modules::Args),
     /// Load a system description file, verify it and run it, with a live status.
     Run(run::Args),
+    /// Record topics into an MCAP file (Foxglove, rosbag2 and Python's mcap read it).
+    Record(record::Args),
+    /// Publish recorded samples again, with their recorded types, QoS and timing.
+    Play(play::Args),
+    /// What a recording holds, and parts of recordings into new files.
+    Bag(bag::Args),
     /// Domain key files: a new one, and the steps of a key rotation.
     Key(key::Args),
     /// Identities and the permissions document: who may publish, subscribe, own or use what.
@@ -76,6 +85,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
         Command::Modules(args) => modules::run(&cli.daemon, &args),
+        Command::Record(args) => record::run(&cli.daemon, &args),
+        Command::Play(args) => play::run(&cli.daemon, &args),
+        Command::Bag(args) => bag::run(&args),
         Command::Key(args) => key::run(&args),
         Command::Security(args) => security::run(&args),
         Command::Run(args) => run::run(&cli.daemon, &args),
