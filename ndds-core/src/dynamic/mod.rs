@@ -73,12 +73,15 @@
 mod decode;
 mod encode;
 mod path;
+mod schema;
 #[cfg(test)]
 mod tests;
 
 use serde_json::Value;
 
 use crate::types::TypeLayout;
+
+pub use schema::json_schema;
 
 /// Deepest nesting of values accepted while decoding or encoding.
 pub const MAX_DEPTH: usize = 64;

@@ -680,3 +680,153 @@ proptest! {
         }
     }
 }
+
+/// Whether `value` satisfies `schema`, for the draft-07 keywords [`json_schema`] writes (a
+/// small checker for these tests; Python's `jsonschema` checks recordings in the interop
+/// tests). `root` resolves `$ref`s.
+fn satisfies(schema: &Value, value: &Value, root: &Value) -> bool {
+    let Some(schema) = schema.as_object() else {
+        return true;
+    };
+    if let Some(reference) = schema.get("$ref").and_then(Value::as_str) {
+        let name = reference.trim_start_matches("#/definitions/");
+        return satisfies(&root["definitions"][name], value, root);
+    }
+    let any_of = schema.get("anyOf").and_then(Value::as_array);
+    if any_of.is_some_and(|any| !any.iter().any(|s| satisfies(s, value, root)))
+        || schema.get("const").is_some_and(|c| c != value)
+        || (schema.get("enum").and_then(Value::as_array)).is_some_and(|e| !e.contains(value))
+    {
+        return false;
+    }
+    let number = |key: &str| schema.get(key).and_then(Value::as_f64);
+    let count = |key: &str| schema.get(key).and_then(Value::as_u64);
+    match schema.get("type").and_then(Value::as_str) {
+        None => true,
+        Some("null") => value.is_null(),
+        Some("boolean") => value.is_boolean(),
+        Some("number") => value.is_number(),
+        Some("integer") => {
+            let Some(v) = value.as_f64().filter(|_| value.is_i64() || value.is_u64()) else {
+                return false;
+            };
+            number("minimum").is_none_or(|m| v >= m) && number("maximum").is_none_or(|m| v <= m)
+        }
+        Some("string") => value.as_str().is_some_and(|s| {
+            let n = s.chars().count() as u64;
+            count("minLength").is_none_or(|m| n >= m) && count("maxLength").is_none_or(|m| n <= m)
+        }),
+        Some("array") => value.as_array().is_some_and(|items| {
+            let n = items.len() as u64;
+            let sized = count("minItems").is_none_or(|m| n >= m)
+                && count("maxItems").is_none_or(|m| n <= m);
+            let each = match schema.get("items") {
+                Some(Value::Array(positional)) => items
+                    .iter()
+                    .zip(positional)
+                    .all(|(v, s)| satisfies(s, v, root)),
+                Some(one) => items.iter().all(|v| satisfies(one, v, root)),
+                None => true,
+            };
+            sized && each
+        }),
+        Some("object") => value.as_object().is_some_and(|members| {
+            let properties = schema.get("properties").and_then(Value::as_object);
+            let required = schema
+                .get("required")
+                .and_then(Value::as_array)
+                .is_none_or(|r| {
+                    r.iter()
+                        .all(|k| k.as_str().is_some_and(|k| members.contains_key(k)))
+                });
+            required
+                && members.iter().all(|(k, v)| {
+                    match (
+                        properties.and_then(|p| p.get(k)),
+                        schema.get("additionalProperties"),
+                    ) {
+                        (Some(s), _) => satisfies(s, v, root),
+                        (None, Some(Value::Bool(false))) => false,
+                        (None, Some(other)) => satisfies(other, v, root),
+                        (None, None) => true,
+                    }
+                })
+        }),
+        Some(_) => false,
+    }
+}
+
+fn schema_of<T: Serialize + DeserializeOwned>() -> Value {
+    json_schema(&layout_of::<T>(), "test").unwrap()
+}
+
+#[test]
+fn the_json_schema_describes_decoded_samples_and_refuses_others() {
+    let schema = schema_of::<Scene>();
+    let json = round_trip(&scene());
+    assert!(satisfies(&schema, &json, &schema), "{schema:#}\n{json:#}");
+    assert_eq!(schema["title"], "Scene");
+    assert_eq!(
+        schema["properties"]["pose"]["properties"]["x"]["anyOf"][0]["type"],
+        "number"
+    );
+    // A missing field, a wrong type, an unknown field, a bad variant: each refused.
+    for broken in [
+        {
+            let mut j = json.clone();
+            j.as_object_mut().unwrap().remove("name");
+            j
+        },
+        {
+            let mut j = json.clone();
+            j["flag"] = json!(3);
+            j
+        },
+        {
+            let mut j = json.clone();
+            j["extra"] = json!(1);
+            j
+        },
+        {
+            let mut j = json.clone();
+            j["shape"] = json!("Hexagon");
+            j
+        },
+        {
+            let mut j = json.clone();
+            j["grid"] = json!([1, 2]);
+            j
+        },
+    ] {
+        assert!(!satisfies(&schema, &broken, &schema), "{broken}");
+    }
+    // A recursive type refers to its own definition.
+    let tree = schema_of::<Tree>();
+    let value = Tree {
+        value: 1,
+        children: vec![Tree {
+            value: 2,
+            children: vec![],
+        }],
+    };
+    assert!(satisfies(&tree, &round_trip(&value), &tree), "{tree:#}");
+    assert!(
+        tree["definitions"]
+            .as_object()
+            .is_some_and(|d| d.len() == 1),
+        "{tree:#}"
+    );
+    assert!(!satisfies(
+        &tree,
+        &json!({"value": 1, "children": [{"value": "x", "children": []}]}),
+        &tree
+    ));
+}
+
+proptest! {
+    #[test]
+    fn every_decoded_scene_satisfies_the_schema(scene in arb_scene()) {
+        let schema = schema_of::<Scene>();
+        prop_assert!(satisfies(&schema, &round_trip(&scene), &schema));
+    }
+}
