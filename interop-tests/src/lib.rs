@@ -17,7 +17,8 @@
 //! ## Layout
 //! - `lib.rs`: [`TestDomain`], binaries, polling helpers;
 //! - [`process`]: child processes owned by a test (daemons, test nodes, short commands);
-//! - [`netns`]: hosts as network namespaces, fault injection, a daemon per host ([`netns::Cluster`]).
+//! - [`netns`]: hosts as network namespaces, fault injection, a daemon per host ([`netns::Cluster`]);
+//! - [`python`]: Python readers of our files (`mcap`, `jsonschema`).
 //!
 //! The binaries are taken from the cargo target directory of the running test; `cargo test
 //! --workspace` builds them (`ndds-daemon` and `ndds` have integration tests of their own,
@@ -26,6 +27,7 @@
 
 pub mod netns;
 pub mod process;
+pub mod python;
 
 use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};

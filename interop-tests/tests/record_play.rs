@@ -105,7 +105,14 @@ fn a_recording_replays_every_sample_with_its_type_order_and_timing() {
     let recorder = ClientProcess::program(
         "ndds",
         &socket,
-        &["record", "--all", "-o", &bag_text, "--json"],
+        &[
+            "record",
+            "--all",
+            "-o",
+            &bag_text,
+            "--json",
+            "--summary-json",
+        ],
     );
     let source = participant(&socket, "source");
     let strong = source
@@ -215,6 +222,52 @@ fn a_recording_replays_every_sample_with_its_type_order_and_timing() {
     assert_eq!(counts["log/seq"].0, SEQS);
     assert_eq!(counts["log/seq"].2, "u64");
     assert_eq!(info["lost"], 0);
+
+    // Read by a reader we did not write: Python's `mcap`, with the JSON channels validated
+    // against their schemas by `jsonschema`.
+    if let Some(python) =
+        interop_tests::python::with_modules("record_play", &["mcap", "jsonschema"])
+    {
+        let out = interop_tests::python::run(&python, "read_bag.py", &[&bag_text]);
+        let read: serde_json::Value = serde_json::from_str(&out).expect("JSON from read_bag.py");
+        println!(
+            "python mcap: counts {} validated {}",
+            read["counts"], read["validated"]
+        );
+        assert_eq!(read["profile"], "ndds");
+        for (topic, count, json) in [
+            ("arm/pose", 2 * POSES, 2 * POSES),
+            ("arm/state", STATES, STATES),
+            // 1 MiB samples get no JSON companion (MAX_JSON_PAYLOAD).
+            ("camera/blob", BLOBS, 0),
+            ("log/seq", SEQS, SEQS),
+        ] {
+            assert_eq!(read["counts"][topic], count, "{topic}");
+            let json_topic = format!("json/{topic}");
+            let counted = |key: &str| read[key][&json_topic].as_u64().unwrap_or(0);
+            assert_eq!(counted("counts"), json, "{json_topic}");
+            assert_eq!(counted("validated"), json, "{json_topic}");
+        }
+        assert_eq!(read["errors"], serde_json::json!([]));
+        let channels = read["channels"].as_array().expect("channels");
+        let pose = channels
+            .iter()
+            .find(|c| c["topic"] == "arm/pose")
+            .expect("an arm/pose channel");
+        assert_eq!(pose["message_encoding"], "ndds");
+        assert_eq!(pose["schema_encoding"], "ndds");
+        assert_eq!(pose["schema_name"], "Pose");
+        let json = channels
+            .iter()
+            .find(|c| c["topic"] == "json/arm/state")
+            .expect("a json/arm/state channel");
+        assert_eq!(json["schema_encoding"], "jsonschema");
+        assert_eq!(json["metadata"]["json_of"], "arm/state");
+        assert_eq!(
+            read["metadata"]["ndds.recording"]["recorder"],
+            format!("ndds {}", env!("CARGO_PKG_VERSION"))
+        );
+    }
 
     // Replay into consumers that take every producer, as the recorder did.
     let sink = participant(&socket, "sink");

@@ -25,6 +25,11 @@ pub struct Keep {
 }
 
 impl Keep {
+    /// Whether a channel's topic is kept (a JSON companion goes with its topic).
+    fn channel(&self, channel: &crate::read::BagChannel) -> bool {
+        self.topic(channel.json_of().unwrap_or(&channel.topic))
+    }
+
     fn topic(&self, topic: &str) -> bool {
         if self.exclude.as_ref().is_some_and(|re| re.is_match(topic)) {
             return false;
@@ -67,14 +72,13 @@ pub fn rewrite(
         while let Some((message, path)) = merged.next_message()? {
             done.read += 1;
             let channel = &message.channel;
-            if !keep.topic(&channel.topic) || !keep.time(message.log_time) {
+            if !keep.channel(channel) || !keep.time(message.log_time) {
                 continue;
             }
-            let desc = channel.playable(path)?;
             let key = match channels.get(&(path.to_owned(), channel.id)) {
                 Some(key) => *key,
                 None => {
-                    let key = writer.add_channel(&channel.topic, desc, channel.meta.clone());
+                    let key = writer.add_raw_channel(channel.to_def());
                     channels.insert((path.to_owned(), channel.id), key);
                     key
                 }

@@ -10,6 +10,11 @@
 //! - **Message**: `log_time` = when the recorder received it, `publish_time` = the producer's
 //!   source timestamp (both nanoseconds since the Unix epoch), `sequence` = the low 32 bits of
 //!   the producer's sequence number.
+//! - **JSON companions** (`ndds record --json`): per topic a channel `json/TOPIC`, message
+//!   encoding `json` (each sample as `ndds echo --json` prints its value), schema encoding
+//!   `jsonschema` (a draft-07 JSON Schema generated from the type description), metadata
+//!   [`JSON_OF`] = the topic; the same log and publish times and sequence as the sample.
+//!   Samples over [`MAX_JSON_PAYLOAD`] bytes and opaque types get none.
 //! - **Metadata** [`RECORDING_METADATA`]: who recorded, and per topic what was lost.
 
 use std::collections::BTreeMap;
@@ -26,6 +31,13 @@ pub const MESSAGE_ENCODING: &str = "ndds";
 pub const PROFILE: &str = "ndds";
 /// The name of the metadata record that describes a recording.
 pub const RECORDING_METADATA: &str = "ndds.recording";
+/// The channel metadata key that marks a JSON companion channel (its value: the topic).
+pub const JSON_OF: &str = "json_of";
+/// Samples larger than this get no JSON companion (a megabyte image as a JSON array of
+/// numbers helps no viewer, and costs the recorder several times its size).
+pub const MAX_JSON_PAYLOAD: usize = 64 * 1024;
+/// The topic prefix of JSON companion channels: `json/arm/pose` for `arm/pose`.
+pub const JSON_TOPIC_PREFIX: &str = "json/";
 /// Largest type description a schema may carry (discovery's bound for one endpoint).
 pub const MAX_SCHEMA_BYTES: usize = 64 * 1024;
 

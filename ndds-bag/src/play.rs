@@ -224,7 +224,9 @@ impl Player {
         for path in player.files.clone() {
             let mut reader = BagReader::open(&path)?;
             while let Some(message) = reader.next_message()? {
-                if !player.options.wants(&message.channel.topic) {
+                if message.channel.json_of().is_some()
+                    || !player.options.wants(&message.channel.topic)
+                {
                     continue;
                 }
                 let desc = message.channel.playable(&path)?.clone();
@@ -326,7 +328,10 @@ impl Player {
                 if control.stopped() {
                     return Ok(summary);
                 }
-                if message.log_time < from || !self.options.wants(&message.channel.topic) {
+                if message.log_time < from
+                    || message.channel.json_of().is_some()
+                    || !self.options.wants(&message.channel.topic)
+                {
                     continue;
                 }
                 if message.log_time > to {

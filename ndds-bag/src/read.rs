@@ -35,6 +35,32 @@ pub struct BagChannel {
     pub desc: Result<TypeDescription, String>,
     /// The recorded producer's QoS (defaults in files from elsewhere).
     pub meta: ChannelMeta,
+    /// The channel's metadata as written.
+    pub metadata: BTreeMap<String, String>,
+    /// Its schema's data as written.
+    pub schema_data: Vec<u8>,
+}
+
+impl BagChannel {
+    /// The topic this channel is the JSON companion of, in a recording made with `--json`
+    /// (players skip such channels: their samples are on the topic's own channel).
+    pub fn json_of(&self) -> Option<&str> {
+        self.metadata.get(format::JSON_OF).map(String::as_str)
+    }
+
+    /// The channel as a writer takes it (to copy it into another file).
+    pub fn to_def(&self) -> crate::write::ChannelDef {
+        crate::write::ChannelDef {
+            topic: self.topic.clone(),
+            schema: (
+                self.schema_name.clone(),
+                self.schema_encoding.clone(),
+                self.schema_data.clone(),
+            ),
+            message_encoding: self.message_encoding.clone(),
+            metadata: self.metadata.clone(),
+        }
+    }
 }
 
 impl BagChannel {
@@ -237,6 +263,7 @@ impl BagReader {
                         continue;
                     }
                     let schema = self.schemas.get(&channel.schema_id);
+                    let schema_data = schema.map(|s| s.2.clone()).unwrap_or_default();
                     let (schema_name, schema_encoding, desc) = match schema {
                         None => (
                             String::new(),
@@ -266,6 +293,8 @@ impl BagReader {
                             message_encoding: channel.message_encoding,
                             desc,
                             meta,
+                            metadata: channel.metadata,
+                            schema_data,
                         }),
                     );
                 }

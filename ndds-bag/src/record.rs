@@ -25,8 +25,8 @@ use ndds_core::wire::{EndpointQos, Guid};
 use regex::Regex;
 
 use crate::BagError;
-use crate::format::{ChannelMeta, nanos};
-use crate::write::{BagWriter, ChannelKey, Lost, Record, WriteOptions};
+use crate::format::{self, ChannelMeta, nanos};
+use crate::write::{BagWriter, ChannelDef, ChannelKey, Lost, Record, WriteOptions};
 
 /// Which topics to record.
 #[derive(Clone, Debug)]
@@ -50,6 +50,9 @@ pub struct RecordOptions {
     pub write: WriteOptions,
     /// Bytes of samples that may wait for the writer; past it samples are dropped and counted.
     pub queue_bytes: usize,
+    /// Also write each sample as JSON on a companion channel `json/TOPIC` with a JSON Schema
+    /// (for viewers that do not know ndds; see [`crate::format`]).
+    pub json: bool,
 }
 
 impl Default for RecordOptions {
@@ -59,6 +62,7 @@ impl Default for RecordOptions {
             exclude: None,
             write: WriteOptions::default(),
             queue_bytes: 256 << 20,
+            json: false,
         }
     }
 }
@@ -165,9 +169,10 @@ impl Recorder {
         let shared = Arc::new(Shared::default());
         let (tx, rx) = flume::bounded(1 << 16);
         let thread_shared = Arc::clone(&shared);
+        let json = options.json;
         let writer = std::thread::Builder::new()
             .name("ndds-record".into())
-            .spawn(move || write_loop(writer, rx, &thread_shared))
+            .spawn(move || write_loop(writer, rx, &thread_shared, json))
             .map_err(|e| BagError::io(path, e))?;
         Ok(Recorder {
             participant: participant.clone(),
@@ -352,12 +357,18 @@ struct WriteState<'a> {
     last_seq: HashMap<(usize, Guid), u64>,
     overflow_seen: HashMap<usize, u64>,
     last_log_time: u64,
+    /// JSON companions wanted.
+    json: bool,
+    /// Their channels by (topic, fingerprint); `None` where the type cannot be written as
+    /// JSON (opaque).
+    json_channels: HashMap<(String, u64), Option<ChannelKey>>,
 }
 
 fn write_loop(
     writer: BagWriter,
     rx: flume::Receiver<Item>,
     shared: &Shared,
+    json: bool,
 ) -> Result<Vec<std::path::PathBuf>, BagError> {
     let mut state = WriteState {
         writer,
@@ -366,6 +377,8 @@ fn write_loop(
         last_seq: HashMap::new(),
         overflow_seen: HashMap::new(),
         last_log_time: 0,
+        json,
+        json_channels: HashMap::new(),
     };
     let result = state.run(&rx);
     if let Err(err) = &result {
@@ -453,13 +466,25 @@ impl WriteState<'_> {
         // Log times never go back within a file, so it reads in time order.
         let log_time = nanos(sample.info.reception_timestamp).max(self.last_log_time);
         self.last_log_time = log_time;
-        let result = self.writer.write(Record {
+        let publish_time = nanos(sample.info.source_timestamp);
+        let mut result = self.writer.write(Record {
             channel: key,
             seq,
             log_time,
-            publish_time: nanos(sample.info.source_timestamp),
+            publish_time,
             data: &sample.payload,
         });
+        if self.json && result.is_ok() {
+            if let Some((key, json)) = self.json_of(&def, &sample.payload) {
+                result = self.writer.write(Record {
+                    channel: key,
+                    seq,
+                    log_time,
+                    publish_time,
+                    data: &json,
+                });
+            }
+        }
         if lost.gaps > 0 {
             self.writer.note_lost(&def.topic, lost);
         }
@@ -471,6 +496,50 @@ impl WriteState<'_> {
             topic.bytes += sample.payload.len() as u64;
         }
         result
+    }
+
+    /// The JSON companion channel of `stream`'s topic and the sample as JSON; `None` for an
+    /// opaque type or a sample that does not decode (logged once per topic).
+    fn json_of(&mut self, stream: &Stream, payload: &[u8]) -> Option<(ChannelKey, Vec<u8>)> {
+        if payload.len() > format::MAX_JSON_PAYLOAD {
+            return None;
+        }
+        let layout = stream.desc.layout.as_ref()?;
+        let id = (stream.topic.clone(), stream.desc.fingerprint());
+        let key = match self.json_channels.get(&id) {
+            Some(key) => *key,
+            None => {
+                let key = match ndds_core::dynamic::json_schema(layout, &stream.desc.name) {
+                    Ok(schema) => {
+                        let mut metadata = BTreeMap::new();
+                        metadata.insert(format::JSON_OF.to_owned(), stream.topic.clone());
+                        Some(self.writer.add_raw_channel(ChannelDef {
+                            topic: format!("{}{}", format::JSON_TOPIC_PREFIX, stream.topic),
+                            schema: (
+                                stream.desc.name.clone(),
+                                "jsonschema".to_owned(),
+                                schema.to_string().into_bytes(),
+                            ),
+                            message_encoding: "json".to_owned(),
+                            metadata,
+                        }))
+                    }
+                    Err(err) => {
+                        tracing::warn!(topic = stream.topic, %err, "no JSON channel for this topic");
+                        None
+                    }
+                };
+                self.json_channels.insert(id, key);
+                key
+            }
+        }?;
+        match ndds_core::dynamic::decode_json(layout, payload) {
+            Ok(value) => Some((key, value.to_string().into_bytes())),
+            Err(err) => {
+                tracing::debug!(topic = stream.topic, %err, "a sample did not decode as JSON");
+                None
+            }
+        }
     }
 
     /// Moves the consumers' overflow counts into the stats and the file.

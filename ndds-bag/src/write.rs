@@ -89,10 +89,15 @@ enum Target {
 
 /// A channel of a bag, as the writer knows it (by index).
 #[derive(Clone, Debug)]
-struct ChannelDef {
-    topic: String,
-    desc: TypeDescription,
-    meta: ChannelMeta,
+pub struct ChannelDef {
+    /// The topic.
+    pub topic: String,
+    /// Its schema's name, encoding and data.
+    pub schema: (String, String, Vec<u8>),
+    /// Its messages' encoding.
+    pub message_encoding: String,
+    /// Its metadata.
+    pub metadata: BTreeMap<String, String>,
 }
 
 /// A channel's handle: its index in the writer.
@@ -172,7 +177,6 @@ struct Open {
     length: Arc<AtomicU64>,
     /// The writer's channel id for each channel key used in this file.
     channels: HashMap<ChannelKey, u16>,
-    schemas: HashMap<u64, u16>,
     first_log_time: Option<u64>,
     last_log_time: u64,
     lost: BTreeMap<String, Lost>,
@@ -253,11 +257,21 @@ impl BagWriter {
         desc: &TypeDescription,
         meta: ChannelMeta,
     ) -> ChannelKey {
-        self.channels.push(ChannelDef {
+        self.add_raw_channel(ChannelDef {
             topic: topic.to_owned(),
-            desc: desc.clone(),
-            meta,
-        });
+            schema: (
+                desc.name.clone(),
+                format::SCHEMA_ENCODING.to_owned(),
+                format::encode_schema(desc),
+            ),
+            message_encoding: format::MESSAGE_ENCODING.to_owned(),
+            metadata: meta.to_map(),
+        })
+    }
+
+    /// Adds a channel of any encoding (a JSON companion, one copied from another file).
+    pub fn add_raw_channel(&mut self, def: ChannelDef) -> ChannelKey {
+        self.channels.push(def);
         ChannelKey(self.channels.len() - 1)
     }
 
@@ -276,30 +290,15 @@ impl BagWriter {
         let id = match open.channels.get(&record.channel) {
             Some(id) => *id,
             None => {
-                let fingerprint = def.desc.fingerprint();
-                let schema = match open.schemas.get(&fingerprint) {
-                    Some(id) => *id,
-                    None => {
-                        let id = open
-                            .writer
-                            .add_schema(
-                                &def.desc.name,
-                                format::SCHEMA_ENCODING,
-                                &format::encode_schema(&def.desc),
-                            )
-                            .map_err(|e| BagError::mcap(&open.path, e))?;
-                        open.schemas.insert(fingerprint, id);
-                        id
-                    }
-                };
+                // The writer keeps one schema record per distinct schema.
+                let (name, encoding, data) = &def.schema;
+                let schema = open
+                    .writer
+                    .add_schema(name, encoding, data)
+                    .map_err(|e| BagError::mcap(&open.path, e))?;
                 let id = open
                     .writer
-                    .add_channel(
-                        schema,
-                        &def.topic,
-                        format::MESSAGE_ENCODING,
-                        &def.meta.to_map(),
-                    )
+                    .add_channel(schema, &def.topic, &def.message_encoding, &def.metadata)
                     .map_err(|e| BagError::mcap(&open.path, e))?;
                 open.channels.insert(record.channel, id);
                 id
@@ -432,7 +431,6 @@ impl BagWriter {
             writer,
             length,
             channels: HashMap::new(),
-            schemas: HashMap::new(),
             first_log_time: None,
             last_log_time: 0,
             lost: BTreeMap::new(),

@@ -58,9 +58,13 @@ pub struct Args {
     /// No status line (it is off anyway when standard error is not a terminal).
     #[arg(long, short)]
     quiet: bool,
-    /// Print the summary as JSON.
+    /// Also write every sample as JSON, on a channel `json/TOPIC` with a JSON Schema made
+    /// from its type, for viewers that do not know ndds (Foxglove, Lichtblick, Python).
     #[arg(long)]
     json: bool,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    summary_json: bool,
 }
 
 /// Runs `ndds record`.
@@ -105,6 +109,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             ..WriteOptions::default()
         },
         queue_bytes: usize::try_from(args.queue).unwrap_or(usize::MAX),
+        json: args.json,
     };
     let mut recorder = Recorder::start(&participant, &output, options)?;
     let live = !args.quiet && std::io::stderr().is_terminal();
@@ -122,7 +127,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         let now = Instant::now();
         if now >= next_discovery {
             for topic in recorder.discover()? {
-                if announced.insert(topic.clone()) && !live && !args.quiet && !args.json {
+                if announced.insert(topic.clone()) && !live && !args.quiet && !args.summary_json {
                     eprintln!("ndds record: recording {topic}");
                 }
             }
@@ -138,7 +143,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         eprint!("\r\x1b[K");
     }
     let summary = recorder.finish()?;
-    print_summary(&summary, started.elapsed(), args.json)?;
+    print_summary(&summary, started.elapsed(), args.summary_json)?;
     if let Some(why) = &summary.stopped {
         anyhow::bail!("recording stopped early: {why}");
     }
