@@ -66,14 +66,19 @@ impl BagChannel {
 impl BagChannel {
     /// The type description, or an error naming the channel that cannot be replayed.
     pub fn playable(&self, path: &Path) -> Result<&TypeDescription, BagError> {
-        if self.message_encoding != format::MESSAGE_ENCODING {
+        if self.message_encoding != format::MESSAGE_ENCODING
+            || self.schema_encoding != format::SCHEMA_ENCODING
+        {
             return Err(BagError::Unplayable {
                 path: path.to_owned(),
                 channel: self.id,
                 topic: self.topic.clone(),
                 why: format!(
-                    "message encoding `{}` (ndds plays `{}`)",
+                    "schema encoding `{}` and message encoding `{}` (ndds plays `{}` and `{}`: \
+                     recordings made by ndds)",
+                    self.schema_encoding,
                     self.message_encoding,
+                    format::SCHEMA_ENCODING,
                     format::MESSAGE_ENCODING
                 ),
             });
