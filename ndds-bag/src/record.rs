@@ -474,16 +474,17 @@ impl WriteState<'_> {
             publish_time,
             data: &sample.payload,
         });
-        if self.json && result.is_ok() {
-            if let Some((key, json)) = self.json_of(&def, &sample.payload) {
-                result = self.writer.write(Record {
-                    channel: key,
-                    seq,
-                    log_time,
-                    publish_time,
-                    data: &json,
-                });
-            }
+        if self.json
+            && result.is_ok()
+            && let Some((key, json)) = self.json_of(&def, &sample.payload)
+        {
+            result = self.writer.write(Record {
+                channel: key,
+                seq,
+                log_time,
+                publish_time,
+                data: &json,
+            });
         }
         if lost.gaps > 0 {
             self.writer.note_lost(&def.topic, lost);
