@@ -299,7 +299,7 @@ fn filter_and_cut_keep_topics_and_time_ranges_with_their_channels() {
     writer.finish().unwrap();
     let only_a = dir.path().join("a.mcap");
     let done = rewrite(
-        &[path.clone()],
+        std::slice::from_ref(&path),
         &only_a,
         &Keep {
             topics: Some(vec!["a/u64".into()]),
