@@ -11,12 +11,12 @@
 //! `SamplesLost`), and writes. [`Recorder::discover`], called by the owner every half second
 //! or so, adds consumers for topics that appeared.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
-use std::path::Path;
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, SystemTime};
 
 use ndds_client::{
     ConsumerQos, DirectConsumer, Participant, RawSample, Reliability, TypeDescription,
@@ -53,6 +53,18 @@ pub struct RecordOptions {
     /// Also write each sample as JSON on a companion channel `json/TOPIC` with a JSON Schema
     /// (for viewers that do not know ndds; see [`crate::format`]).
     pub json: bool,
+    /// Black-box mode: keep only the last samples in memory and write them to a file of
+    /// their own at each [`Recorder::trigger`].
+    pub snapshot: Option<Snapshot>,
+}
+
+/// What a black box keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Snapshot {
+    /// The last this much time (by reception).
+    pub duration: Duration,
+    /// At most this many payload bytes (the oldest go first).
+    pub max_bytes: usize,
 }
 
 impl Default for RecordOptions {
@@ -63,6 +75,7 @@ impl Default for RecordOptions {
             write: WriteOptions::default(),
             queue_bytes: 256 << 20,
             json: false,
+            snapshot: None,
         }
     }
 }
@@ -117,9 +130,16 @@ struct Shared {
 }
 
 /// What the writer thread receives.
+#[derive(Clone)]
 struct Item {
     stream: usize,
     sample: RawSample,
+}
+
+/// A request for a snapshot, answered with the file written.
+struct Trigger {
+    reason: String,
+    reply: flume::Sender<Result<PathBuf, String>>,
 }
 
 /// At the end of a recording.
@@ -152,36 +172,85 @@ pub struct Recorder {
     options: RecordOptions,
     shared: Arc<Shared>,
     tx: Option<flume::Sender<Item>>,
+    triggers: flume::Sender<Trigger>,
     writer: Option<JoinHandle<Result<Vec<std::path::PathBuf>, BagError>>>,
     /// Consumers by (topic, fingerprint, reliable).
     consumers: HashMap<(String, u64, bool), DirectConsumer>,
 }
 
 impl Recorder {
-    /// Starts recording into `path` (see [`BagWriter::create`]); call [`Self::discover`]
-    /// at once and then periodically.
+    /// Starts recording into `path` (see [`BagWriter::create`]); with
+    /// [`RecordOptions::snapshot`], `path` is the directory (new or empty) that snapshots go
+    /// into. Call [`Self::discover`] at once and then periodically.
     pub fn start(
         participant: &Participant,
         path: &Path,
         options: RecordOptions,
     ) -> Result<Self, BagError> {
-        let writer = BagWriter::create(path, options.write.clone())?;
         let shared = Arc::new(Shared::default());
         let (tx, rx) = flume::bounded(1 << 16);
+        let (triggers, trigger_rx) = flume::bounded(16);
         let thread_shared = Arc::clone(&shared);
         let json = options.json;
+        let work: Box<dyn FnOnce() -> Result<Vec<PathBuf>, BagError> + Send> =
+            match options.snapshot {
+                None => {
+                    let writer = BagWriter::create(path, options.write.clone())?;
+                    Box::new(move || write_loop(writer, &rx, &trigger_rx, &thread_shared, json))
+                }
+                Some(snapshot) => {
+                    prepare_dir(path)?;
+                    let ring = Ring {
+                        dir: path.to_owned(),
+                        snapshot,
+                        write: options.write.clone(),
+                        json,
+                        items: VecDeque::new(),
+                        bytes: 0,
+                        files: Vec::new(),
+                    };
+                    Box::new(move || ring.run(&rx, &trigger_rx, &thread_shared))
+                }
+            };
         let writer = std::thread::Builder::new()
             .name("ndds-record".into())
-            .spawn(move || write_loop(writer, rx, &thread_shared, json))
+            .spawn(work)
             .map_err(|e| BagError::io(path, e))?;
         Ok(Recorder {
             participant: participant.clone(),
             options,
             shared,
             tx: Some(tx),
+            triggers,
             writer: Some(writer),
             consumers: HashMap::new(),
         })
+    }
+
+    /// Black box: writes what the recorder keeps to a new file now and returns it (waits up
+    /// to `timeout` for it to be written). Without [`RecordOptions::snapshot`], refused.
+    pub fn trigger(&self, reason: &str, timeout: Duration) -> Result<PathBuf, BagError> {
+        if self.options.snapshot.is_none() {
+            return Err(BagError::Usage(
+                "this recorder writes everything: snapshots are for --snapshot recorders".into(),
+            ));
+        }
+        let (reply, answer) = flume::bounded(1);
+        self.triggers
+            .send(Trigger {
+                reason: reason.to_owned(),
+                reply,
+            })
+            .map_err(|_| BagError::Finished)?;
+        match answer.recv_timeout(timeout) {
+            Ok(Ok(path)) => Ok(path),
+            Ok(Err(why)) => Err(BagError::Participant(format!(
+                "snapshot not written: {why}"
+            ))),
+            Err(_) => Err(BagError::Participant(format!(
+                "snapshot not written within {timeout:?}"
+            ))),
+        }
     }
 
     /// Looks at the graph and declares consumers for topics that appeared (and a reliable one
@@ -362,39 +431,229 @@ struct WriteState<'a> {
     /// Their channels by (topic, fingerprint); `None` where the type cannot be written as
     /// JSON (opaque).
     json_channels: HashMap<(String, u64), Option<ChannelKey>>,
+    /// Whether what is written counts in the recorder's statistics (not for snapshots, whose
+    /// samples were counted when the black box took them).
+    count_stats: bool,
 }
 
 fn write_loop(
     writer: BagWriter,
-    rx: flume::Receiver<Item>,
+    rx: &flume::Receiver<Item>,
+    triggers: &flume::Receiver<Trigger>,
     shared: &Shared,
     json: bool,
-) -> Result<Vec<std::path::PathBuf>, BagError> {
-    let mut state = WriteState {
-        writer,
-        shared,
-        channels: HashMap::new(),
-        last_seq: HashMap::new(),
-        overflow_seen: HashMap::new(),
-        last_log_time: 0,
-        json,
-        json_channels: HashMap::new(),
-    };
-    let result = state.run(&rx);
+) -> Result<Vec<PathBuf>, BagError> {
+    let mut state = WriteState::new(writer, shared, json, true);
+    let result = state.run(rx, triggers);
     if let Err(err) = &result {
         *shared.failed.lock().expect("not poisoned") = Some(err.to_string());
-        // Nothing more is written: what still arrives is refused at once and counted.
-        drop(rx);
     }
     state.writer.finish()?;
     result.map(|()| state.writer.files().to_vec())
 }
 
-impl WriteState<'_> {
-    fn run(&mut self, rx: &flume::Receiver<Item>) -> Result<(), BagError> {
+/// Makes the snapshot directory: new, or an existing empty one.
+fn prepare_dir(dir: &Path) -> Result<(), BagError> {
+    if dir.exists() {
+        let empty = std::fs::read_dir(dir)
+            .map_err(|e| BagError::io(dir, e))?
+            .next()
+            .is_none();
+        if !empty {
+            return Err(BagError::Exists(dir.to_owned()));
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).map_err(|e| BagError::io(dir, e))
+}
+
+/// A black box: the last samples, by time and bytes.
+struct Ring {
+    dir: PathBuf,
+    snapshot: Snapshot,
+    write: WriteOptions,
+    json: bool,
+    items: VecDeque<Item>,
+    bytes: usize,
+    files: Vec<PathBuf>,
+}
+
+impl Ring {
+    fn run(
+        mut self,
+        rx: &flume::Receiver<Item>,
+        triggers: &flume::Receiver<Trigger>,
+        shared: &Shared,
+    ) -> Result<Vec<PathBuf>, BagError> {
+        let mut taken = WriteState::counter(shared);
+        loop {
+            match rx.recv_timeout(Duration::from_millis(20)) {
+                Ok(item) => {
+                    let size = item.sample.payload.len();
+                    shared.queued_bytes.fetch_sub(size, Ordering::Relaxed);
+                    taken.count(&item);
+                    self.keep(item);
+                }
+                Err(flume::RecvTimeoutError::Timeout) => {}
+                Err(flume::RecvTimeoutError::Disconnected) => return Ok(self.files),
+            }
+            taken.count_overflow();
+            while let Ok(trigger) = triggers.try_recv() {
+                let written = self.write(&trigger.reason, shared);
+                if let Err(err) = &written {
+                    tracing::warn!(%err, "snapshot not written");
+                }
+                let _ = trigger.reply.send(written.map_err(|e| e.to_string()));
+            }
+            if shared.stop.load(Ordering::Acquire) && rx.is_empty() {
+                return Ok(self.files);
+            }
+        }
+    }
+
+    /// Keeps `item`, dropping what is older than the duration or past the byte bound.
+    fn keep(&mut self, item: Item) {
+        let newest = item.sample.info.reception_timestamp;
+        self.bytes += item.sample.payload.len();
+        self.items.push_back(item);
+        while let Some(oldest) = self.items.front() {
+            let age = newest
+                .duration_since(oldest.sample.info.reception_timestamp)
+                .unwrap_or_default();
+            if age <= self.snapshot.duration && self.bytes <= self.snapshot.max_bytes {
+                break;
+            }
+            self.bytes -= oldest.sample.payload.len();
+            self.items.pop_front();
+        }
+    }
+
+    /// Writes what is kept into a new file of the directory.
+    fn write(&mut self, reason: &str, shared: &Shared) -> Result<PathBuf, BagError> {
+        let stamp = humantime_stamp(SystemTime::now());
+        let path = self
+            .dir
+            .join(format!("snapshot_{}_{stamp}.mcap", self.files.len()));
+        let mut options = self.write.clone();
+        options.max_size = None;
+        options.max_duration = None;
+        options
+            .metadata
+            .insert("snapshot_reason".into(), reason.to_owned());
+        options.metadata.insert(
+            "snapshot_window_ms".into(),
+            self.snapshot.duration.as_millis().to_string(),
+        );
+        let writer = BagWriter::create(&path, options)?;
+        let mut state = WriteState::new(writer, shared, self.json, false);
+        let result = self.items.iter().try_for_each(|item| state.write(item));
+        state.writer.finish()?;
+        result?;
+        tracing::info!(path = %path.display(), samples = self.items.len(), reason, "snapshot written");
+        self.files.push(path.clone());
+        Ok(path)
+    }
+}
+
+/// `2026-12-06T08-55-01Z`: a UTC time for file names (RFC 3339 without colons).
+fn humantime_stamp(time: SystemTime) -> String {
+    humantime::format_rfc3339_seconds(time)
+        .to_string()
+        .replace(':', "-")
+}
+
+/// Counts what a black box takes (its samples go to files only when triggered).
+struct Counter<'a> {
+    shared: &'a Shared,
+    last_seq: HashMap<(usize, Guid), u64>,
+    overflow_seen: HashMap<usize, u64>,
+}
+
+impl Counter<'_> {
+    fn count(&mut self, item: &Item) {
+        let gaps = gap(&mut self.last_seq, item);
+        let topic = self.shared.streams.lock().expect("not poisoned")[item.stream]
+            .topic
+            .clone();
+        let mut stats = self.shared.stats.lock().expect("not poisoned");
+        let entry = stats.entry(topic).or_default();
+        entry.messages += 1;
+        entry.bytes += item.sample.payload.len() as u64;
+        entry.lost.gaps += gaps;
+    }
+
+    fn count_overflow(&mut self) {
+        for (topic, overflow) in new_overflow(self.shared, &mut self.overflow_seen) {
+            let mut stats = self.shared.stats.lock().expect("not poisoned");
+            stats.entry(topic).or_default().lost.overflow += overflow;
+        }
+    }
+}
+
+/// The sequence numbers `item`'s producer skipped since its last sample (0 for its first:
+/// before it, the recorder was not there).
+fn gap(last_seq: &mut HashMap<(usize, Guid), u64>, item: &Item) -> u64 {
+    let seq = item.sample.info.seq;
+    match last_seq.get_mut(&(item.stream, item.sample.info.writer)) {
+        Some(last) if seq > *last => {
+            let gaps = seq - *last - 1;
+            *last = seq;
+            gaps
+        }
+        Some(_) => 0,
+        None => {
+            last_seq.insert((item.stream, item.sample.info.writer), seq);
+            0
+        }
+    }
+}
+
+/// Overflow counted by the consumers since the last call, per topic.
+fn new_overflow(shared: &Shared, seen: &mut HashMap<usize, u64>) -> Vec<(String, u64)> {
+    let streams: Vec<Arc<Stream>> = shared.streams.lock().expect("not poisoned").clone();
+    let mut out = Vec::new();
+    for (index, stream) in streams.iter().enumerate() {
+        let now = stream.overflow.load(Ordering::Relaxed);
+        let seen = seen.entry(index).or_default();
+        if now > *seen {
+            out.push((stream.topic.clone(), now - *seen));
+            *seen = now;
+        }
+    }
+    out
+}
+
+impl<'a> WriteState<'a> {
+    fn new(writer: BagWriter, shared: &'a Shared, json: bool, count_stats: bool) -> Self {
+        WriteState {
+            writer,
+            shared,
+            channels: HashMap::new(),
+            last_seq: HashMap::new(),
+            overflow_seen: HashMap::new(),
+            last_log_time: 0,
+            json,
+            json_channels: HashMap::new(),
+            count_stats,
+        }
+    }
+
+    fn counter(shared: &'a Shared) -> Counter<'a> {
+        Counter {
+            shared,
+            last_seq: HashMap::new(),
+            overflow_seen: HashMap::new(),
+        }
+    }
+
+    fn run(
+        &mut self,
+        rx: &flume::Receiver<Item>,
+        triggers: &flume::Receiver<Trigger>,
+    ) -> Result<(), BagError> {
         loop {
             match rx.recv_timeout(Duration::from_millis(50)) {
-                Ok(item) => self.write(item)?,
+                Ok(item) => self.take(&item)?,
                 Err(flume::RecvTimeoutError::Timeout) => {}
                 Err(flume::RecvTimeoutError::Disconnected) => {
                     self.count_overflow();
@@ -402,10 +661,16 @@ impl WriteState<'_> {
                 }
             }
             self.count_overflow();
+            while let Ok(trigger) = triggers.try_recv() {
+                let _ = trigger.reply.send(Err(format!(
+                    "this recorder writes everything (asked for `{}`)",
+                    trigger.reason
+                )));
+            }
             if self.shared.stop.load(Ordering::Acquire) && rx.is_empty() {
                 // The consumers are gone: what is queued is all there is.
                 while let Ok(item) = rx.try_recv() {
-                    self.write(item)?;
+                    self.take(&item)?;
                 }
                 self.count_overflow();
                 return Ok(());
@@ -413,15 +678,21 @@ impl WriteState<'_> {
         }
     }
 
+    /// Writes an item taken off the queue.
+    fn take(&mut self, item: &Item) -> Result<(), BagError> {
+        self.shared
+            .queued_bytes
+            .fetch_sub(item.sample.payload.len(), Ordering::Relaxed);
+        self.write(item)
+    }
+
     fn stream(&self, index: usize) -> Arc<Stream> {
         Arc::clone(&self.shared.streams.lock().expect("not poisoned")[index])
     }
 
-    fn write(&mut self, item: Item) -> Result<(), BagError> {
+    fn write(&mut self, item: &Item) -> Result<(), BagError> {
         let Item { stream, sample } = item;
-        self.shared
-            .queued_bytes
-            .fetch_sub(sample.payload.len(), Ordering::Relaxed);
+        let stream = *stream;
         let writer_id = sample.info.writer;
         let def = self.stream(stream);
         let key = match self.channels.get(&(stream, writer_id)) {
@@ -449,20 +720,12 @@ impl WriteState<'_> {
                 key
             }
         };
-        // Gaps in a producer's sequence numbers are samples lost (before the first one
-        // heard, nothing is counted: the recorder was not there yet).
+        // Gaps in a producer's sequence numbers are samples lost.
         let seq = sample.info.seq;
-        let mut lost = Lost::default();
-        match self.last_seq.get_mut(&(stream, writer_id)) {
-            Some(last) if seq > *last => {
-                lost.gaps = seq - *last - 1;
-                *last = seq;
-            }
-            Some(_) => {}
-            None => {
-                self.last_seq.insert((stream, writer_id), seq);
-            }
-        }
+        let lost = Lost {
+            gaps: gap(&mut self.last_seq, item),
+            overflow: 0,
+        };
         // Log times never go back within a file, so it reads in time order.
         let log_time = nanos(sample.info.reception_timestamp).max(self.last_log_time);
         self.last_log_time = log_time;
@@ -488,6 +751,9 @@ impl WriteState<'_> {
         }
         if lost.gaps > 0 {
             self.writer.note_lost(&def.topic, lost);
+        }
+        if !self.count_stats {
+            return result;
         }
         let mut stats = self.shared.stats.lock().expect("not poisoned");
         let topic = stats.entry(def.topic.clone()).or_default();
@@ -545,20 +811,11 @@ impl WriteState<'_> {
 
     /// Moves the consumers' overflow counts into the stats and the file.
     fn count_overflow(&mut self) {
-        let streams: Vec<Arc<Stream>> = self.shared.streams.lock().expect("not poisoned").clone();
-        for (index, stream) in streams.iter().enumerate() {
-            let now = stream.overflow.load(Ordering::Relaxed);
-            let seen = self.overflow_seen.entry(index).or_default();
-            if now > *seen {
-                let lost = Lost {
-                    gaps: 0,
-                    overflow: now - *seen,
-                };
-                *seen = now;
-                self.writer.note_lost(&stream.topic, lost);
-                let mut stats = self.shared.stats.lock().expect("not poisoned");
-                stats.entry(stream.topic.clone()).or_default().lost.overflow += lost.overflow;
-            }
+        for (topic, overflow) in new_overflow(self.shared, &mut self.overflow_seen) {
+            let lost = Lost { gaps: 0, overflow };
+            self.writer.note_lost(&topic, lost);
+            let mut stats = self.shared.stats.lock().expect("not poisoned");
+            stats.entry(topic).or_default().lost.overflow += overflow;
         }
     }
 }

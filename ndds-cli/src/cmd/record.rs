@@ -9,8 +9,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use ndds_bag::info::human_bytes;
-use ndds_bag::record::{RecordOptions, Recorder, Selection, Summary};
+use ndds_bag::record::{RecordOptions, Recorder, Selection, Snapshot, Summary};
 use ndds_bag::write::{Compression, WriteOptions};
+use ndds_client::ports::{PortError, PortOwner, PortUser, ReplyHandle};
 use regex::Regex;
 use serde_json::json;
 
@@ -65,10 +66,57 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     summary_json: bool,
+    /// Black box: keep the last SECONDS in memory and write them to a new file of the output
+    /// directory only when asked (SIGUSR1, `ndds record --trigger NAME`, a query on port
+    /// snapshot.NAME, a state machine's `snapshot NAME` action).
+    #[arg(long, value_name = "SECONDS", value_parser = seconds::parse)]
+    snapshot: Option<Duration>,
+    /// The black box keeps at most this many bytes of samples (K, M, G suffixes).
+    #[arg(long, default_value = "512M", value_parser = parse_size, requires = "snapshot")]
+    snapshot_bytes: u64,
+    /// The black box's name (its port is snapshot.NAME).
+    #[arg(long, default_value = "recorder")]
+    name: String,
+    /// Ask the black box NAME for a snapshot, print the file it wrote, and exit.
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["topics", "all", "regex", "snapshot"])]
+    trigger: Option<String>,
+    /// Why (with --trigger): written into the snapshot's metadata.
+    #[arg(
+        long,
+        default_value = "asked from the command line",
+        requires = "trigger"
+    )]
+    reason: String,
+}
+
+/// The port of black box `name`: request the reason, reply the file written or why not.
+fn snapshot_port(name: &str) -> String {
+    format!("snapshot.{name}")
+}
+
+type SnapshotReply = Result<String, String>;
+
+/// `ndds record --trigger NAME`.
+fn trigger(daemon: &DaemonArgs, name: &str, reason: &str) -> anyhow::Result<()> {
+    let participant = connect(daemon)?;
+    let port = snapshot_port(name);
+    let user = PortUser::<String, SnapshotReply>::declare(&participant, &port, "ndds-trigger")?;
+    match user.send(&reason.to_owned(), Duration::from_secs(60)) {
+        Ok(Ok(path)) => outln!("{path}").map_err(Into::into),
+        Ok(Err(why)) => anyhow::bail!("black box `{name}` wrote no snapshot: {why}"),
+        Err(PortError::Timeout { .. }) => anyhow::bail!(
+            "no answer from black box `{name}` (port {port}) within 60 s: is `ndds record \
+             --snapshot SECONDS --name {name}` running in this domain?"
+        ),
+        Err(err) => Err(err.into()),
+    }
 }
 
 /// Runs `ndds record`.
 pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+    if let Some(name) = &args.trigger {
+        return trigger(daemon, name, &args.reason);
+    }
     let selection = match (&args.regex, args.all, args.topics.is_empty()) {
         (Some(re), _, _) => Selection::Regex(re.clone()),
         (None, true, _) => Selection::All,
@@ -110,8 +158,30 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         },
         queue_bytes: usize::try_from(args.queue).unwrap_or(usize::MAX),
         json: args.json,
+        snapshot: args.snapshot.map(|duration| Snapshot {
+            duration,
+            max_bytes: usize::try_from(args.snapshot_bytes).unwrap_or(usize::MAX),
+        }),
+    };
+    let output = match (&args.output, args.snapshot) {
+        (None, Some(_)) => PathBuf::from(format!("ndds_snapshots_{}", args.name)),
+        _ => output,
     };
     let mut recorder = Recorder::start(&participant, &output, options)?;
+    // A black box answers on its port and to SIGUSR1.
+    let usr1 = Arc::new(AtomicBool::new(false));
+    let port = match args.snapshot {
+        Some(_) => {
+            signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&usr1))
+                .context("cannot catch SIGUSR1")?;
+            Some(PortOwner::<String, SnapshotReply>::declare(
+                &participant,
+                &snapshot_port(&args.name),
+                "recorder",
+            )?)
+        }
+        None => None,
+    };
     let live = !args.quiet && std::io::stderr().is_terminal();
     let started = Instant::now();
     let mut next_discovery = Instant::now();
@@ -137,7 +207,17 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             status_line(&recorder, started.elapsed());
             next_status = now + Duration::from_millis(250);
         }
-        std::thread::sleep(Duration::from_millis(20));
+        if usr1.swap(false, Ordering::Relaxed) {
+            snapshot_now(&recorder, "SIGUSR1", live, None);
+        }
+        match &port {
+            Some(port) => match port.receive(Duration::from_millis(20)) {
+                Ok((reason, reply)) => snapshot_now(&recorder, &reason, live, Some(reply)),
+                Err(PortError::Timeout { .. }) => {}
+                Err(err) => tracing::warn!(%err, "snapshot port"),
+            },
+            None => std::thread::sleep(Duration::from_millis(20)),
+        }
     }
     if live {
         eprint!("\r\x1b[K");
@@ -148,6 +228,32 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         anyhow::bail!("recording stopped early: {why}");
     }
     Ok(())
+}
+
+/// Writes a snapshot, says so, and answers the port's request if there is one.
+fn snapshot_now(
+    recorder: &Recorder,
+    reason: &str,
+    live: bool,
+    reply: Option<ReplyHandle<SnapshotReply>>,
+) {
+    let result = recorder
+        .trigger(reason, Duration::from_secs(50))
+        .map(|path| path.display().to_string())
+        .map_err(|e| e.to_string());
+    let line = match &result {
+        Ok(path) => format!("snapshot ({reason}): {path}"),
+        Err(why) => format!("snapshot ({reason}) not written: {why}"),
+    };
+    if live {
+        eprint!("\r\x1b[K");
+    }
+    eprintln!("ndds record: {line}");
+    if let Some(reply) = reply
+        && let Err(err) = reply.reply(&result)
+    {
+        tracing::warn!(%err, "the snapshot's answer was not sent");
+    }
 }
 
 /// `ndds_2026-12-06T08-31-37Z.mcap`, in the current directory.

@@ -362,7 +362,8 @@ pub(crate) fn build_into(
         let pending = PendingMachine {
             program: m.program.clone(),
         };
-        let actions = pending.actions(&rt);
+        // For the names and codes only: the network does not change them.
+        let actions = pending.actions(&rt, None);
         let problems = crate::fsm::verify(&m.program, &|action| actions.codes(action));
         for problem in problems {
             found.problems.push(
@@ -464,9 +465,22 @@ pub(crate) struct PendingMachine {
 
 impl PendingMachine {
     /// The actions a description's state machines have: the runtime's (`switch`, `start`,
-    /// `stop`, `reset`) and `set CSMAT V1 V2 ...` (row-major values; 0 done, 1 refused).
-    fn actions(&self, rt: &Runtime) -> ActionSet {
+    /// `stop`, `reset`), `set CSMAT V1 V2 ...` (row-major values; 0 done, 1 refused) and
+    /// `snapshot NAME [REASON]` (asks the black-box recorder `ndds record --snapshot S --name
+    /// NAME` to write what it keeps; 0 asked, 1 without a network).
+    fn actions(&self, rt: &Runtime, participant: Option<&Participant>) -> ActionSet {
         let mut set = ActionSet::runtime(rt);
+        let participant = participant.cloned();
+        set.add("snapshot", &[0, 1], move |arg| {
+            let arg = arg.ok_or("`snapshot` needs the recorder's name")?;
+            let (name, reason) = arg.split_once(' ').unwrap_or((arg, "state machine"));
+            let Some(participant) = participant.clone() else {
+                tracing::warn!("`snapshot {arg}`: the system runs without a network");
+                return Ok(1);
+            };
+            snapshot(participant, name.to_owned(), reason.trim().to_owned());
+            Ok(0)
+        });
         let rt = rt.clone();
         set.add("set", &[0, 1], move |arg| {
             let arg = arg.ok_or("`set` needs a CSMat name and its values")?;
@@ -495,11 +509,37 @@ impl PendingMachine {
         rt: &Runtime,
         participant: Option<&Participant>,
     ) -> Result<StateMachine, FsmError> {
-        let actions = self.actions(rt);
+        let actions = self.actions(rt, participant);
         match participant {
             Some(p) => StateMachine::start_on(self.program.clone(), actions, p),
             None => StateMachine::start(self.program.clone(), actions),
         }
+    }
+}
+
+/// Asks the black-box recorder `name` for a snapshot, on a thread of its own so the machine
+/// never waits for the file to be written: the recorder owns port `snapshot.NAME` (request:
+/// the reason; reply: the file written, or why not; docs/recording.md), and the answer is
+/// logged.
+fn snapshot(participant: Participant, name: String, reason: String) {
+    let spawned = std::thread::Builder::new()
+        .name("ndds-snapshot".into())
+        .spawn(move || {
+            let port = format!("snapshot.{name}");
+            let answer = ndds_client::ports::PortUser::<String, Result<String, String>>::declare(
+                &participant,
+                &port,
+                "state-machine",
+            )
+            .and_then(|user| user.send(&reason, std::time::Duration::from_secs(60)));
+            match answer {
+                Ok(Ok(path)) => tracing::info!(recorder = name, path, "snapshot written"),
+                Ok(Err(why)) => tracing::warn!(recorder = name, why, "snapshot not written"),
+                Err(err) => tracing::warn!(recorder = name, %err, "snapshot not asked"),
+            }
+        });
+    if let Err(err) = spawned {
+        tracing::warn!(%err, "snapshot: no thread to ask the recorder");
     }
 }
 
