@@ -344,3 +344,210 @@ fn a_recording_replays_every_sample_with_its_type_order_and_timing() {
     );
     assert!(median <= 2.0, "median timing error {median:.3} ms");
 }
+
+/// A system that doubles what arrives on `sensor/x` onto `ctl/y` at 200 Hz, and a state
+/// machine that asks the black box `bb` for a snapshot when told `Fault`.
+const DOUBLER: &str = r#"
+[system]
+name = "doubler"
+
+[[habitat]]
+name = "loop"
+rate = 200.0
+
+[[subscribe]]
+mat = "x"
+topic = "sensor/x"
+habitat = "loop"
+shape = [1, 1]
+
+[[component]]
+name = "double"
+type = "gain"
+habitat = "loop"
+input = "x"
+output = "y"
+k = 2.0
+
+[[publish]]
+mat = "y"
+topic = "ctl/y"
+habitat = "loop"
+
+[[state_machine]]
+file = "watch.toml"
+"#;
+
+const WATCH: &str = r#"
+main = "watch"
+error_state = "Broken"
+
+[stimuli]
+Fault = "transient"
+
+[[machine]]
+name = "watch"
+start = "Running"
+states = ["Running", "Saved", "Broken"]
+
+[[machine.transition]]
+from = "Running"
+when = "Fault"
+action = "snapshot bb the watch saw a fault"
+next = { 0 = "Saved", 1 = "Broken" }
+"#;
+
+#[test]
+fn a_replayed_recording_drives_a_live_system_whose_state_machine_saves_the_black_box() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let dir = domain.path("system");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("doubler.toml"), DOUBLER).unwrap();
+    std::fs::write(dir.join("watch.toml"), WATCH).unwrap();
+    let system_file = dir.join("doubler.toml").display().to_string();
+
+    // 1. Record a sensor: 200 values, 100 Hz, best effort.
+    let bag = domain.path("sensor.mcap").display().to_string();
+    let recorder = ClientProcess::program(
+        "ndds",
+        &socket,
+        &["record", "sensor/x", "-o", &bag, "--summary-json"],
+    );
+    let source = participant(&socket, "sensor");
+    let sensor = source
+        .producer::<CsMat>("sensor/x", ProducerQos::default())
+        .unwrap();
+    assert!(sensor.wait_for_consumers(1, WAIT), "recorder took sensor/x");
+    std::thread::sleep(Duration::from_millis(200));
+    let started = Instant::now();
+    for i in 0..200u64 {
+        let due = started + Duration::from_millis(10 * i);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        let x = CsMat::from_row_slice("x", 1, 1, &[i as f64 + 1.0]).unwrap();
+        sensor.write(&x).unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    recorder.interrupt();
+    let summary: serde_json::Value =
+        serde_json::from_str(&recorder.line(WAIT).expect("summary")).unwrap();
+    assert_eq!(summary["messages"], 200, "{summary}");
+    drop(sensor);
+    drop(source);
+
+    // 2. The system, with a black box recording its output, and the replay into it.
+    let system = ClientProcess::program("ndds", &socket, &["run", &system_file, "--plain"]);
+    let snapshots = domain.path("snapshots").display().to_string();
+    let black_box = ClientProcess::program(
+        "ndds",
+        &socket,
+        &[
+            "record",
+            "ctl/y",
+            "--snapshot",
+            "30",
+            "--name",
+            "bb",
+            "-o",
+            &snapshots,
+        ],
+    );
+    let sink = participant(&socket, "sink");
+    let outputs = sink
+        .consumer::<CsMat>(
+            "ctl/y",
+            ConsumerQos {
+                depth: 8192,
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    // The system is up once its output flows (x is 0 until the replay: y is 0).
+    let first = outputs
+        .recv_timeout(WAIT)
+        .expect("the system publishes ctl/y");
+    assert_eq!(first.value.get(0, 0).unwrap(), 0.0);
+    let play = domain.ndds("a", &["play", &bag, "--delay", "1"], WAIT * 2);
+    assert_eq!(play.code, Some(0), "ndds play: {}", play.stderr);
+    // The system publishes all the time: what it published until now waits in the queue.
+    std::thread::sleep(Duration::from_millis(300));
+    let mut ys = Vec::new();
+    while let Ok(sample) = outputs.try_recv() {
+        ys.push(sample.value.get(0, 0).unwrap());
+    }
+    // The system doubled each replayed value: every output is 0 or 2 × a recorded value, they
+    // never go back, and most of the 200 recorded values were seen doubled.
+    assert!(
+        ys.iter()
+            .all(|y| *y == 0.0 || (*y / 2.0).fract() == 0.0 && *y <= 400.0),
+        "{ys:?}"
+    );
+    assert!(
+        ys.windows(2).all(|w| w[0] <= w[1]),
+        "outputs follow the replay in order"
+    );
+    let distinct: std::collections::BTreeSet<u64> =
+        ys.iter().filter(|y| **y > 0.0).map(|y| *y as u64).collect();
+    println!(
+        "replay into a live system: {} outputs, {} distinct doubled values, last {}",
+        ys.len(),
+        distinct.len(),
+        ys.last().copied().unwrap_or_default()
+    );
+    assert!(
+        distinct.len() >= 180,
+        "{} of 200 values seen doubled",
+        distinct.len()
+    );
+    assert_eq!(ys.last().copied(), Some(400.0));
+
+    // 3. The state machine's `snapshot bb` action: the black box writes its last 30 s.
+    let fsm = domain.ndds("a", &["fsm", "send", "watch", "Fault"], WAIT);
+    assert_eq!(fsm.code, Some(0), "ndds fsm send: {}", fsm.stderr);
+    let snapshot_dir = Path::new(&snapshots).to_owned();
+    let written = interop_tests::wait_until(WAIT, || {
+        std::fs::read_dir(&snapshot_dir).is_ok_and(|d| d.count() == 1)
+    });
+    assert!(written.is_some(), "the black box wrote a snapshot");
+    // Written whole (the file appears when its writer starts: wait for its summary).
+    let file = std::fs::read_dir(&snapshot_dir)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let info = interop_tests::wait_until(WAIT, || {
+        let out = domain.ndds(
+            "a",
+            &["bag", "info", "--json", &file.display().to_string()],
+            WAIT,
+        );
+        out.stdout.contains("\"finished\":true")
+    });
+    assert!(info.is_some(), "the snapshot is finished");
+    let out = domain.ndds(
+        "a",
+        &["bag", "info", "--json", &file.display().to_string()],
+        WAIT,
+    );
+    let info: serde_json::Value = serde_json::from_str(&out.stdout).unwrap();
+    let messages = info[0]["messages"].as_u64().unwrap();
+    println!(
+        "snapshot: {messages} samples of ctl/y, {} s",
+        info[0]["duration_s"]
+    );
+    assert!(messages > 200, "{info}");
+    // And by hand: `ndds record --trigger bb` prints the next file.
+    let out = domain.ndds(
+        "a",
+        &["record", "--trigger", "bb", "--reason", "test"],
+        WAIT,
+    );
+    assert_eq!(out.code, Some(0), "{}", out.stderr);
+    assert!(out.stdout.trim().ends_with(".mcap"), "{}", out.stdout);
+    drop(black_box);
+    drop(system);
+}
