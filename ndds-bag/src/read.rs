@@ -144,6 +144,9 @@ pub struct BagReader {
     path: PathBuf,
     file: File,
     length: u64,
+    /// Whether the file ends with MCAP's closing magic (a whole file does; one whose writer
+    /// was killed does not).
+    closed: bool,
     reader: LinearReader,
     schemas: HashMap<u16, (String, String, Vec<u8>)>,
     channels: HashMap<u16, Arc<BagChannel>>,
@@ -164,13 +167,15 @@ impl std::fmt::Debug for BagReader {
 impl BagReader {
     /// Opens `path` (an MCAP file).
     pub fn open(path: &Path) -> Result<Self, BagError> {
-        let file = File::open(path).map_err(|e| BagError::io(path, e))?;
+        let mut file = File::open(path).map_err(|e| BagError::io(path, e))?;
         let length = file.metadata().map_err(|e| BagError::io(path, e))?.len();
+        let closed = ends_with_magic(&mut file).map_err(|e| BagError::io(path, e))?;
         let options = LinearReaderOptions::default().with_record_length_limit(MAX_RECORD);
         Ok(BagReader {
             path: path.to_owned(),
             file,
             length,
+            closed,
             reader: LinearReader::new_with_options(options),
             schemas: HashMap::new(),
             channels: HashMap::new(),
@@ -220,6 +225,16 @@ impl BagReader {
                     return Ok(None);
                 }
                 Some(Err(mcap::McapError::UnexpectedEof)) => {
+                    self.ending = Ending::Truncated {
+                        length: self.length,
+                    };
+                    return Ok(None);
+                }
+                // Without its closing magic the file was cut short: a record or chunk that
+                // ends early is the cut (a chunk's lengths are written when the chunk ends).
+                Some(Err(
+                    mcap::McapError::UnexpectedEoc | mcap::McapError::BadChunkLength { .. },
+                )) if !self.closed => {
                     self.ending = Ending::Truncated {
                         length: self.length,
                     };
@@ -334,6 +349,20 @@ impl BagReader {
             }
         }
     }
+}
+
+/// Whether `file` ends with MCAP's magic; the file is left at its start.
+fn ends_with_magic(file: &mut File) -> std::io::Result<bool> {
+    use std::io::{Seek, SeekFrom};
+    let length = file.metadata()?.len();
+    let mut end = [0u8; 8];
+    let closed = length >= 16 && {
+        file.seek(SeekFrom::End(-8))?;
+        file.read_exact(&mut end)?;
+        end == *mcap::MAGIC
+    };
+    file.seek(SeekFrom::Start(0))?;
+    Ok(closed)
 }
 
 /// Several bags' messages merged in log-time order (each file is in log-time order as ndds

@@ -444,12 +444,21 @@ fn write_loop(
     json: bool,
 ) -> Result<Vec<PathBuf>, BagError> {
     let mut state = WriteState::new(writer, shared, json, true);
-    let result = state.run(rx, triggers);
-    if let Err(err) = &result {
+    // A failure (the disk's reserve reached, a write error) ends the recording with the file
+    // finished; it is reported in the summary (`stopped`), not as the recorder's error.
+    if let Err(err) = state.run(rx, triggers) {
+        tracing::warn!(%err, "recording stopped");
         *shared.failed.lock().expect("not poisoned") = Some(err.to_string());
     }
-    state.writer.finish()?;
-    result.map(|()| state.writer.files().to_vec())
+    if let Err(err) = state.writer.finish() {
+        let mut failed = shared.failed.lock().expect("not poisoned");
+        let why = match failed.take() {
+            Some(first) => format!("{first}; then finishing the file failed: {err}"),
+            None => format!("finishing the file failed: {err}"),
+        };
+        *failed = Some(why);
+    }
+    Ok(state.writer.files().to_vec())
 }
 
 /// Makes the snapshot directory: new, or an existing empty one.

@@ -281,10 +281,12 @@ impl BagWriter {
     }
 
     /// Writes one sample; opens the next split file first when the current one is full. On
-    /// [`BagError::DiskFull`] the current file has been finished properly and nothing more
-    /// may be written.
+    /// [`BagError::DiskFull`] the sample was not written, the current file has been finished
+    /// properly, and nothing more may be written.
     pub fn write(&mut self, record: Record<'_>) -> Result<(), BagError> {
         self.split_if_due(record.log_time)?;
+        // Before writing: a refused sample is one not in the file.
+        self.check_space()?;
         let def = &self.channels[record.channel.0];
         let open = self.open.as_mut().ok_or(BagError::Finished)?;
         let id = match open.channels.get(&record.channel) {
@@ -316,7 +318,7 @@ impl BagWriter {
         open.first_log_time.get_or_insert(record.log_time);
         open.last_log_time = open.last_log_time.max(record.log_time);
         self.messages += 1;
-        self.check_space()
+        Ok(())
     }
 
     /// Counts samples a topic lost into the current file's metadata.

@@ -1,0 +1,292 @@
+//! `ndds record`, `ndds play` and `ndds bag` as a user runs them, through a real daemon: a
+//! recorder killed with -9 leaves a file read up to its last chunk; split files; play's loop,
+//! remap, start, duration and rate; bag filter and cut; a disk that fills (a small tmpfs,
+//! as root) stops the recording with the file closed properly.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use interop_tests::{ClientProcess, TestDomain};
+use ndds_client::{ConsumerQos, EmbeddedPolicy, Participant, ProducerQos};
+
+const WAIT: Duration = Duration::from_secs(20);
+
+fn participant(socket: &Path, name: &str) -> Participant {
+    Participant::builder()
+        .socket(socket)
+        .embedded(EmbeddedPolicy::Never)
+        .name(name)
+        .connect()
+        .expect("connect to the test daemon")
+}
+
+fn json(text: &str) -> serde_json::Value {
+    serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+/// Writes `count` u64 samples (0, 1, ...) on `topic` at `hz`, once the recorder took it.
+fn publish(socket: &Path, topic: &str, count: u64, hz: f64, payload: usize) {
+    let source = participant(socket, "source");
+    let producer = source
+        .producer::<(u64, serde_bytes::ByteBuf)>(topic, ProducerQos::default())
+        .unwrap();
+    assert!(
+        producer.wait_for_consumers(1, WAIT),
+        "the recorder took {topic}"
+    );
+    std::thread::sleep(Duration::from_millis(200));
+    let started = Instant::now();
+    // Random bytes, new in each sample: compression cannot shrink them (the split test counts
+    // on the size).
+    let mut rng = fastrand::Rng::with_seed(7);
+    for i in 0..count {
+        let blob = serde_bytes::ByteBuf::from((0..payload).map(|_| rng.u8(..)).collect::<Vec<_>>());
+        let due = started + Duration::from_secs_f64(i as f64 / hz);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        producer.write(&(i, blob)).unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+}
+
+#[test]
+fn a_recorder_killed_with_sigkill_leaves_a_file_read_up_to_its_last_chunk() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let bag = domain.path("killed.mcap").display().to_string();
+    let mut recorder = ClientProcess::program(
+        "ndds",
+        &socket,
+        &["record", "data", "-o", &bag, "--chunk-size", "64K"],
+    );
+    publish(&socket, "data", 500, 500.0, 1000);
+    recorder.kill9();
+    let out = domain.ndds("a", &["bag", "info", "--json", &bag], WAIT);
+    assert_eq!(out.code, Some(0), "{}", out.stderr);
+    let info = &json(&out.stdout)[0];
+    println!("killed recorder: {info}");
+    assert_eq!(info["state"], "truncated", "{info}");
+    assert_eq!(info["finished"], false);
+    let messages = info["messages"].as_u64().unwrap();
+    // Everything but the last chunk (64 KiB of ~1 KiB samples) is there.
+    assert!(messages >= 500 - 70 && messages < 500, "{messages}");
+    let text = domain.ndds("a", &["bag", "info", &bag], WAIT).stdout;
+    assert!(
+        text.contains("truncated") && text.contains("unknown"),
+        "{text}"
+    );
+    // And it plays what it holds.
+    let play = domain.ndds(
+        "a",
+        &["play", &bag, "--delay", "0", "--rate", "10", "--json"],
+        WAIT,
+    );
+    assert_eq!(play.code, Some(0), "{}", play.stderr);
+    assert!(play.stderr.contains("truncated"), "{}", play.stderr);
+    assert_eq!(json(&play.stdout)["published"], messages);
+}
+
+#[test]
+fn split_files_play_loop_remap_start_duration_and_bag_filter_cut() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let dir = domain.path("split").display().to_string();
+    let recorder = ClientProcess::program(
+        "ndds",
+        &socket,
+        &[
+            "record",
+            "data",
+            "-o",
+            &dir,
+            "--max-size",
+            "100K",
+            "--chunk-size",
+            "16K",
+            "--compression",
+            "lz4",
+            "--summary-json",
+        ],
+    );
+    // 2 s at 200 Hz of 2 KiB samples: about 800 KiB, so several files.
+    publish(&socket, "data", 400, 200.0, 2048);
+    recorder.interrupt();
+    let summary = json(&recorder.line(WAIT).expect("summary"));
+    let files = summary["files"].as_array().unwrap().len();
+    println!("split: {files} files, {}", summary["messages"]);
+    assert!(files >= 4, "{summary}");
+    assert_eq!(summary["messages"], 400);
+
+    // Play the directory: remapped, from 0.5 s for 1 s, twice as fast, looped twice.
+    let sink = participant(&socket, "sink");
+    let consumer = sink
+        .consumer::<(u64, serde_bytes::ByteBuf)>(
+            "replayed",
+            ConsumerQos {
+                depth: 4096,
+                ..ConsumerQos::default()
+            },
+        )
+        .unwrap();
+    let player = ClientProcess::program(
+        "ndds",
+        &socket,
+        &[
+            "play",
+            &dir,
+            "--remap",
+            "data=replayed",
+            "--start",
+            "0.5",
+            "--duration",
+            "1",
+            "--rate",
+            "2",
+            "--loop",
+            "--delay",
+            "1",
+            "--json",
+        ],
+    );
+    let mut got = Vec::new();
+    let deadline = Instant::now() + WAIT;
+    // Two passes of about 200 samples (0.5 s to 1.5 s at 200 Hz).
+    while got.len() < 410 && Instant::now() < deadline {
+        if let Ok(sample) = consumer.recv_timeout(Duration::from_millis(100)) {
+            got.push(sample.value.0);
+        }
+    }
+    player.interrupt();
+    assert!(got.len() >= 410, "{} samples", got.len());
+    // A pass is 0.5 s to 1.5 s of the recording: samples 100 to 300, in order; then the
+    // loop starts again at --start.
+    let restart = (1..got.len())
+        .find(|i| got[*i] < got[i - 1])
+        .expect("a second pass");
+    let first_pass = &got[..restart];
+    println!(
+        "play: first pass {}..={} ({} samples)",
+        first_pass[0],
+        got[restart - 1],
+        restart
+    );
+    assert!((99..=101).contains(&first_pass[0]), "{first_pass:?}");
+    assert!((199..=202).contains(&restart), "{first_pass:?}");
+    assert!(
+        first_pass.windows(2).all(|w| w[1] == w[0] + 1),
+        "{first_pass:?}"
+    );
+    assert_eq!(
+        got[restart], first_pass[0],
+        "the loop starts again at --start"
+    );
+
+    // bag filter by topic (none left of another topic) and cut by time.
+    let merged = domain.path("merged.mcap").display().to_string();
+    let mut args = vec![
+        "bag",
+        "cut",
+        "-o",
+        &merged,
+        "--start",
+        "0.5",
+        "--duration",
+        "0.5",
+    ];
+    let parts: Vec<String> = summary["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap().to_owned())
+        .collect();
+    args.extend(parts.iter().map(String::as_str));
+    let out = domain.ndds("a", &args, WAIT);
+    assert_eq!(out.code, Some(0), "{}", out.stderr);
+    let cut = json(&out.stdout);
+    println!("cut: {cut}");
+    assert!((99..=102).contains(&cut["kept"].as_u64().unwrap()), "{cut}");
+    let filtered = domain.path("none.mcap").display().to_string();
+    let out = domain.ndds(
+        "a",
+        &[
+            "bag", "filter", &merged, "-o", &filtered, "--topics", "other",
+        ],
+        WAIT,
+    );
+    assert_eq!(json(&out.stdout)["kept"], 0, "{}", out.stdout);
+    // An existing output is never overwritten.
+    let out = domain.ndds("a", &["bag", "cut", &merged, "-o", &filtered], WAIT);
+    assert_ne!(out.code, Some(0));
+    assert!(out.stderr.contains("exists"), "{}", out.stderr);
+}
+
+#[test]
+fn a_disk_that_fills_stops_the_recording_with_the_file_closed_properly() {
+    if !nix::unistd::Uid::effective().is_root() {
+        let why = "a_disk_that_fills_stops_the_recording_with_the_file_closed_properly: skipped: \
+                   mounting a small tmpfs needs root";
+        let required = std::env::var("CI").is_ok_and(|v| v == "true")
+            || std::env::var("NDDS_REQUIRE_NETNS").is_ok_and(|v| v == "1");
+        assert!(!required, "{why} (required under CI)");
+        eprintln!("{why}");
+        return;
+    }
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let mount = domain.path("small");
+    std::fs::create_dir_all(&mount).unwrap();
+    let mounted = std::process::Command::new("mount")
+        .args([
+            "-t",
+            "tmpfs",
+            "-o",
+            "size=24m",
+            "ndds-test",
+            &mount.display().to_string(),
+        ])
+        .status()
+        .expect("mount");
+    assert!(mounted.success(), "mount a tmpfs");
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _unmount = Unmount(&mount);
+    let bag = mount.join("full.mcap").display().to_string();
+    let recorder = ClientProcess::program(
+        "ndds",
+        &socket,
+        &[
+            "record",
+            "data",
+            "-o",
+            &bag,
+            "--compression",
+            "none",
+            "--summary-json",
+        ],
+    );
+    // 64 KiB samples at 500 Hz (32 MiB/s): the 24 MiB disk (8 MiB kept free) fills in 0.5 s.
+    let stopped = std::thread::spawn({
+        let socket = socket.clone();
+        move || publish(&socket, "data", 1000, 500.0, 64 << 10)
+    });
+    let summary = json(&recorder.line(WAIT).expect("a summary when stopped"));
+    let _ = stopped.join();
+    println!("disk full: {summary}");
+    let why = summary["stopped"]
+        .as_str()
+        .expect("stopped early, saying why");
+    assert!(why.contains("closed properly"), "{why}");
+    let out = domain.ndds("a", &["bag", "info", "--json", &bag], WAIT);
+    let info = &json(&out.stdout)[0];
+    assert_eq!(info["state"], "complete", "{info}");
+    assert_eq!(info["finished"], true, "{info}");
+    assert_eq!(info["messages"], summary["messages"]);
+}
