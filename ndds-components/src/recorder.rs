@@ -1,6 +1,9 @@
 //! Recording: the `recorder` keeps the last `capacity` samples of its inputs in memory, for
-//! code to read through a [`RecorderHandle`] and, if given a `file`, writes them as CSV when
-//! sampling ends.
+//! code to read through a [`RecorderHandle`] and, if given a `file`, writes them when sampling
+//! ends: as CSV, or as an MCAP recording when the file's name ends in `.mcap` (one channel per
+//! input, named after it, each sample the input CSMat with its field names and units, logged
+//! at the wall-clock time sampling began plus the sample's nominal time: `ndds play` and
+//! `ndds bag` take it like a recording by `ndds record`).
 //!
 //! | type       | module       | reads    | writes |
 //! |------------|--------------|----------|--------|
@@ -64,6 +67,11 @@ impl Ring {
 
 struct Shared {
     ring: Mutex<Ring>,
+    /// Each input as it was when sampling began (name, shape, fields): what MCAP samples are
+    /// rebuilt from.
+    templates: Mutex<Vec<CsMat>>,
+    /// Wall-clock time sampling began.
+    began: Mutex<std::time::SystemTime>,
     /// Samples not recorded because a reader held the recording.
     dropped: AtomicU64,
 }
@@ -119,6 +127,52 @@ impl RecorderHandle {
         let ring = self.ring();
         let index = ring.columns.iter().position(|c| c == name)?;
         Some(ring.rows().iter().map(|row| row[index]).collect())
+    }
+
+    /// Writes the rows held as an MCAP recording (see the module docs).
+    pub fn write_mcap(&self, path: &Path) -> Result<(), ndds_bag::BagError> {
+        let rows = self.rows();
+        let templates = self
+            .0
+            .templates
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        let began = *self.0.began.lock().unwrap_or_else(PoisonError::into_inner);
+        let began = ndds_bag::format::nanos(began);
+        let mut writer = ndds_bag::BagWriter::create(path, ndds_bag::WriteOptions::default())?;
+        let desc = ndds_client::TypeDescription::of::<CsMat>();
+        let channels: Vec<_> = templates
+            .iter()
+            .map(|t| writer.add_channel(t.name(), &desc, ndds_bag::format::ChannelMeta::default()))
+            .collect();
+        let mut mats = templates;
+        let mut payload = Vec::new();
+        for (seq, row) in rows.iter().enumerate() {
+            let log_time = began.saturating_add((row[0] * 1e9) as u64);
+            let mut at = 1;
+            for (mat, channel) in mats.iter_mut().zip(&channels) {
+                let (rows, cols) = mat.shape();
+                for r in 0..rows {
+                    for c in 0..cols {
+                        mat.matrix_mut()[(r, c)] = row[at];
+                        at += 1;
+                    }
+                }
+                payload.clear();
+                payload = postcard::to_extend(mat, payload).map_err(|err| {
+                    ndds_bag::BagError::Usage(format!("encoding {}: {err}", mat.name()))
+                })?;
+                writer.write(ndds_bag::write::Record {
+                    channel: *channel,
+                    seq: seq as u64 + 1,
+                    log_time,
+                    publish_time: log_time,
+                    data: &payload,
+                })?;
+            }
+        }
+        writer.finish()
     }
 
     /// Writes the rows held as CSV: a header line of column names, then one line per row.
@@ -206,6 +260,8 @@ impl Recorder {
             name: b.module_name().to_owned(),
             shared: Arc::new(Shared {
                 ring: Mutex::new(ring),
+                templates: Mutex::new(Vec::new()),
+                began: Mutex::new(std::time::SystemTime::UNIX_EPOCH),
                 dropped: AtomicU64::new(0),
             }),
         })
@@ -225,11 +281,25 @@ impl Recorder {
     fn prepare(&mut self) -> RoutineResult {
         self.shapes.clear();
         let mut columns = vec!["time".to_owned()];
+        let mut templates = Vec::new();
         for input in &self.inputs {
             let value = input.read();
             self.shapes.push(value.shape());
             column_names(input.name(), &value, &mut columns);
+            let mut template = value.clone();
+            template.set_name(input.name());
+            templates.push(template);
         }
+        *self
+            .shared
+            .templates
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = templates;
+        *self
+            .shared
+            .began
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = std::time::SystemTime::now();
         let mut ring = self
             .shared
             .ring
@@ -320,6 +390,14 @@ impl SampleModule for Recorder {
         let Some(path) = &self.file else {
             return Ok(());
         };
+        if path.extension().is_some_and(|e| e == "mcap") {
+            // A recording of an earlier session is replaced, as a CSV file is.
+            let _ = std::fs::remove_file(path);
+            return self
+                .handle()
+                .write_mcap(path)
+                .map_err(|err| self.error(format_args!("writing `{}`: {err}", path.display())));
+        }
         self.handle()
             .write_csv(path)
             .map_err(|err| self.error(format_args!("writing `{}`: {err}", path.display())))
@@ -330,7 +408,7 @@ const RECORDER: ComponentSpec = ComponentSpec {
     name: "recorder",
     summary: "Records its inputs each sample (time, then every element) into a ring of the \
               last `capacity` samples, read from code through a RecorderHandle; with `file`, \
-              writes them as CSV when sampling ends.",
+              writes them as CSV or MCAP (`.mcap`) when sampling ends.",
     params: &[
         P::required("inputs", K::Inputs, "the CSMats to record (at least one)"),
         P::optional("capacity", K::Number, "10000", "samples kept (the newest)"),
@@ -338,7 +416,8 @@ const RECORDER: ComponentSpec = ComponentSpec {
             "file",
             K::File,
             "none",
-            "CSV file written when sampling ends (header: time, <mat>[<row>,<col>], …)",
+            "file written when sampling ends: CSV (header: time, <mat>[<row>,<col>], …), or an \
+             MCAP recording when it ends in .mcap (one channel per input)",
         ),
     ],
 };
@@ -448,6 +527,41 @@ mod tests {
         steps(&rt, 1)?;
         assert_eq!((handle.recorded(), handle.dropped()), (3, 1));
         assert_eq!(handle.column("time"), Some(vec![0.0, 0.01, 0.03]));
+        Ok(())
+    }
+
+    #[test]
+    fn writes_an_mcap_recording_when_sampling_ends() -> TestResult {
+        let dir = tempfile::tempdir()?;
+        let path = dir.path().join("run.mcap");
+        let (rt, handle) = recording(100)?;
+        // The recording made by `recording` has no file: write it as the module would.
+        steps(&rt, 20)?;
+        handle.write_mcap(&path)?;
+        let mut reader = ndds_bag::BagReader::open(&path)?;
+        let mut by_topic: std::collections::BTreeMap<String, Vec<(u64, CsMat)>> =
+            Default::default();
+        while let Some(message) = reader.next_message()? {
+            let mat: CsMat = postcard::from_bytes(&message.data)?;
+            by_topic
+                .entry(message.channel.topic.clone())
+                .or_default()
+                .push((message.log_time, mat));
+        }
+        assert_eq!(reader.ending(), &ndds_bag::Ending::Complete);
+        assert_eq!(by_topic.keys().collect::<Vec<_>>(), ["pair", "y"]);
+        let ys = &by_topic["y"];
+        assert_eq!(ys.len(), 20);
+        for (k, (log_time, y)) in ys.iter().enumerate() {
+            assert_eq!(y.get(0, 0)?, k as f64 / 100.0, "sample {k}");
+            // 10 ms apart, from when sampling began.
+            assert_eq!(log_time - ys[0].0, k as u64 * 10_000_000);
+        }
+        // CSMats keep their field names and units.
+        let pair = &by_topic["pair"][0].1;
+        assert_eq!(pair.row_fields()[1].name, "right");
+        assert_eq!(pair.row_fields()[1].unit, "m");
+        assert_eq!(pair.get(1, 0)?, 2.0);
         Ok(())
     }
 

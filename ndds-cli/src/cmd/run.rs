@@ -68,6 +68,10 @@ pub struct Args {
     /// file's names, so a second copy of one system belongs in another domain (--domain).
     #[arg(long)]
     name: Option<String>,
+    /// Record the system's topics (its bindings, its state machines' states and stimuli, its
+    /// statistics and configuration topics) into FILE, an MCAP file as `ndds record` writes.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["check", "simulate"])]
+    record: Option<PathBuf>,
 }
 
 /// Runs `ndds run`.
@@ -130,6 +134,11 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             None => "no configurations".to_owned(),
         }
     );
+    let mut recorder = match &args.record {
+        Some(path) => Some(start_recording(&participant, &system, path)?),
+        None => None,
+    };
+    let mut next_discovery = Instant::now() + Duration::from_millis(500);
     let begun = Instant::now();
     let live = !args.plain && std::io::stdout().is_terminal();
     if live {
@@ -166,6 +175,14 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
                 next = now + args.interval;
             }
         }
+        if let Some(recorder) = recorder.as_mut()
+            && now >= next_discovery
+        {
+            next_discovery = now + Duration::from_millis(500);
+            if let Err(err) = recorder.discover() {
+                tracing::warn!(%err, "recording: the graph could not be read");
+            }
+        }
         std::thread::sleep(Duration::from_millis(20));
     };
     // The last report stays on screen; what follows goes below it.
@@ -174,6 +191,26 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         say!("ndds run: interrupted");
     }
     system.stop();
+    if let Some(recorder) = recorder {
+        let summary = recorder.finish()?;
+        let files: Vec<String> = summary
+            .files
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect();
+        say!(
+            "ndds run: recorded {} messages of {} topics into {} ({} lost){}",
+            summary.messages(),
+            summary.topics.len(),
+            files.join(", "),
+            summary.lost(),
+            summary
+                .stopped
+                .as_ref()
+                .map(|why| format!("; stopped early: {why}"))
+                .unwrap_or_default()
+        );
+    }
     let status = system.status();
     let errors = status.module_errors();
     say!(
@@ -184,6 +221,33 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         if errors == 1 { "" } else { "s" }
     );
     Ok(())
+}
+
+/// `--record FILE`: a recorder of the system's topics and its `cs/NAME/` topics, its first
+/// consumers declared now (the rest as their producers appear).
+fn start_recording(
+    participant: &Participant,
+    system: &System,
+    path: &std::path::Path,
+) -> anyhow::Result<ndds_bag::Recorder> {
+    let mut names: Vec<String> = system
+        .topics()
+        .iter()
+        .map(|t| format!("^{}$", regex::escape(t)))
+        .collect();
+    names.push(format!("^cs/{}/", regex::escape(system.name())));
+    let selection = regex::Regex::new(&names.join("|")).context("the system's topics")?;
+    let options = ndds_bag::RecordOptions {
+        selection: ndds_bag::Selection::Regex(selection),
+        ..ndds_bag::RecordOptions::default()
+    };
+    let mut recorder = ndds_bag::Recorder::start(participant, path, options)?;
+    recorder.discover()?;
+    say!(
+        "ndds run: recording the system's topics into {}",
+        path.display()
+    );
+    Ok(recorder)
 }
 
 /// `--simulate`: simulated time in steps of 10 ms, letting state machines act between steps.

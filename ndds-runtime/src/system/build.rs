@@ -424,8 +424,20 @@ pub(crate) fn build_into(
         }
     }
     found.into_result()?;
+    let mut topics: Vec<String> = (d.subscribes.iter().map(|s| s.topic.clone()))
+        .chain(d.publishes.iter().map(|p| p.topic.clone()))
+        .chain(d.machines.iter().flat_map(|m| {
+            [
+                format!("fsm/{}/state", m.program.main),
+                format!("fsm/{}/events", m.program.main),
+            ]
+        }))
+        .collect();
+    topics.sort();
+    topics.dedup();
     Ok(System {
         name: rt.name().to_owned(),
+        topics,
         files: files.iter().map(|f| f.path.as_ref().clone()).collect(),
         participant: participant.cloned(),
         description: d.description.clone(),

@@ -110,6 +110,8 @@ pub(crate) struct MachineEntry {
 /// the state machines and ports it starts.
 pub struct System {
     name: String,
+    /// The topics its bindings and state machines publish and take.
+    topics: Vec<String>,
     files: Vec<PathBuf>,
     runtime: Runtime,
     participant: Option<Participant>,
@@ -180,6 +182,13 @@ impl System {
             .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
         let options = LoadOptions::default().with_library(library);
         build::build(files, &stem, participant, options)
+    }
+
+    /// The topics the system's bindings publish and subscribe to, and its state machines'
+    /// state and stimulus topics (`fsm/M/state`, `fsm/M/events`), sorted; its statistics and
+    /// configuration topics are `cs/NAME/...` (what `ndds run --record` records).
+    pub fn topics(&self) -> &[String] {
+        &self.topics
     }
 
     /// The system's name (`[system] name`, else the top file's name without extension); also
