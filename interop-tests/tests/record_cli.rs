@@ -290,3 +290,65 @@ fn a_disk_that_fills_stops_the_recording_with_the_file_closed_properly() {
     assert_eq!(info["finished"], true, "{info}");
     assert_eq!(info["messages"], summary["messages"]);
 }
+
+#[test]
+fn a_recorder_that_cannot_keep_up_counts_each_lost_sample_once() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let bag = domain.path("overflow.mcap").display().to_string();
+    // A queue of 256 KiB between the network and the disk: 8 KiB samples flat out overflow it.
+    let recorder = ClientProcess::program(
+        "ndds",
+        &socket,
+        &[
+            "record",
+            "ndds/perf/data",
+            "-o",
+            &bag,
+            "--queue",
+            "256K",
+            "--summary-json",
+        ],
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    let publish = domain.ndds(
+        "a",
+        &["perf", "pub", "--size", "8k", "--duration", "2", "--json"],
+        WAIT,
+    );
+    assert_eq!(publish.code, Some(0), "{}", publish.stderr);
+    let written = json(&publish.stdout)["written"].as_u64().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    recorder.interrupt();
+    let summary = json(&recorder.line(WAIT).expect("summary"));
+    let topic = &summary["topics"][0];
+    let (recorded, gaps, overflow) = (
+        topic["messages"].as_u64().unwrap(),
+        topic["lost_gaps"].as_u64().unwrap(),
+        topic["lost_overflow"].as_u64().unwrap(),
+    );
+    let mut reader = ndds_bag::BagReader::open(Path::new(&bag)).unwrap();
+    let (mut first, mut last) = (None, 0);
+    while let Some(message) = reader.next_message().unwrap() {
+        first.get_or_insert(message.sequence);
+        last = message.sequence;
+    }
+    let first = first.expect("something recorded");
+    println!(
+        "overflow: {written} written, {recorded} recorded, {gaps} gaps, {overflow} overflow, \
+         recorded seqs {first}..={last}"
+    );
+    assert!(overflow > 0, "the queue overflowed");
+    // Every seq from the first recorded to the last is recorded, a gap or overflow, once;
+    // overflow after the last recorded one adds to that, never past what was written.
+    let span = u64::from(last - first) + 1;
+    assert!(
+        recorded + gaps + overflow >= span,
+        "{recorded} + {gaps} + {overflow} < {span}"
+    );
+    assert!(
+        recorded + gaps + overflow <= written,
+        "counted twice: more than {written} written"
+    );
+}

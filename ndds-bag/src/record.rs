@@ -111,6 +111,9 @@ struct Stream {
     topic: String,
     desc: TypeDescription,
     reliable: bool,
+    /// Sequence numbers its producers skipped (counted as samples arrive, on the I/O thread).
+    gaps: AtomicU64,
+    /// Samples it received that the recorder could not queue.
     overflow: AtomicU64,
 }
 
@@ -325,6 +328,7 @@ impl Recorder {
             topic: topic.to_owned(),
             desc: desc.clone(),
             reliable,
+            gaps: AtomicU64::new(0),
             overflow: AtomicU64::new(0),
         });
         let index = {
@@ -351,6 +355,9 @@ impl Recorder {
         };
         let shared = Arc::clone(&self.shared);
         let budget = self.options.queue_bytes;
+        // Each producer's last sequence number, as samples arrive: a gap is counted here, where
+        // every sample is seen in order (one the queue cannot take is overflow, not a gap).
+        let mut last_seq: HashMap<Guid, u64> = HashMap::new();
         consumer
             .on_raw_sample_direct(move |sample| {
                 if !stream.reliable
@@ -361,6 +368,18 @@ impl Recorder {
                         .contains(&sample.info.writer)
                 {
                     return;
+                }
+                let seq = sample.info.seq;
+                match last_seq.get_mut(&sample.info.writer) {
+                    Some(last) if seq > *last => {
+                        stream.gaps.fetch_add(seq - *last - 1, Ordering::Relaxed);
+                        *last = seq;
+                    }
+                    Some(_) => {}
+                    // Before a producer's first sample the recorder was not there.
+                    None => {
+                        last_seq.insert(sample.info.writer, seq);
+                    }
                 }
                 let size = sample.payload.len();
                 let queued = shared.queued_bytes.fetch_add(size, Ordering::Relaxed);
@@ -424,7 +443,7 @@ struct WriteState<'a> {
     shared: &'a Shared,
     channels: HashMap<(usize, Guid), ChannelKey>,
     last_seq: HashMap<(usize, Guid), u64>,
-    overflow_seen: HashMap<usize, u64>,
+    losses_seen: HashMap<usize, Lost>,
     last_log_time: u64,
     /// JSON companions wanted.
     json: bool,
@@ -574,13 +593,11 @@ fn humantime_stamp(time: SystemTime) -> String {
 /// Counts what a black box takes (its samples go to files only when triggered).
 struct Counter<'a> {
     shared: &'a Shared,
-    last_seq: HashMap<(usize, Guid), u64>,
-    overflow_seen: HashMap<usize, u64>,
+    seen: HashMap<usize, Lost>,
 }
 
 impl Counter<'_> {
     fn count(&mut self, item: &Item) {
-        let gaps = gap(&mut self.last_seq, item);
         let topic = self.shared.streams.lock().expect("not poisoned")[item.stream]
             .topic
             .clone();
@@ -588,19 +605,20 @@ impl Counter<'_> {
         let entry = stats.entry(topic).or_default();
         entry.messages += 1;
         entry.bytes += item.sample.payload.len() as u64;
-        entry.lost.gaps += gaps;
     }
 
     fn count_overflow(&mut self) {
-        for (topic, overflow) in new_overflow(self.shared, &mut self.overflow_seen) {
+        for (topic, lost) in new_losses(self.shared, &mut self.seen) {
             let mut stats = self.shared.stats.lock().expect("not poisoned");
-            stats.entry(topic).or_default().lost.overflow += overflow;
+            let entry = &mut stats.entry(topic).or_default().lost;
+            entry.gaps += lost.gaps;
+            entry.overflow += lost.overflow;
         }
     }
 }
 
-/// The sequence numbers `item`'s producer skipped since its last sample (0 for its first:
-/// before it, the recorder was not there).
+/// The sequence numbers `item`'s producer skipped since its last sample in `last_seq` (0 for
+/// its first): in a snapshot, the samples of the window that are not in it.
 fn gap(last_seq: &mut HashMap<(usize, Guid), u64>, item: &Item) -> u64 {
     let seq = item.sample.info.seq;
     match last_seq.get_mut(&(item.stream, item.sample.info.writer)) {
@@ -617,15 +635,24 @@ fn gap(last_seq: &mut HashMap<(usize, Guid), u64>, item: &Item) -> u64 {
     }
 }
 
-/// Overflow counted by the consumers since the last call, per topic.
-fn new_overflow(shared: &Shared, seen: &mut HashMap<usize, u64>) -> Vec<(String, u64)> {
+/// Losses the consumers counted since the last call, per topic.
+fn new_losses(shared: &Shared, seen: &mut HashMap<usize, Lost>) -> Vec<(String, Lost)> {
     let streams: Vec<Arc<Stream>> = shared.streams.lock().expect("not poisoned").clone();
     let mut out = Vec::new();
     for (index, stream) in streams.iter().enumerate() {
-        let now = stream.overflow.load(Ordering::Relaxed);
+        let now = Lost {
+            gaps: stream.gaps.load(Ordering::Relaxed),
+            overflow: stream.overflow.load(Ordering::Relaxed),
+        };
         let seen = seen.entry(index).or_default();
-        if now > *seen {
-            out.push((stream.topic.clone(), now - *seen));
+        if now != *seen {
+            out.push((
+                stream.topic.clone(),
+                Lost {
+                    gaps: now.gaps - seen.gaps,
+                    overflow: now.overflow - seen.overflow,
+                },
+            ));
             *seen = now;
         }
     }
@@ -639,7 +666,7 @@ impl<'a> WriteState<'a> {
             shared,
             channels: HashMap::new(),
             last_seq: HashMap::new(),
-            overflow_seen: HashMap::new(),
+            losses_seen: HashMap::new(),
             last_log_time: 0,
             json,
             json_channels: HashMap::new(),
@@ -650,8 +677,7 @@ impl<'a> WriteState<'a> {
     fn counter(shared: &'a Shared) -> Counter<'a> {
         Counter {
             shared,
-            last_seq: HashMap::new(),
-            overflow_seen: HashMap::new(),
+            seen: HashMap::new(),
         }
     }
 
@@ -729,10 +755,15 @@ impl<'a> WriteState<'a> {
                 key
             }
         };
-        // Gaps in a producer's sequence numbers are samples lost.
+        // A recording's losses come from the consumers (`count_overflow`); a snapshot's file
+        // counts the samples of its window that are not in it.
         let seq = sample.info.seq;
         let lost = Lost {
-            gaps: gap(&mut self.last_seq, item),
+            gaps: if self.count_stats {
+                0
+            } else {
+                gap(&mut self.last_seq, item)
+            },
             overflow: 0,
         };
         // Log times never go back within a file, so it reads in time order.
@@ -766,7 +797,6 @@ impl<'a> WriteState<'a> {
         }
         let mut stats = self.shared.stats.lock().expect("not poisoned");
         let topic = stats.entry(def.topic.clone()).or_default();
-        topic.lost.gaps += lost.gaps;
         if result.is_ok() {
             topic.messages += 1;
             topic.bytes += sample.payload.len() as u64;
@@ -818,13 +848,14 @@ impl<'a> WriteState<'a> {
         }
     }
 
-    /// Moves the consumers' overflow counts into the stats and the file.
+    /// Moves the consumers' loss counts into the stats and the file.
     fn count_overflow(&mut self) {
-        for (topic, overflow) in new_overflow(self.shared, &mut self.overflow_seen) {
-            let lost = Lost { gaps: 0, overflow };
+        for (topic, lost) in new_losses(self.shared, &mut self.losses_seen) {
             self.writer.note_lost(&topic, lost);
             let mut stats = self.shared.stats.lock().expect("not poisoned");
-            stats.entry(topic).or_default().lost.overflow += overflow;
+            let entry = &mut stats.entry(topic).or_default().lost;
+            entry.gaps += lost.gaps;
+            entry.overflow += lost.overflow;
         }
     }
 }
