@@ -5,7 +5,8 @@
 #                                        target/, on the disk the repository is on)
 #
 # Builds nothing: run `cargo build --release -p ndds-cli -p ndds-daemon` first, and nothing
-# else meanwhile. One daemon on 127.0.0.1. Prints one line per measurement:
+# else meanwhile. SECONDS_PER_RUN (default 5) sets how long each publisher runs: a run longer
+# than the page cache absorbs (15 s here) measures what the disk sustains. One daemon on 127.0.0.1. Prints one line per measurement:
 #   dd MB/s; for 8 KiB and 1 MiB samples published flat out: the recorder's MB/s, its drops,
 #   its peak memory; the same at half of dd's rate; 64 B samples at 200 000/s (batched); and
 #   `ndds play` of each recording: its rate against the recorded one.
@@ -21,6 +22,13 @@ dir=${1:-target/bench-record}
 rm -rf "$dir"
 mkdir -p "$dir"
 seconds=${SECONDS_PER_RUN:-5}
+# Long runs write several GiB per recording (each is removed once measured): check the room.
+free=$(df --output=avail -B1 "$dir" | tail -1)
+need=$((seconds * 700 * 1000 * 1000))
+if (( free < need )); then
+    echo "$dir has $((free >> 30)) GiB free; SECONDS_PER_RUN=$seconds needs about $((need >> 30)) GiB" >&2
+    exit 2
+fi
 
 "$bin/ndds-daemon" --domain 219 --socket "$dir/d.sock" --interface 127.0.0.1 >"$dir/daemon.log" 2>&1 &
 daemon=$!
@@ -81,6 +89,7 @@ played = play["published"] / max(play["seconds"] - 0.2, 1e-9)
 print(f"{sys.argv[4]} play msgs/s {played:.0f} recorded msgs/s {recorded:.0f} "
       f"ratio {played / recorded:.3f}")
 EOF
+    rm -f "$file"
 }
 
 record 8k_max 8192 max

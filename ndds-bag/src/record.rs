@@ -217,7 +217,10 @@ impl Recorder {
             };
         let writer = std::thread::Builder::new()
             .name("ndds-record".into())
-            .spawn(work)
+            .spawn(move || {
+                yield_to_receivers();
+                work()
+            })
             .map_err(|e| BagError::io(path, e))?;
         Ok(Recorder {
             participant: participant.clone(),
@@ -478,6 +481,18 @@ fn write_loop(
         *failed = Some(why);
     }
     Ok(state.writer.files().to_vec())
+}
+
+/// Lowers the calling thread's scheduling priority (nice +5, which needs no privilege): on a
+/// busy machine the participant's receive thread, which must take every datagram before its
+/// socket buffer fills, then runs before the writer, which has the queue to catch up from.
+fn yield_to_receivers() {
+    // SAFETY: `gettid` and `setpriority` only read their arguments; `PRIO_PROCESS` with a
+    // thread id names this thread alone on Linux.
+    let result = unsafe { libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, 5) };
+    if result != 0 {
+        tracing::debug!("the recorder's writer thread keeps its priority");
+    }
 }
 
 /// Makes the snapshot directory: new, or an existing empty one.

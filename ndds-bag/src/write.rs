@@ -141,6 +141,8 @@ struct Counting {
     inner: BufWriter<File>,
     position: u64,
     length: Arc<AtomicU64>,
+    /// Position at the last sync to the disk.
+    synced: u64,
 }
 
 impl Counting {
@@ -149,11 +151,23 @@ impl Counting {
     }
 }
 
+/// Bytes written between two flushes of the file to the disk.
+const SYNC_EVERY: u64 = 32 << 20;
+
 impl Write for Counting {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.inner.write(buf)?;
         self.position += n as u64;
         self.note();
+        // Keep the dirty pages of a long recording few: a page cache full of them makes the
+        // kernel reclaim memory in whatever thread allocates next, the participant's receive
+        // thread among them, which then drops samples. The wait is the writer thread's, and
+        // the queue before it absorbs it.
+        if self.position >= self.synced + SYNC_EVERY {
+            self.inner.flush()?;
+            self.inner.get_ref().sync_data()?;
+            self.synced = self.position;
+        }
         Ok(n)
     }
 
@@ -419,6 +433,7 @@ impl BagWriter {
             inner: BufWriter::with_capacity(1 << 16, file),
             position: 0,
             length: Arc::clone(&length),
+            synced: 0,
         };
         let writer = mcap::WriteOptions::new()
             .profile(format::PROFILE)
