@@ -470,3 +470,64 @@ pub fn ending_warning(reader: &BagReader) -> Option<String> {
         _ => None,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    #[test]
+    fn the_clock_keeps_recorded_spacing_scaled_by_the_rate() {
+        let control = PlayControl::new(2.0, false);
+        let mut clock = PlayClock::new(0, control.rate());
+        let started = Instant::now();
+        assert!(clock.wait_until(0, &control));
+        // 100 ms of recording at rate 2: 50 ms.
+        assert!(clock.wait_until(100 * MS, &control));
+        let took = started.elapsed();
+        assert!(took >= Duration::from_millis(50), "{took:?}");
+        assert!(took < Duration::from_millis(90), "{took:?}");
+    }
+
+    #[test]
+    fn a_pause_holds_a_step_releases_one_message_and_resuming_goes_on_from_there() {
+        let control = std::sync::Arc::new(PlayControl::new(1.0, true));
+        let mut clock = PlayClock::new(0, control.rate());
+        let stepper = {
+            let control = std::sync::Arc::clone(&control);
+            std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(60));
+                control.step();
+            })
+        };
+        // Paused: the first message waits for the step, not for its time (0).
+        let started = Instant::now();
+        assert!(clock.wait_until(0, &control));
+        assert!(started.elapsed() >= Duration::from_millis(50));
+        stepper.join().unwrap();
+        // Resumed after a while paused: the next message (20 ms later in the recording) comes
+        // 20 ms after resuming, not at once for the time spent paused.
+        std::thread::sleep(Duration::from_millis(40));
+        control.toggle_pause();
+        let resumed = Instant::now();
+        assert!(clock.wait_until(20 * MS, &control));
+        let took = resumed.elapsed();
+        assert!(took >= Duration::from_millis(15), "{took:?}");
+        assert!(took < Duration::from_millis(60), "{took:?}");
+        // Stopping ends a wait.
+        control.stop();
+        assert!(!clock.wait_until(10_000 * MS, &control));
+    }
+
+    #[test]
+    fn rates_are_bounded() {
+        let control = PlayControl::new(1.0, false);
+        control.set_rate(1e9);
+        assert_eq!(control.rate(), 1000.0);
+        control.set_rate(0.0);
+        assert_eq!(control.rate(), 0.01);
+        control.set_rate(f64::NAN);
+        assert_eq!(control.rate(), 1.0);
+    }
+}

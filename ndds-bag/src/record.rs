@@ -28,6 +28,9 @@ use crate::BagError;
 use crate::format::{self, ChannelMeta, nanos};
 use crate::write::{BagWriter, ChannelDef, ChannelKey, Lost, Record, WriteOptions};
 
+/// Samples smaller than this are copied into a buffer of their own before they are queued.
+const DETACH_BELOW: usize = 64 * 1024;
+
 /// Which topics to record.
 #[derive(Clone, Debug)]
 pub enum Selection {
@@ -386,6 +389,15 @@ impl Recorder {
                 }
                 let size = sample.payload.len();
                 let queued = shared.queued_bytes.fetch_add(size, Ordering::Relaxed);
+                // A small sample is a view into a receive region of several datagrams: queued
+                // as it is, it would keep the whole region alive, and the queue's byte budget
+                // would bound the payloads but not the memory they hold. A copy of its own
+                // makes the budget the memory (large samples have their own buffer already).
+                let sample = if size < DETACH_BELOW && queued + size <= budget {
+                    sample.detached()
+                } else {
+                    sample
+                };
                 if queued + size > budget
                     || tx
                         .try_send(Item {
