@@ -217,6 +217,22 @@ impl Default for TestDomain {
     }
 }
 
+/// A participant of this test process, a client of the daemon at `socket` (never an
+/// embedded daemon), named `name`.
+pub fn participant(socket: &Path, name: &str) -> Participant {
+    Participant::builder()
+        .socket(socket)
+        .embedded(EmbeddedPolicy::Never)
+        .name(name)
+        .connect()
+        .unwrap_or_else(|err| {
+            panic!(
+                "{name}: connect to the test daemon at {}: {err}",
+                socket.display()
+            )
+        })
+}
+
 /// Polls `check` every 5 ms until it holds; returns how long that took, or `None` at the
 /// timeout.
 pub fn wait_until(timeout: Duration, mut check: impl FnMut() -> bool) -> Option<Duration> {

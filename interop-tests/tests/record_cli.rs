@@ -6,19 +6,10 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use interop_tests::{ClientProcess, TestDomain};
-use ndds_client::{ConsumerQos, EmbeddedPolicy, Participant, ProducerQos};
+use interop_tests::{ClientProcess, TestDomain, participant};
+use ndds_client::{ConsumerQos, ProducerQos};
 
 const WAIT: Duration = Duration::from_secs(20);
-
-fn participant(socket: &Path, name: &str) -> Participant {
-    Participant::builder()
-        .socket(socket)
-        .embedded(EmbeddedPolicy::Never)
-        .name(name)
-        .connect()
-        .expect("connect to the test daemon")
-}
 
 fn json(text: &str) -> serde_json::Value {
     serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("{e}: {text}"))

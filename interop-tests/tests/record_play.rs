@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime};
 
-use interop_tests::{ClientProcess, TestDomain};
-use ndds_client::{ConsumerQos, EmbeddedPolicy, Participant, ProducerQos, Reliability, Sample};
+use interop_tests::{ClientProcess, TestDomain, participant};
+use ndds_client::{ConsumerQos, ProducerQos, Reliability, Sample};
 use ndds_runtime::CsMat;
 use serde::{Deserialize, Serialize};
 
@@ -28,15 +28,6 @@ const STATES: u64 = 100;
 const BLOBS: u64 = 10;
 const BLOB: usize = 1 << 20;
 const SEQS: u64 = 1000;
-
-fn participant(socket: &Path, name: &str) -> Participant {
-    Participant::builder()
-        .socket(socket)
-        .embedded(EmbeddedPolicy::Never)
-        .name(name)
-        .connect()
-        .expect("connect to the test daemon")
-}
 
 fn pose(i: u64, strong: bool) -> Pose {
     Pose {

@@ -26,7 +26,7 @@ use regex::Regex;
 
 use crate::BagError;
 use crate::format::{self, ChannelMeta, nanos};
-use crate::write::{BagWriter, ChannelDef, ChannelKey, Lost, Record, WriteOptions};
+use crate::write::{BagWriter, ChannelDef, ChannelKey, Lost, Record, WriteOptions, prepare_dir};
 
 /// Samples smaller than this are copied into a buffer of their own before they are queued.
 const DETACH_BELOW: usize = 64 * 1024;
@@ -505,21 +505,6 @@ fn yield_to_receivers() {
     if result != 0 {
         tracing::debug!("the recorder's writer thread keeps its priority");
     }
-}
-
-/// Makes the snapshot directory: new, or an existing empty one.
-fn prepare_dir(dir: &Path) -> Result<(), BagError> {
-    if dir.exists() {
-        let empty = std::fs::read_dir(dir)
-            .map_err(|e| BagError::io(dir, e))?
-            .next()
-            .is_none();
-        if !empty {
-            return Err(BagError::Exists(dir.to_owned()));
-        }
-        return Ok(());
-    }
-    std::fs::create_dir_all(dir).map_err(|e| BagError::io(dir, e))
 }
 
 /// A black box: the last samples, by time and bytes.

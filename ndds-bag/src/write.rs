@@ -218,6 +218,22 @@ impl std::fmt::Debug for BagWriter {
     }
 }
 
+/// Makes a directory for recordings: new, or an existing empty one (never one with files,
+/// which a recording could be mistaken for or mixed with).
+pub(crate) fn prepare_dir(dir: &Path) -> Result<(), BagError> {
+    if dir.exists() {
+        let empty = std::fs::read_dir(dir)
+            .map_err(|e| BagError::io(dir, e))?
+            .next()
+            .is_none();
+        if !empty {
+            return Err(BagError::Exists(dir.to_owned()));
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).map_err(|e| BagError::io(dir, e))
+}
+
 /// Free-space checks happen at most once per this many bytes written.
 const SPACE_CHECK_BYTES: u64 = 1 << 20;
 
@@ -227,17 +243,7 @@ impl BagWriter {
     /// files `NAME_0.mcap`, `NAME_1.mcap`, ... where NAME is the directory's name.
     pub fn create(path: &Path, options: WriteOptions) -> Result<Self, BagError> {
         let target = if options.max_size.is_some() || options.max_duration.is_some() {
-            if path.exists() {
-                let empty = std::fs::read_dir(path)
-                    .map_err(|e| BagError::io(path, e))?
-                    .next()
-                    .is_none();
-                if !empty {
-                    return Err(BagError::Exists(path.to_owned()));
-                }
-            } else {
-                std::fs::create_dir_all(path).map_err(|e| BagError::io(path, e))?;
-            }
+            prepare_dir(path)?;
             let name = path
                 .file_name()
                 .map_or_else(|| "ndds".to_owned(), |n| n.to_string_lossy().into_owned());

@@ -123,15 +123,20 @@ fn announce_burst(driver: &mut Driver) {
     announce(driver, BURST);
 }
 
-fn announce(driver: &mut Driver, count: u64) {
-    let node = NodeInfo {
+/// The remote node that announces the test's producers.
+fn remote_node() -> NodeInfo {
+    NodeInfo {
         hostname: "remote".into(),
         pid: 9,
         unicast: REMOTE,
         lease_ms: 30_000,
         announce_period_ms: 1000,
         version: String::new(),
-    };
+    }
+}
+
+fn announce(driver: &mut Driver, count: u64) {
+    let node = remote_node();
     let endpoints: Vec<EndpointInfo> = (1..=count).map(|p| producer(0x1000 + p)).collect();
     for chunk in endpoints.chunks(100) {
         let announce = Message::Announce(Announce {
@@ -375,14 +380,7 @@ proptest::proptest! {
             // behind a backlog and go on filling it.
             announce(&mut driver, 40);
             driver.flush().await;
-            let node = NodeInfo {
-                hostname: "remote".into(),
-                pid: 9,
-                unicast: REMOTE,
-                lease_ms: 30_000,
-                announce_period_ms: 1000,
-                version: String::new(),
-            };
+            let node = remote_node();
             let mut seen = std::collections::BTreeMap::new();
             // The engine's truth: producer n present, and whether its type is compatible.
             let mut truth: std::collections::BTreeMap<Guid, bool> =
