@@ -1,6 +1,6 @@
 //! Recordings of ndds topics in MCAP files, the format rosbag2, Foxglove, PlotJuggler and the
-//! Python `mcap` package read ([docs/recording.md](../../docs/recording.md); the layout in
-//! [`format`] and docs/protocol.md, "Recordings").
+//! Python `mcap` package read (docs/recording.md in the repository; the layout in
+//! [`format`](mod@format) and docs/protocol.md, "Recordings").
 //!
 //! - [`record::Recorder`] records topics as they arrive (every producer, reliably where the
 //!   producer offers it), counting honestly what it lost;

@@ -33,7 +33,7 @@ pub struct Args {
     #[arg(long, value_name = "REGEX")]
     exclude: Option<Regex>,
     /// The file to write (never over an existing one); with --max-size or --max-duration, a
-    /// directory of files NAME_0.mcap, NAME_1.mcap, ... [default: ndds_<UTC time>.mcap]
+    /// directory of files NAME_0.mcap, NAME_1.mcap, ... [default: ndds_TIME.mcap, TIME in UTC]
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Start a new file at this size (bytes; K, M, G suffixes: 512M).
