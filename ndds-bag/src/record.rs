@@ -381,7 +381,10 @@ impl Recorder {
                         stream.gaps.fetch_add(seq - *last - 1, Ordering::Relaxed);
                         *last = seq;
                     }
-                    Some(_) => {}
+                    // A copy of a sample already taken, or one overtaken (best effort) and
+                    // counted as a gap when its successor came: the file keeps each
+                    // producer's samples in order, each once, and gaps + samples = the span.
+                    Some(_) => return,
                     // Before a producer's first sample the recorder was not there.
                     None => {
                         last_seq.insert(sample.info.writer, seq);
