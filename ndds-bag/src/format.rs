@@ -79,7 +79,7 @@ impl Default for ChannelMeta {
         ChannelMeta {
             writer: None,
             strength: 0,
-            persistence: Duration::from_secs(1),
+            persistence: ndds_client::qos::DEFAULT_PERSISTENCE,
             reliability: Reliability::BestEffort,
         }
     }

@@ -208,13 +208,7 @@ impl Player {
             messages: 0,
             log: Mutex::new(Vec::new()),
         };
-        // Each file is in log-time order: its first message has its first log time.
-        let mut first: Option<u64> = None;
-        for path in &player.files {
-            if let Some(message) = BagReader::open(path)?.next_message()? {
-                first = Some(first.map_or(message.log_time, |f| f.min(message.log_time)));
-            }
-        }
+        let first = crate::read::first_log_time(&player.files)?;
         let from = first.map_or(0, |f| f.saturating_add(nanos(player.options.start)));
         let to = player
             .options

@@ -351,6 +351,18 @@ impl BagReader {
     }
 }
 
+/// The earliest first log time of `paths` (each file is in log-time order as ndds writes it,
+/// so its first message has its first log time); `None` when none holds a message.
+pub fn first_log_time(paths: &[PathBuf]) -> Result<Option<u64>, BagError> {
+    let mut first: Option<u64> = None;
+    for path in paths {
+        if let Some(message) = BagReader::open(path)?.next_message()? {
+            first = Some(first.map_or(message.log_time, |f| f.min(message.log_time)));
+        }
+    }
+    Ok(first)
+}
+
 /// Whether `file` ends with MCAP's magic; the file is left at its start.
 fn ends_with_magic(file: &mut File) -> std::io::Result<bool> {
     use std::io::{Seek, SeekFrom};

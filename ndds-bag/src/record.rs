@@ -459,6 +459,7 @@ impl Drop for Recorder {
 struct WriteState<'a> {
     writer: BagWriter,
     shared: &'a Shared,
+    streams: KnownStreams,
     channels: HashMap<(usize, Guid), ChannelKey>,
     last_seq: HashMap<(usize, Guid), u64>,
     losses_seen: HashMap<usize, Lost>,
@@ -605,19 +606,40 @@ fn humantime_stamp(time: SystemTime) -> String {
         .replace(':', "-")
 }
 
+/// The writer thread's copy of the streams: streams are only ever added, so the shared list is
+/// locked only when a sample of one not seen yet comes, not for every sample.
+#[derive(Default)]
+struct KnownStreams(Vec<Arc<Stream>>);
+
+impl KnownStreams {
+    fn get(&mut self, shared: &Shared, index: usize) -> Arc<Stream> {
+        if index >= self.0.len() {
+            self.0 = shared.streams.lock().expect("not poisoned").clone();
+        }
+        Arc::clone(&self.0[index])
+    }
+}
+
+/// `topic`'s statistics, its name copied only the first time.
+fn topic_stats<'a>(stats: &'a mut BTreeMap<String, TopicStats>, topic: &str) -> &'a mut TopicStats {
+    if !stats.contains_key(topic) {
+        stats.insert(topic.to_owned(), TopicStats::default());
+    }
+    stats.get_mut(topic).expect("inserted above")
+}
+
 /// Counts what a black box takes (its samples go to files only when triggered).
 struct Counter<'a> {
     shared: &'a Shared,
+    streams: KnownStreams,
     seen: HashMap<usize, Lost>,
 }
 
 impl Counter<'_> {
     fn count(&mut self, item: &Item) {
-        let topic = self.shared.streams.lock().expect("not poisoned")[item.stream]
-            .topic
-            .clone();
+        let stream = self.streams.get(self.shared, item.stream);
         let mut stats = self.shared.stats.lock().expect("not poisoned");
-        let entry = stats.entry(topic).or_default();
+        let entry = topic_stats(&mut stats, &stream.topic);
         entry.messages += 1;
         entry.bytes += item.sample.payload.len() as u64;
     }
@@ -679,6 +701,7 @@ impl<'a> WriteState<'a> {
         WriteState {
             writer,
             shared,
+            streams: KnownStreams::default(),
             channels: HashMap::new(),
             last_seq: HashMap::new(),
             losses_seen: HashMap::new(),
@@ -692,6 +715,7 @@ impl<'a> WriteState<'a> {
     fn counter(shared: &'a Shared) -> Counter<'a> {
         Counter {
             shared,
+            streams: KnownStreams::default(),
             seen: HashMap::new(),
         }
     }
@@ -736,15 +760,11 @@ impl<'a> WriteState<'a> {
         self.write(item)
     }
 
-    fn stream(&self, index: usize) -> Arc<Stream> {
-        Arc::clone(&self.shared.streams.lock().expect("not poisoned")[index])
-    }
-
     fn write(&mut self, item: &Item) -> Result<(), BagError> {
         let Item { stream, sample } = item;
         let stream = *stream;
         let writer_id = sample.info.writer;
-        let def = self.stream(stream);
+        let def = self.streams.get(self.shared, stream);
         let key = match self.channels.get(&(stream, writer_id)) {
             Some(key) => *key,
             None => {
@@ -811,7 +831,7 @@ impl<'a> WriteState<'a> {
             return result;
         }
         let mut stats = self.shared.stats.lock().expect("not poisoned");
-        let topic = stats.entry(def.topic.clone()).or_default();
+        let topic = topic_stats(&mut stats, &def.topic);
         if result.is_ok() {
             topic.messages += 1;
             topic.bytes += sample.payload.len() as u64;

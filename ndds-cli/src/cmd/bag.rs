@@ -10,7 +10,7 @@ use ndds_bag::write::{Compression, WriteOptions};
 use regex::Regex;
 use serde_json::json;
 
-use crate::cmd::record::parse_size;
+use crate::cmd::record::{parse_compression, parse_size};
 use crate::{outln, seconds};
 
 /// Options of `ndds bag`.
@@ -141,13 +141,7 @@ fn time_range(
     start: Duration,
     duration: Option<Duration>,
 ) -> anyhow::Result<Keep> {
-    let mut first: Option<u64> = None;
-    for file in files {
-        if let Some(message) = ndds_bag::BagReader::open(file)?.next_message()? {
-            first = Some(first.map_or(message.log_time, |f| f.min(message.log_time)));
-        }
-    }
-    let Some(first) = first else {
+    let Some(first) = ndds_bag::read::first_log_time(files)? else {
         return Ok(Keep::default());
     };
     let nanos = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
@@ -179,9 +173,4 @@ fn edit(
         json!({"output": output.display().to_string(), "read": done.read, "kept": done.kept})
     )?;
     Ok(())
-}
-
-fn parse_compression(text: &str) -> Result<Compression, String> {
-    Compression::from_name(text)
-        .ok_or_else(|| format!("unknown compression `{text}` (zstd, lz4 or none)"))
 }

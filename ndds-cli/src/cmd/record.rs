@@ -360,7 +360,8 @@ pub fn parse_size(text: &str) -> Result<u64, String> {
     Ok((value * scale as f64) as u64)
 }
 
-fn parse_compression(text: &str) -> Result<Compression, String> {
+/// A chunk compression by name: zstd, lz4 or none.
+pub fn parse_compression(text: &str) -> Result<Compression, String> {
     Compression::from_name(text)
         .ok_or_else(|| format!("unknown compression `{text}` (zstd, lz4 or none)"))
 }
