@@ -150,6 +150,9 @@ case ${1:-} in
         for target in $(targets); do
             run "$target" "$seconds" || failed=1
         done
+        # The instrumented build (about 3 GB) is not needed after the runs, and CI's disk is
+        # shared with the test build that follows. A crash's inputs stay in target/fuzz-out.
+        rm -rf "$fuzz_dir/target"
         exit $failed
         ;;
     replay) shift; replay "$@" ;;
