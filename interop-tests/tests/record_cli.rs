@@ -343,3 +343,245 @@ fn a_recorder_that_cannot_keep_up_counts_each_lost_sample_once() {
         "counted twice: more than {written} written"
     );
 }
+
+/// What `ndds play` wrote to its terminal so far, read from the pseudo-terminal's master side
+/// on a thread of its own (the player would block on a full terminal otherwise).
+struct Screen {
+    text: std::sync::Arc<std::sync::Mutex<String>>,
+}
+
+impl Screen {
+    fn read_from(master: std::os::fd::OwnedFd) -> Self {
+        let text = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let shared = std::sync::Arc::clone(&text);
+        std::thread::spawn(move || {
+            use std::io::Read;
+            let mut master = std::fs::File::from(master);
+            let mut buffer = [0u8; 4096];
+            // Ends with EIO once the player and every copy of the terminal's other side closed.
+            while let Ok(n @ 1..) = master.read(&mut buffer) {
+                shared
+                    .lock()
+                    .unwrap()
+                    .push_str(&String::from_utf8_lossy(&buffer[..n]));
+            }
+        });
+        Screen { text }
+    }
+
+    /// The last status line drawn (the text after the last carriage return).
+    fn status(&self) -> String {
+        let text = self.text.lock().unwrap();
+        let last = text.rsplit('\r').find(|line| !line.trim().is_empty());
+        last.unwrap_or_default().replace("\x1b[K", "")
+    }
+
+    fn wait_for(&self, what: &str) -> String {
+        let found = interop_tests::wait_until(WAIT, || self.status().contains(what));
+        let status = self.status();
+        assert!(
+            found.is_some(),
+            "no {what:?} on the terminal; last: {status:?}"
+        );
+        status
+    }
+
+    fn all(&self) -> String {
+        self.text.lock().unwrap().clone()
+    }
+}
+
+/// Starts `ndds ARGS` (with the daemon at `socket`) on a new pseudo-terminal: its standard
+/// input, output and error. Returns the process, its screen, the terminal's side (to read
+/// its modes) and the keyboard (the master side, to type on).
+fn on_terminal(
+    socket: &Path,
+    args: &[&str],
+) -> (
+    std::process::Child,
+    Screen,
+    std::os::fd::OwnedFd,
+    std::fs::File,
+) {
+    let pty = nix::pty::openpty(None, None).expect("a pseudo-terminal");
+    let terminal = pty.slave;
+    let child = std::process::Command::new(interop_tests::binary("ndds"))
+        .arg("--socket")
+        .arg(socket)
+        .args(args)
+        .env("NDDS_EMBEDDED", "never")
+        .stdin(terminal.try_clone().unwrap())
+        .stdout(terminal.try_clone().unwrap())
+        .stderr(terminal.try_clone().unwrap())
+        .spawn()
+        .expect("start ndds");
+    let keys = std::fs::File::from(pty.master.try_clone().unwrap());
+    (child, Screen::read_from(pty.master), terminal, keys)
+}
+
+#[test]
+fn record_on_a_terminal_shows_a_live_status_line_and_its_summary() {
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let bag = domain.path("live.mcap").display().to_string();
+    let (mut recorder, screen, terminal, _keys) =
+        on_terminal(&socket, &["record", "data", "-o", &bag]);
+    // While samples arrive the line counts them, per topic too; then it settles on the total.
+    let publishing = std::thread::spawn({
+        let socket = socket.clone();
+        move || publish(&socket, "data", 100, 50.0, 64)
+    });
+    let status = screen.wait_for("| data ");
+    assert!(
+        status.starts_with("recording ") && status.contains("1 topics"),
+        "{status:?}"
+    );
+    publishing.join().unwrap();
+    let status = screen.wait_for("100 msgs");
+    assert!(
+        status.contains("| data 100") && status.contains("lost 0"),
+        "{status:?}"
+    );
+    // Ctrl-C: the line is cleared and the summary printed; the file is finished.
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(recorder.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap();
+    let ended = interop_tests::wait_until(WAIT, || recorder.try_wait().unwrap().is_some());
+    assert!(ended.is_some(), "Ctrl-C ends the recording");
+    assert!(recorder.wait().unwrap().success());
+    drop(terminal);
+    let shown = interop_tests::wait_until(WAIT, || screen.all().contains(&bag));
+    let all = screen.all();
+    assert!(shown.is_some(), "the summary names the file: {all:?}");
+    let out = domain.ndds("a", &["bag", "info", "--json", &bag], WAIT);
+    let info = &json(&out.stdout)[0];
+    assert_eq!(info["finished"], true, "{info}");
+    assert_eq!(info["messages"], 100, "{info}");
+}
+
+#[test]
+fn play_on_a_terminal_pauses_steps_changes_rate_and_quits_on_keys() {
+    use nix::sys::termios::{LocalFlags, tcgetattr};
+    use std::io::Write;
+
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let bag = domain.path("keys.mcap").display().to_string();
+    let mut recorder = ClientProcess::program("ndds", &socket, &["record", "data", "-o", &bag]);
+    publish(&socket, "data", 60, 20.0, 16);
+    recorder.interrupt();
+    assert_eq!(
+        recorder.wait(WAIT),
+        Some(0),
+        "the recorder finished its file"
+    );
+
+    let watcher = participant(&socket, "watcher");
+    let consumer = watcher
+        .consumer::<(u64, serde_bytes::ByteBuf)>("data", ConsumerQos::default())
+        .unwrap();
+    let mut received = Vec::new();
+    let take = |received: &mut Vec<u64>| {
+        while let Ok(sample) = consumer.try_recv() {
+            received.push(sample.value.0);
+        }
+    };
+
+    let (mut player, screen, terminal, mut keys) =
+        on_terminal(&socket, &["play", &bag, "--paused"]);
+    let mut press = |key: &[u8]| keys.write_all(key).expect("type on the terminal");
+
+    // Paused from the start: the terminal says so, with the keys, and nothing is published.
+    let status = screen.wait_for("paused [");
+    assert!(
+        status.contains("space pause") && status.contains("0/60 msgs"),
+        "{status:?}"
+    );
+    let modes = tcgetattr(&terminal).unwrap().local_flags;
+    assert!(
+        !modes.intersects(LocalFlags::ICANON | LocalFlags::ECHO),
+        "keys are read one by one, unechoed, while playing: {modes:?}"
+    );
+    std::thread::sleep(Duration::from_secs(1));
+    take(&mut received);
+    assert_eq!(received, Vec::<u64>::new(), "published while paused");
+
+    // `s` steps one message at a time.
+    for step in 0..2u64 {
+        press(b"s");
+        let arrived = interop_tests::wait_until(WAIT, || {
+            take(&mut received);
+            received.len() as u64 > step
+        });
+        assert!(arrived.is_some(), "step {step}: {received:?}");
+        std::thread::sleep(Duration::from_millis(500));
+        take(&mut received);
+        assert_eq!(
+            received,
+            (0..=step).collect::<Vec<_>>(),
+            "one message per step"
+        );
+    }
+    screen.wait_for("2/60 msgs");
+
+    // `+` doubles the rate, `-` halves it; space resumes.
+    press(b"+");
+    screen.wait_for("x2.00");
+    press(b"+-");
+    screen.wait_for("x2.00");
+    press(b" ");
+    screen.wait_for("playing [");
+    let flowing = interop_tests::wait_until(WAIT, || {
+        take(&mut received);
+        received.len() >= 12
+    });
+    assert!(flowing.is_some(), "resumed: {received:?}");
+
+    // Space pauses again: at most one message already due gets out after it.
+    press(b" ");
+    screen.wait_for("paused [");
+    std::thread::sleep(Duration::from_millis(300));
+    take(&mut received);
+    let at_pause = received.len();
+    std::thread::sleep(Duration::from_secs(1));
+    take(&mut received);
+    assert!(
+        received.len() <= at_pause + 1,
+        "{at_pause} then {}",
+        received.len()
+    );
+    assert!(
+        received.len() < 60,
+        "still paused before the end: {}",
+        received.len()
+    );
+    assert_eq!(
+        received,
+        (0..received.len() as u64).collect::<Vec<_>>(),
+        "in order, none lost"
+    );
+
+    // `q` quits with the summary, and the terminal's modes are given back.
+    press(b"q");
+    let quit = interop_tests::wait_until(WAIT, || player.try_wait().unwrap().is_some());
+    assert!(quit.is_some(), "q quits");
+    assert!(player.wait().unwrap().success());
+    let restored = tcgetattr(&terminal).unwrap().local_flags;
+    assert!(
+        restored.contains(LocalFlags::ICANON | LocalFlags::ECHO),
+        "terminal restored: {restored:?}"
+    );
+    drop(terminal);
+    let shown = interop_tests::wait_until(WAIT, || screen.all().contains("published "));
+    let all = screen.all();
+    assert!(shown.is_some(), "summary on quitting: {all:?}");
+    assert!(
+        all.contains(&format!("published {} messages", received.len())),
+        "the summary counts the {} received: {all:?}",
+        received.len()
+    );
+}

@@ -298,7 +298,8 @@ impl Player {
     }
 
     /// Plays until the end (or forever with `repeat`, until `control` stops it), calling
-    /// `progress` after each message.
+    /// `progress` after each message and, while it waits for the next one (paused, or a gap in
+    /// the recording), at least every 50 ms: a status line stays current through a pause.
     pub fn run(
         &mut self,
         control: &PlayControl,
@@ -331,7 +332,16 @@ impl Player {
                 if message.log_time > to {
                     break;
                 }
-                if !clock.wait_until(message.log_time, control) {
+                let total = self.total();
+                let waited = clock.wait_until(message.log_time, control, &mut |position| {
+                    progress(Progress {
+                        position: Duration::from_nanos(position.saturating_sub(from)),
+                        total,
+                        published: summary.published,
+                        passes,
+                    })
+                });
+                if !waited {
                     return Ok(summary);
                 }
                 let desc = message.channel.playable(path)?.clone();
@@ -395,11 +405,22 @@ impl PlayClock {
         self.anchor.0.saturating_add(played as u64)
     }
 
-    /// Waits until `log_time` is due; false when stopped meanwhile.
-    fn wait_until(&mut self, log_time: u64, control: &PlayControl) -> bool {
+    /// Waits until `log_time` is due; false when stopped meanwhile. `waiting` is told the
+    /// recording time reached, at least every 50 ms while it waits.
+    fn wait_until(
+        &mut self,
+        log_time: u64,
+        control: &PlayControl,
+        waiting: &mut dyn FnMut(u64),
+    ) -> bool {
+        let mut told = Instant::now();
         loop {
             if control.stopped() {
                 return false;
+            }
+            if told.elapsed() >= Duration::from_millis(50) {
+                waiting(self.position().min(log_time));
+                told = Instant::now();
             }
             if control.is_paused() {
                 let held = match self.held {
@@ -476,9 +497,9 @@ mod tests {
         let control = PlayControl::new(2.0, false);
         let mut clock = PlayClock::new(0, control.rate());
         let started = Instant::now();
-        assert!(clock.wait_until(0, &control));
+        assert!(clock.wait_until(0, &control, &mut |_| {}));
         // 100 ms of recording at rate 2: 50 ms.
-        assert!(clock.wait_until(100 * MS, &control));
+        assert!(clock.wait_until(100 * MS, &control, &mut |_| {}));
         let took = started.elapsed();
         assert!(took >= Duration::from_millis(50), "{took:?}");
         assert!(took < Duration::from_millis(90), "{took:?}");
@@ -491,27 +512,30 @@ mod tests {
         let stepper = {
             let control = std::sync::Arc::clone(&control);
             std::thread::spawn(move || {
-                std::thread::sleep(Duration::from_millis(60));
+                std::thread::sleep(Duration::from_millis(150));
                 control.step();
             })
         };
-        // Paused: the first message waits for the step, not for its time (0).
+        // Paused: the first message waits for the step, not for its time (0), and whoever
+        // draws the progress hears of the held position meanwhile.
         let started = Instant::now();
-        assert!(clock.wait_until(0, &control));
-        assert!(started.elapsed() >= Duration::from_millis(50));
+        let mut told = Vec::new();
+        assert!(clock.wait_until(0, &control, &mut |position| told.push(position)));
+        assert!(started.elapsed() >= Duration::from_millis(100));
+        assert!(!told.is_empty() && told.iter().all(|&p| p == 0), "{told:?}");
         stepper.join().unwrap();
         // Resumed after a while paused: the next message (20 ms later in the recording) comes
         // 20 ms after resuming, not at once for the time spent paused.
         std::thread::sleep(Duration::from_millis(40));
         control.toggle_pause();
         let resumed = Instant::now();
-        assert!(clock.wait_until(20 * MS, &control));
+        assert!(clock.wait_until(20 * MS, &control, &mut |_| {}));
         let took = resumed.elapsed();
         assert!(took >= Duration::from_millis(15), "{took:?}");
         assert!(took < Duration::from_millis(60), "{took:?}");
         // Stopping ends a wait.
         control.stop();
-        assert!(!clock.wait_until(10_000 * MS, &control));
+        assert!(!clock.wait_until(10_000 * MS, &control, &mut |_| {}));
     }
 
     #[test]
