@@ -4,7 +4,8 @@
 #   scripts/bench-record.sh [DIR]        DIR: where files go (default: a new directory in
 #                                        target/, on the disk the repository is on)
 #
-# Builds nothing: run `cargo build --release -p ndds-cli -p ndds-daemon` first, and nothing
+# Builds nothing: run `cargo build --release -p ndds-cli -p ndds-daemon` first (or name another
+# directory of those two binaries in NDDS_BIN), and nothing
 # else meanwhile. SECONDS_PER_RUN (default 5) sets how long each publisher runs: a run longer
 # than the page cache absorbs (15 s here) measures what the disk sustains. One daemon on 127.0.0.1. Prints one line per measurement:
 #   dd MB/s; for 8 KiB and 1 MiB samples published flat out: the recorder's MB/s, its drops,
@@ -13,7 +14,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-bin=target/release
+bin=${NDDS_BIN:-target/release}
 [[ -x $bin/ndds && -x $bin/ndds-daemon ]] || {
     echo "build first: cargo build --release -p ndds-cli -p ndds-daemon" >&2
     exit 2
@@ -68,18 +69,27 @@ record() {
     sleep 1
     local peak
     peak=$(awk '/VmHWM/ {print $2}' "/proc/$rec/status")
+    # The recorder's finish (its last chunk, the summary, and a sync of the file to the disk)
+    # is timed too: dd's figure includes its final fdatasync.
+    local stopping=$EPOCHREALTIME
     kill -INT "$rec"
     wait "$rec" || true
-    python3 - "$dir/$name.json" "$dir/$name.pub.json" "$name" "$peak" <<'EOF'
+    local finish
+    finish=$(python3 -c "import sys; print(float(sys.argv[2]) - float(sys.argv[1]))" "$stopping" "$EPOCHREALTIME")
+    python3 - "$dir/$name.json" "$dir/$name.pub.json" "$name" "$peak" "$finish" <<'EOF'
 import json, sys
 summary = json.load(open(sys.argv[1]))
 pub = json.load(open(sys.argv[2]))
-name, peak = sys.argv[3], int(sys.argv[4])
-topic = summary["topics"][0] if summary["topics"] else {"messages": 0, "bytes": 0}
+name, peak, finish = sys.argv[3], int(sys.argv[4]), float(sys.argv[5])
+topic = summary["topics"][0] if summary["topics"] else {"messages": 0, "bytes": 0,
+                                                         "lost_gaps": 0, "lost_overflow": 0}
 sent = pub["written"]
 window = pub["elapsed_s"] or 1
 print(f"{name} sent {sent} recorded {topic['messages']} lost {summary['lost']} "
-      f"MB/s {topic['bytes'] / window / 1e6:.1f} recorder_peak_MiB {peak / 1024:.1f}")
+      f"(gaps {topic['lost_gaps']}, overflow {topic['lost_overflow']}) "
+      f"MB/s {topic['bytes'] / window / 1e6:.1f} "
+      f"with_finish {topic['bytes'] / (window + 1 + finish) / 1e6:.1f} (finish {finish:.2f} s) "
+      f"recorder_peak_MiB {peak / 1024:.1f}")
 EOF
     "$bin/ndds" play "$file" --delay 0.2 --json >"$dir/$name.play.json"
     python3 - "$dir/$name.play.json" "$file" "$bin/ndds" "$name" <<'EOF'

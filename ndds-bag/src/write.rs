@@ -141,8 +141,11 @@ struct Counting {
     inner: BufWriter<File>,
     position: u64,
     length: Arc<AtomicU64>,
-    /// Position at the last sync to the disk.
-    synced: u64,
+    /// The file's bytes before this are on their way to the disk or there: writeback was
+    /// started for them.
+    handed: u64,
+    /// The file's bytes before this were written to the disk and dropped from the page cache.
+    settled: u64,
 }
 
 impl Counting {
@@ -151,28 +154,77 @@ impl Counting {
     }
 }
 
-/// Bytes written between two flushes of the file to the disk.
-const SYNC_EVERY: u64 = 32 << 20;
+/// How much of the file is handed to the disk at a time.
+const WRITEBACK_STEP: u64 = 8 << 20;
 
 impl Write for Counting {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.inner.write(buf)?;
         self.position += n as u64;
         self.note();
-        // Keep the dirty pages of a long recording few: a page cache full of them makes the
-        // kernel reclaim memory in whatever thread allocates next, the participant's receive
-        // thread among them, which then drops samples. The wait is the writer thread's, and
-        // the queue before it absorbs it.
-        if self.position >= self.synced + SYNC_EVERY {
+        if self.position >= self.handed + WRITEBACK_STEP {
             self.inner.flush()?;
-            self.inner.get_ref().sync_data()?;
-            self.synced = self.position;
+            self.write_back()?;
         }
         Ok(n)
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
         self.inner.flush()
+    }
+}
+
+impl Counting {
+    /// Keeps the dirty pages of a long recording few, without stalling the disk: a page cache
+    /// full of them makes the kernel reclaim memory in whatever thread allocates next, the
+    /// participant's receive thread among them, which then drops samples. Writeback of what
+    /// was written since the last step starts now, and the step before it, by now most
+    /// likely on the disk, is waited for and dropped from the page cache. So the disk always
+    /// has the next step queued (a sync of everything would leave it idle while this thread
+    /// catches up), at most two steps are dirty, and the wait is the writer thread's, which
+    /// the queue before it absorbs. Durability is `finish`'s (`sync_data`).
+    #[cfg(target_os = "linux")]
+    fn write_back(&mut self) -> std::io::Result<()> {
+        use std::os::fd::AsRawFd;
+        let fd = self.inner.get_ref().as_raw_fd();
+        let range = |from: u64, to: u64| -> (libc::off64_t, libc::off64_t) {
+            (from as libc::off64_t, (to - from) as libc::off64_t)
+        };
+        let (start, len) = range(self.handed, self.position);
+        // SAFETY: `fd` is this writer's open file for the whole call; sync_file_range only
+        // reads its arguments.
+        if unsafe { libc::sync_file_range(fd, start, len, libc::SYNC_FILE_RANGE_WRITE) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        if self.settled < self.handed {
+            let (start, len) = range(self.settled, self.handed);
+            let wait = libc::SYNC_FILE_RANGE_WAIT_BEFORE
+                | libc::SYNC_FILE_RANGE_WRITE
+                | libc::SYNC_FILE_RANGE_WAIT_AFTER;
+            // SAFETY: as above.
+            if unsafe { libc::sync_file_range(fd, start, len, wait) } != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // Only advice: a failure costs page cache, nothing else.
+            let _ = nix::fcntl::posix_fadvise(
+                self.inner.get_ref(),
+                start,
+                len,
+                nix::fcntl::PosixFadviseAdvice::POSIX_FADV_DONTNEED,
+            );
+            self.settled = self.handed;
+        }
+        self.handed = self.position;
+        Ok(())
+    }
+
+    /// Elsewhere, a sync of everything so far every step.
+    #[cfg(not(target_os = "linux"))]
+    fn write_back(&mut self) -> std::io::Result<()> {
+        self.inner.get_ref().sync_data()?;
+        self.handed = self.position;
+        self.settled = self.position;
+        Ok(())
     }
 }
 
@@ -439,7 +491,8 @@ impl BagWriter {
             inner: BufWriter::with_capacity(1 << 16, file),
             position: 0,
             length: Arc::clone(&length),
-            synced: 0,
+            handed: 0,
+            settled: 0,
         };
         let writer = mcap::WriteOptions::new()
             .profile(format::PROFILE)

@@ -34,6 +34,18 @@ pub enum RuntimeCommand {
         /// The sample a tool is about to publish.
         sample: CsMat,
     },
+    /// Set a CSMat that no module writes (a parameter or a reference input) to `values`,
+    /// row-major, as `ndds pub` to a subscribed parameter would: its habitats take the new
+    /// value at their next sample boundary.
+    SetMat {
+        /// The CSMat.
+        name: String,
+        /// Its new values, row-major; as many as it has elements.
+        values: Vec<f64>,
+    },
+    /// The values of these CSMats now, answered as JSON text: an object from each name to
+    /// `{"rows", "cols", "data"}` (row-major) or `{"error"}`.
+    ReadMats(Vec<String>),
 }
 
 /// The name of runtime `runtime`'s command port.
@@ -115,10 +127,77 @@ impl Runtime {
         }
     }
 
+    /// Sets CSMat `name` to `values` (row-major) if no module writes it, in words (see
+    /// [`RuntimeCommand::SetMat`]).
+    pub fn set_mat(&self, name: &str, values: &[f64]) -> CommandReply {
+        let system = self.name();
+        let mat = {
+            let db = self.db();
+            let Some(entry) = db.mats.get(name).filter(|e| e.mat.is_bound()) else {
+                let known: Vec<String> = db.mats.keys().cloned().collect();
+                return Err(format!(
+                    "system `{system}` has no CSMat `{name}`{}",
+                    crate::system::decl::suggest(name, &known)
+                ));
+            };
+            let writer = db
+                .modules
+                .iter()
+                .find(|(_, m)| m.interface.output_names().any(|o| o == name));
+            if let Some((writer, _)) = writer {
+                return Err(format!(
+                    "CSMat `{name}` of system `{system}` is written by module `{writer}` every \
+                     sample; only parameters and reference inputs (CSMats no module writes) \
+                     can be set"
+                ));
+            }
+            entry.mat.clone()
+        };
+        let (rows, cols) = mat.shape();
+        if values.len() != rows * cols {
+            return Err(format!(
+                "CSMat `{name}` of system `{system}` is {rows}x{cols} ({} values); {} given",
+                rows * cols,
+                values.len()
+            ));
+        }
+        if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+            return Err(format!("CSMat `{name}`: {bad} is not a finite number"));
+        }
+        mat.write()
+            .copy_from_slice(values)
+            .map(|()| format!("system `{system}`: CSMat `{name}` set to {values:?}"))
+            .map_err(|err| format!("CSMat `{name}` of system `{system}`: {err}"))
+    }
+
+    /// The values of `names` now, as JSON text (see [`RuntimeCommand::ReadMats`]).
+    pub fn read_mats(&self, names: &[String]) -> CommandReply {
+        let mut out = serde_json::Map::new();
+        for name in names.iter().take(256) {
+            let mat = self.db().mats.get(name).map(|e| e.mat.clone());
+            let value = match mat.filter(super::mat::Mat::is_bound) {
+                Some(mat) => {
+                    let value = mat.snapshot();
+                    let (rows, cols) = value.shape();
+                    let data: Vec<f64> = (0..rows)
+                        .flat_map(|r| (0..cols).map(move |c| (r, c)))
+                        .map(|(r, c)| value.get(r, c).unwrap_or(f64::NAN))
+                        .collect();
+                    serde_json::json!({"rows": rows, "cols": cols, "data": data})
+                }
+                None => serde_json::json!({"error": format!("no CSMat `{name}`")}),
+            };
+            out.insert(name.clone(), value);
+        }
+        Ok(serde_json::Value::Object(out).to_string())
+    }
+
     fn answer(&self, command: RuntimeCommand) -> CommandReply {
         match command {
             RuntimeCommand::Configure(name) => self.switch_explained(name.trim()),
             RuntimeCommand::CheckSample { topic, sample } => self.check_sample(&topic, &sample),
+            RuntimeCommand::SetMat { name, values } => self.set_mat(name.trim(), &values),
+            RuntimeCommand::ReadMats(names) => self.read_mats(&names),
         }
     }
 }

@@ -65,6 +65,7 @@ mod command;
 mod config;
 pub mod csmat;
 mod database;
+pub mod describe;
 mod error;
 pub mod fsm;
 mod habitat;

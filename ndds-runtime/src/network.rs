@@ -156,6 +156,7 @@ fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
     let mut producers: BTreeMap<String, Producer<HabitatStats>> = BTreeMap::new();
     let tick = Duration::from_millis(100);
     let mut next: BTreeMap<String, std::time::Instant> = BTreeMap::new();
+    let mut description = Description::default();
     while !stop.load(Ordering::Acquire) {
         std::thread::sleep(tick);
         let Some(inner) = weak.upgrade() else { return };
@@ -163,6 +164,7 @@ fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
         let Some(participant) = rt.inner.participant.clone() else {
             return;
         };
+        description.refresh(&rt, &participant);
         for habitat in rt.habitats() {
             if !habitat.is_created() {
                 continue;
@@ -198,6 +200,61 @@ fn publish_stats(weak: &std::sync::Weak<Inner>, stop: &AtomicBool) {
                 && let Err(err) = producer.write(&stats)
             {
                 tracing::debug!(habitat = %name, error = %err, "habitat statistics not sent");
+            }
+        }
+    }
+}
+
+/// The runtime's description on `cs/<runtime>/description` (`describe.rs`): looked at every
+/// second, written when it changed and at least every [`DESCRIPTION_AGAIN`], kept for
+/// reliable consumers that join later. Written again because a best-effort consumer (`ndds
+/// echo`) gets no kept sample, and a reliable one did not always get it in the studio's
+/// browser test (3 runs of 8).
+#[derive(Default)]
+struct Description {
+    producer: Option<Producer<crate::describe::SystemDescription>>,
+    last: Option<(crate::describe::SystemDescription, std::time::Instant)>,
+    due: Option<std::time::Instant>,
+}
+
+/// How often an unchanged description is written again.
+const DESCRIPTION_AGAIN: Duration = Duration::from_secs(5);
+
+impl Description {
+    fn refresh(&mut self, rt: &Runtime, participant: &Participant) {
+        let now = std::time::Instant::now();
+        if self.due.is_some_and(|due| now < due) {
+            return;
+        }
+        self.due = Some(now + Duration::from_secs(1));
+        if self.producer.is_none() {
+            let topic = crate::describe::description_topic(rt.name());
+            let qos = ProducerQos {
+                reliability: Reliability::Reliable { depth: 4 },
+                late_joiners: 1,
+                ..ProducerQos::default()
+            };
+            match participant.producer_with_type(&topic, crate::describe::description_type(), qos) {
+                Ok(producer) => self.producer = Some(producer),
+                Err(err) => {
+                    tracing::warn!(topic, error = %err, "cannot publish the system's description");
+                    // Not again for a minute.
+                    self.due = Some(now + Duration::from_secs(60));
+                    return;
+                }
+            }
+        }
+        let current = rt.describe();
+        if let Some((last, written)) = &self.last
+            && *last == current
+            && now.duration_since(*written) < DESCRIPTION_AGAIN
+        {
+            return;
+        }
+        if let Some(producer) = &self.producer {
+            match producer.write(&current) {
+                Ok(()) => self.last = Some((current, now)),
+                Err(err) => tracing::debug!(error = %err, "the system's description not sent"),
             }
         }
     }

@@ -74,6 +74,9 @@ pub(crate) struct Inner {
     requests: Mutex<Option<Sender<Request>>>,
     /// This runtime, for the request thread.
     this: Weak<Inner>,
+    /// What a loaded system adds to its description (`describe.rs`). Never locked by a
+    /// habitat thread.
+    extras: Mutex<super::describe::Extras>,
 }
 
 pub(crate) struct Services {
@@ -207,6 +210,7 @@ impl Runtime {
                 structure: Mutex::new(()),
                 requests: Mutex::new(None),
                 this: Weak::clone(this),
+                extras: Mutex::new(super::describe::Extras::default()),
             }),
         }
     }
@@ -251,6 +255,15 @@ impl Runtime {
 
     pub(crate) fn db(&self) -> MutexGuard<'_, Database> {
         lock(&self.inner.db)
+    }
+
+    /// What a loaded system adds to the runtime's description.
+    pub(crate) fn extras(&self) -> super::describe::Extras {
+        lock(&self.inner.extras).clone()
+    }
+
+    pub(crate) fn set_extras(&self, extras: super::describe::Extras) {
+        *lock(&self.inner.extras) = extras;
     }
 
     /// Adds every component type of `library` to this runtime's registry (replacing types of

@@ -14,6 +14,7 @@ mod publish;
 mod record;
 mod run;
 mod security;
+mod studio;
 mod topics;
 
 use clap::{Parser, Subcommand};
@@ -62,6 +63,8 @@ enum Command {
     Key(key::Args),
     /// Identities and the permissions document: who may publish, subscribe, own or use what.
     Security(security::Args),
+    /// The network, running systems, state machines and live plots in a browser.
+    Studio(studio::Args),
 }
 
 impl Cli {
@@ -91,5 +94,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Key(args) => key::run(&args),
         Command::Security(args) => security::run(&args),
         Command::Run(args) => run::run(&cli.daemon, &args),
+        Command::Studio(args) => studio::run(&cli.daemon, &args),
     }
 }

@@ -75,6 +75,8 @@ pub mod builtin {
     pub const FSM_STIMULUS: &str = "ndds::fsm::Stimulus";
     /// `ndds_runtime::fsm::MachineState`, on a state machine's `fsm/<machine>/state` topic.
     pub const FSM_STATE: &str = "ndds::fsm::MachineState";
+    /// `ndds_runtime::describe::SystemDescription`, on a runtime's `cs/<runtime>/description`.
+    pub const SYSTEM_DESCRIPTION: &str = "ndds::SystemDescription";
     /// `ndds_client::ports::Request`, on `port/<port>/request`.
     pub const PORT_REQUEST: &str = "ndds::port::Request";
     /// `ndds_client::ports::Reply`, on `port/<port>/reply/<user>`.
@@ -100,6 +102,7 @@ pub mod builtin {
         HABITAT_STATS,
         FSM_STIMULUS,
         FSM_STATE,
+        SYSTEM_DESCRIPTION,
         PORT_REQUEST,
         PORT_REPLY,
         PORT_OWNER_INFO,

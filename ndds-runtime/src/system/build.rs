@@ -435,6 +435,7 @@ pub(crate) fn build_into(
         .collect();
     topics.sort();
     topics.dedup();
+    rt.set_extras(describe_extras(&d, &files));
     Ok(System {
         name: rt.name().to_owned(),
         topics,
@@ -450,6 +451,35 @@ pub(crate) fn build_into(
         simulated: std::sync::Mutex::new((0.0, Vec::new())),
         runtime: rt,
     })
+}
+
+/// What the description adds to the runtime's own picture of itself, for tools
+/// (`Runtime::describe`).
+fn describe_extras(d: &super::decl::Description, files: &[SourceFile]) -> crate::describe::Extras {
+    use crate::describe::{BindingDescription, MachineDescription};
+    let binding = |topic: &str, mat: &str, habitat: &str, direction: &str| BindingDescription {
+        topic: topic.to_owned(),
+        mat: mat.to_owned(),
+        habitat: habitat.to_owned(),
+        direction: direction.to_owned(),
+    };
+    crate::describe::Extras {
+        description: d.description.clone().unwrap_or_default(),
+        files: files.iter().map(|f| f.path.display().to_string()).collect(),
+        components: (d.components.iter())
+            .map(|c| (c.name.name.clone(), c.type_name.name.clone()))
+            .collect(),
+        bindings: (d.subscribes.iter())
+            .map(|s| binding(&s.topic, &s.mat.name, &s.habitat.name, "subscribe"))
+            .chain(
+                (d.publishes.iter())
+                    .map(|p| binding(&p.topic, &p.mat.name, &p.habitat.name, "publish")),
+            )
+            .collect(),
+        machines: (d.machines.iter())
+            .map(|m| MachineDescription::of(&m.program))
+            .collect(),
+    }
 }
 
 /// `(category, group)`, its modules, where it was first named.

@@ -1,0 +1,297 @@
+//! `ndds studio` in a real browser: headless Chromium (Debian's `chromium` and
+//! `chromium-driver`, which `.ci/run` installs) driven over WebDriver, against
+//! `examples/arm.toml` running under a test daemon. Each check of the page is also checked
+//! through the system itself (its statistics, its state machine's state, its command port), so
+//! a page that only claims a change does not pass. Screenshots of each view go to
+//! `target/studio-screenshots/` (docs/studio.md shows them).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use fantoccini::{Client, ClientBuilder, Locator};
+use interop_tests::{ClientProcess, TestDomain, participant};
+use ndds_client::ConsumerQos;
+use ndds_client::ports::{CommandReply, PortUser};
+use ndds_core::types::builtin;
+use ndds_runtime::fsm::{MachineState, Stimulus};
+use ndds_runtime::{HabitatStats, RuntimeCommand};
+
+const WAIT: Duration = Duration::from_secs(30);
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+/// Chromium and its driver, or a skip (a failure under CI, which installs them).
+fn browser_available() -> bool {
+    let present = Path::new(CHROMIUM).exists() && Path::new(CHROMEDRIVER).exists();
+    if !present {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "{CHROMIUM} and {CHROMEDRIVER} are missing (apt-get install chromium chromium-driver)"
+        );
+        eprintln!(
+            "skipped: {CHROMIUM} or {CHROMEDRIVER} missing (apt-get install chromium chromium-driver)"
+        );
+    }
+    present
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port on loopback")
+}
+
+/// chromedriver on loopback, killed on drop.
+struct Driver {
+    child: Child,
+    url: String,
+}
+
+impl Driver {
+    fn start() -> Self {
+        let port = free_port();
+        let child = Command::new(CHROMEDRIVER)
+            .arg(format!("--port={port}"))
+            .arg("--allowed-ips=127.0.0.1")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start chromedriver");
+        let started = interop_tests::wait_until(WAIT, || {
+            std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
+        });
+        assert!(started.is_some(), "chromedriver listens on {port}");
+        Driver {
+            child,
+            url: format!("http://127.0.0.1:{port}"),
+        }
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn browser(driver: &Driver, profile: &Path) -> Client {
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        serde_json::json!({
+            "binary": CHROMIUM,
+            "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                     "--disable-quic", "--no-first-run", "--disable-background-networking",
+                     "--disable-component-update", "--disable-sync", "--window-size=1500,1100",
+                     format!("--user-data-dir={}", profile.display())]
+        }),
+    );
+    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
+        .capabilities(caps)
+        .connect(&driver.url)
+        .await
+        .expect("a Chromium session through chromedriver")
+}
+
+/// Polls `script` (a JS expression) in the page until it is truthy; its last value.
+async fn until(page: &Client, what: &str, script: &str) -> serde_json::Value {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let value = page
+            .execute(&format!("return ({script});"), vec![])
+            .await
+            .unwrap_or(serde_json::Value::Null);
+        let truthy = match &value {
+            serde_json::Value::Null | serde_json::Value::Bool(false) => false,
+            serde_json::Value::String(s) => !s.is_empty(),
+            serde_json::Value::Number(n) => n.as_f64().is_some_and(|n| n != 0.0),
+            _ => true,
+        };
+        if truthy {
+            return value;
+        }
+        if Instant::now() >= deadline {
+            let errors = page
+                .execute("return {errors: window.studioErrors, systems: Object.keys(state.systems), machines: Object.keys(state.machines), topics: state.network ? state.network.topics.map(t => t.name).filter(n => n.startsWith('cs/')) : null}", vec![])
+                .await
+                .unwrap_or_default();
+            panic!("the page never showed {what} ({script}): {value}; page errors: {errors}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+async fn click(page: &Client, css: &str) {
+    page.find(Locator::Css(css))
+        .await
+        .unwrap_or_else(|e| panic!("no {css} on the page: {e}"))
+        .click()
+        .await
+        .unwrap_or_else(|e| panic!("cannot click {css}: {e}"));
+}
+
+async fn screenshot(page: &Client, name: &str) {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/studio-screenshots");
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = page.screenshot().await.expect("a screenshot");
+    std::fs::write(dir.join(format!("{name}.png")), png).unwrap();
+}
+
+/// Waits until `check` holds for a sample of `T` on `topic` (as the system reports it).
+fn system_reports<T: serde::de::DeserializeOwned + serde::Serialize + Send + 'static>(
+    socket: &Path,
+    topic: &str,
+    type_name: &str,
+    check: impl Fn(&T) -> bool,
+) -> Option<T> {
+    let watcher = participant(socket, "verifier");
+    let consumer = watcher
+        .consumer_with_type::<T>(
+            topic,
+            ndds_client::TypeDescription::named::<T>(type_name),
+            ConsumerQos::default(),
+        )
+        .unwrap();
+    let deadline = Instant::now() + WAIT;
+    while Instant::now() < deadline {
+        if let Ok(sample) = consumer.recv_timeout(Duration::from_millis(200))
+            && check(&sample.value)
+        {
+            return Some(sample.value);
+        }
+    }
+    None
+}
+
+#[test]
+fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
+    if !browser_available() {
+        return;
+    }
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let arm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/arm.toml");
+    let _system = ClientProcess::program(
+        "ndds",
+        &socket,
+        &["run", &arm.display().to_string(), "--plain"],
+    );
+    // The arm settles in Joint and its supervisor switches to endptLQG by itself; `Coarse`
+    // takes it to Held in JointPD, where it stays until told otherwise.
+    let tool = participant(&socket, "setup");
+    let machine =
+        PortUser::<Vec<Stimulus>, CommandReply>::declare(&tool, "fsm.arm", "test").unwrap();
+    let held = interop_tests::wait_until(WAIT, || {
+        machine
+            .send(&vec![Stimulus::parse("Coarse")], Duration::from_secs(2))
+            .is_ok_and(|r| r.is_ok_and(|text| text.contains("Held")))
+    });
+    assert!(held.is_some(), "the arm's machine took Coarse");
+    let studio = ClientProcess::program("ndds", &socket, &["studio", "--port", "0"]);
+    let url = studio
+        .line(WAIT)
+        .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
+        .expect("the studio prints its URL");
+    assert!(
+        url.starts_with("http://127.0.0.1:") && url.contains("#token="),
+        "{url}"
+    );
+    let driver = Driver::start();
+    let profile = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let page = browser(&driver, profile.path()).await;
+        page.goto(&url).await.unwrap();
+
+        // Network: the arm's topics, with the processes on them.
+        until(&page, "arm/endpoint in the topic list", "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"]')").await;
+        until(&page, "a rate for arm/endpoint", "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"] td:nth-child(5)').textContent.includes('Hz')").await;
+        let nodes = until(&page, "the topic in the graph", "graphs.net.nodes('[kind = \"topic\"]').map(n => n.data('name')).filter(n => n === 'arm/endpoint').length").await;
+        assert_eq!(nodes, 1);
+        until(&page, "write access", "document.getElementById('access').textContent === 'may change the system'").await;
+        screenshot(&page, "network").await;
+
+        // System: the components in their habitats; the configuration switched from the page.
+        click(&page, "#tab-system").await;
+        until(&page, "the endptLQG button", "document.querySelector('button[data-configuration=\"endptLQG\"]')").await;
+        let modules = until(&page, "the arm's modules", "graphs.sys.nodes().map(n => n.data('module')).filter(Boolean)").await;
+        for module in ["arm", "joint_pd", "endpoint_lqg", "joint_error", "tip_error"] {
+            assert!(modules.as_array().unwrap().iter().any(|m| m == module), "{module} in {modules}");
+        }
+        assert_eq!(until(&page, "the configuration", "document.getElementById('sys-config').textContent").await, "JointPD");
+        screenshot(&page, "system").await;
+        click(&page, "button[data-configuration=\"endptLQG\"]").await;
+        let reply = until(&page, "the switch's reply", "document.getElementById('sys-reply').textContent").await;
+        assert!(reply.as_str().unwrap().contains("switched to configuration `endptLQG`"), "{reply}");
+        let stats = system_reports::<HabitatStats>(&socket, "cs/arm/control/stats", builtin::HABITAT_STATS, |s| s.configuration == "endptLQG");
+        assert!(stats.is_some(), "the runtime reports endptLQG after the page's button");
+        until(&page, "the new configuration on the page", "document.getElementById('sys-config').textContent === 'endptLQG'").await;
+
+        // A parameter set in place, read back through the runtime's command port.
+        until(&page, "joint_pd.kp among the parameters", "document.querySelector('input[data-mat=\"joint_pd.kp\"]')").await;
+        page.execute("const i = document.querySelector('input[data-mat=\"joint_pd.kp\"]'); i.value = '41.5'; i.closest('tr').querySelector('button').click(); return true;", vec![]).await.unwrap();
+        let reply = until(&page, "the set's reply", "document.getElementById('sys-reply').textContent.includes('joint_pd.kp') && document.getElementById('sys-reply').textContent").await;
+        assert!(reply.as_str().unwrap().contains("set to [41.5]"), "{reply}");
+        let tool = participant(&socket, "reader");
+        let port = PortUser::<RuntimeCommand, CommandReply>::declare(&tool, "cs.arm", "test").unwrap();
+        let read = port.send(&RuntimeCommand::ReadMats(vec!["joint_pd.kp".into()]), WAIT).unwrap().unwrap();
+        let read: serde_json::Value = serde_json::from_str(&read).unwrap();
+        assert_eq!(read["joint_pd.kp"]["data"], serde_json::json!([41.5]), "{read}");
+        until(&page, "the new value in the table", "document.querySelector('#sys-params tr[data-mat=\"joint_pd.kp\"] .value').textContent === '41.5'").await;
+        // A parameter of the wrong shape gets the runtime's own refusal.
+        page.execute("const i = document.querySelector('input[data-mat=\"joint_pd.kp\"]'); i.value = '1, 2'; i.closest('tr').querySelector('button').click(); return true;", vec![]).await.unwrap();
+        let refusal = until(&page, "the refusal", "document.getElementById('sys-reply').className.includes('bad') && document.getElementById('sys-reply').textContent").await;
+        assert!(refusal.as_str().unwrap().contains("is 1x1 (1 values); 2 given"), "{refusal}");
+
+        // State machines: the state the machine reports, and a stimulus sent from the page.
+        click(&page, "#tab-fsm").await;
+        until(&page, "the arm machine", "document.getElementById('fsm-select').value === 'arm'").await;
+        let reported = system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |_| true).expect("the machine reports its state");
+        until(&page, "the reported state", &format!("document.getElementById('fsm-state').textContent === {:?}", reported.state)).await;
+        assert_eq!(reported.state, "Held");
+        click(&page, "button[data-stimulus=\"Precise\"]").await;
+        let reply = until(&page, "the stimulus's reply", "document.getElementById('fsm-reply').textContent").await;
+        assert!(reply.as_str().unwrap().contains("Precise: Held -> Endpoint"), "{reply}");
+        let endpoint = system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |s| s.state == "Endpoint");
+        assert!(endpoint.is_some(), "the machine went to Endpoint on the page's Precise");
+        until(&page, "Endpoint on the page", "document.getElementById('fsm-state').textContent === 'Endpoint'").await;
+        let highlighted = until(&page, "the current state highlighted", "graphs.fsm.nodes('.current').map(n => n.id()).join(',')").await;
+        assert_eq!(highlighted, "s:arm:Endpoint");
+        let fired = until(&page, "the last transition highlighted", "graphs.fsm.edges('.fired').map(e => e.data('from') + '>' + e.data('to')).join(',')").await;
+        assert_eq!(fired, "Held>Endpoint");
+        screenshot(&page, "fsm").await;
+
+        // Plots: arm/endpoint's x, decimated on the server, points arriving.
+        click(&page, "#tab-plots").await;
+        until(&page, "arm/endpoint among the plot topics", "[...document.getElementById('plot-topic').options].some(o => o.value === 'arm/endpoint')").await;
+        page.execute("const s = document.getElementById('plot-topic'); s.value = 'arm/endpoint'; s.dispatchEvent(new Event('input')); return true;", vec![]).await.unwrap();
+        let field = until(&page, "arm/endpoint's fields", "[...document.getElementById('plot-field').options].map(o => o.value).find(v => v.startsWith('x'))").await;
+        assert_eq!(field, "x (m)");
+        page.execute("document.getElementById('plot-field').value = 'x (m)'; return true;", vec![]).await.unwrap();
+        click(&page, "#plot-add").await;
+        let points = until(&page, "points in the plot", "Number(document.querySelector('.plot').dataset.points) > 100 && Number(document.querySelector('.plot').dataset.points)").await;
+        assert!(points.as_f64().unwrap() > 100.0);
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        screenshot(&page, "plots").await;
+
+        // Without the token the page may look but not change anything.
+        let base = url.split('#').next().unwrap().to_owned();
+        page.goto(&base).await.unwrap();
+        until(&page, "view-only access", "document.getElementById('access').textContent.startsWith('view only')").await;
+        click(&page, "#tab-system").await;
+        until(&page, "the JointPD button", "document.querySelector('button[data-configuration=\"JointPD\"]')").await;
+        click(&page, "button[data-configuration=\"JointPD\"]").await;
+        let refused = until(&page, "the refusal", "document.getElementById('sys-reply').textContent").await;
+        assert!(refused.as_str().unwrap().contains("may only look"), "{refused}");
+        let still = system_reports::<HabitatStats>(&socket, "cs/arm/control/stats", builtin::HABITAT_STATS, |_| true).unwrap();
+        assert_eq!(still.configuration, "endptLQG", "a page without the token changed nothing");
+        page.close().await.unwrap();
+    });
+}

@@ -1,0 +1,578 @@
+//! What the studio watches, on threads of its own, and hands to every page: the daemon's graph
+//! (polled every second), each topic's rate, each running system's description and habitat
+//! statistics, each state machine's state, and the plotted topics' points; and the commands a
+//! page sends (switch a configuration, set a parameter, send stimuli), through the system's
+//! own ports so their answers come back.
+//!
+//! Pages never slow the hub down: messages go out on a broadcast channel, and a page that
+//! falls behind misses messages rather than holding them up (the next network message, once a
+//! second, carries the whole picture again).
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use ndds_client::ports::{CommandReply, PortUser};
+use ndds_client::{
+    ConsumerQos, DirectConsumer, Graph, Guid, Participant, Reliability, TypeDescription,
+};
+use ndds_core::types::builtin;
+use ndds_runtime::describe::SystemDescription;
+use ndds_runtime::fsm::{MachineState, Stimulus};
+use ndds_runtime::{CsMat, HabitatStats, RuntimeCommand};
+use serde_json::json;
+use tokio::sync::broadcast;
+
+use crate::network;
+use crate::plot::{self, Decimator};
+
+/// A message for the pages (JSON text).
+pub type Message = Arc<str>;
+
+/// How long commands wait for the system's answer.
+const COMMAND_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Plot buckets: 20 ms (at most 100 points per second per field).
+const BUCKET_S: f64 = 0.02;
+
+/// The studio's watcher (see the module's documentation).
+pub struct Hub {
+    participant: Participant,
+    tx: broadcast::Sender<Message>,
+    latest: Mutex<Latest>,
+    plots: Mutex<BTreeMap<String, PlotTopic>>,
+    ports: Mutex<HashMap<String, Arc<dyn std::any::Any + Send + Sync>>>,
+    /// Measure each user topic's rate (a consumer per topic).
+    rates: bool,
+    stop: AtomicBool,
+}
+
+/// The last message of each kind, for a page that connects now.
+#[derive(Default)]
+struct Latest {
+    network: Option<Message>,
+    descriptions: BTreeMap<String, Message>,
+    machines: BTreeMap<String, Message>,
+    stats: BTreeMap<String, Message>,
+}
+
+/// A plotted topic: its consumer, how many pages watch it, its fields' decimators.
+struct PlotTopic {
+    _consumer: DirectConsumer,
+    watchers: usize,
+    series: Arc<Mutex<Series>>,
+}
+
+#[derive(Default)]
+struct Series {
+    names: Vec<String>,
+    decimators: Vec<Decimator>,
+    error: Option<String>,
+}
+
+/// What the hub keeps of one topic's rate consumer.
+struct RateMonitor {
+    _consumer: DirectConsumer,
+    counts: Arc<RateCounts>,
+    last: (u64, Instant),
+    rate: f64,
+}
+
+#[derive(Default)]
+struct RateCounts {
+    samples: AtomicU64,
+    lost: AtomicU64,
+}
+
+fn unix_seconds(t: SystemTime) -> f64 {
+    t.duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+impl Hub {
+    /// A hub on `participant`; `rates`: measure each user topic's rate.
+    pub fn new(participant: Participant, rates: bool) -> Arc<Self> {
+        let (tx, _) = broadcast::channel(1024);
+        Arc::new(Hub {
+            participant,
+            tx,
+            latest: Mutex::new(Latest::default()),
+            plots: Mutex::new(BTreeMap::new()),
+            ports: Mutex::new(HashMap::new()),
+            rates,
+            stop: AtomicBool::new(false),
+        })
+    }
+
+    /// Starts the watching threads; they end with [`stop`](Self::stop).
+    pub fn start(self: &Arc<Self>) -> std::io::Result<()> {
+        let hub = Arc::clone(self);
+        std::thread::Builder::new()
+            .name("studio-graph".into())
+            .spawn(move || hub.watch_graph())?;
+        let hub = Arc::clone(self);
+        std::thread::Builder::new()
+            .name("studio-plots".into())
+            .spawn(move || hub.send_points())?;
+        Ok(())
+    }
+
+    /// Ends the watching threads.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+
+    /// Messages from now on.
+    pub fn subscribe(&self) -> broadcast::Receiver<Message> {
+        self.tx.subscribe()
+    }
+
+    /// The last message of each kind, for a new page.
+    pub fn snapshot(&self) -> Vec<Message> {
+        let latest = lock(&self.latest);
+        (latest.network.iter())
+            .chain(latest.descriptions.values())
+            .chain(latest.machines.values())
+            .chain(latest.stats.values())
+            .cloned()
+            .collect()
+    }
+
+    fn publish(&self, message: serde_json::Value) -> Message {
+        let text: Message = Arc::from(message.to_string());
+        // No page connected is not an error.
+        let _ = self.tx.send(Arc::clone(&text));
+        text
+    }
+
+    fn watch_graph(self: Arc<Self>) {
+        let mut monitors: BTreeMap<String, RateMonitor> = BTreeMap::new();
+        let mut systems: BTreeMap<String, DirectConsumer> = BTreeMap::new();
+        let mut failing = false;
+        while !self.stop.load(Ordering::Acquire) {
+            match self.participant.graph() {
+                Ok(graph) => {
+                    if failing {
+                        tracing::info!("the daemon answers again");
+                        failing = false;
+                    }
+                    self.follow(&graph, &mut monitors, &mut systems);
+                    let now = Instant::now();
+                    let mut rates = BTreeMap::new();
+                    for (topic, m) in monitors.iter_mut() {
+                        let samples = m.counts.samples.load(Ordering::Relaxed);
+                        let elapsed = now.duration_since(m.last.1).as_secs_f64();
+                        if elapsed >= 0.5 {
+                            m.rate = (samples - m.last.0) as f64 / elapsed;
+                            m.last = (samples, now);
+                        }
+                        rates.insert(
+                            topic.clone(),
+                            (m.rate, m.counts.lost.load(Ordering::Relaxed)),
+                        );
+                    }
+                    let model = network::model(&graph, &rates);
+                    let text = self.publish(json!({"type": "network", "network": model}));
+                    lock(&self.latest).network = Some(text);
+                }
+                Err(err) => {
+                    if !failing {
+                        tracing::warn!(%err, "the daemon does not answer");
+                        failing = true;
+                    }
+                    self.publish(json!({"type": "error", "text": format!("the daemon does not answer: {err}")}));
+                }
+            }
+            std::thread::sleep(Duration::from_secs(1));
+        }
+    }
+
+    /// Consumers for what appeared in `graph`: a rate monitor per user topic, and each
+    /// system's description, statistics and state machines.
+    fn follow(
+        self: &Arc<Self>,
+        graph: &Graph,
+        monitors: &mut BTreeMap<String, RateMonitor>,
+        systems: &mut BTreeMap<String, DirectConsumer>,
+    ) {
+        let mut present: BTreeMap<&str, &TypeDescription> = BTreeMap::new();
+        for e in &graph.endpoints {
+            if e.info.kind() == ndds_core::wire::EndpointKind::Producer {
+                present.entry(&e.info.topic).or_insert(&e.info.type_desc);
+            }
+        }
+        monitors.retain(|topic, _| present.contains_key(topic.as_str()));
+        for (topic, desc) in &present {
+            let kind = if topic.starts_with("cs/") && topic.ends_with("/description") {
+                Watch::Description
+            } else if topic.starts_with("cs/") && topic.ends_with("/stats") {
+                Watch::Stats
+            } else if topic.starts_with("fsm/") && topic.ends_with("/state") {
+                Watch::Machine
+            } else if network::is_internal(topic) {
+                continue;
+            } else {
+                if self.rates && !monitors.contains_key(*topic) {
+                    match self.monitor(topic, desc) {
+                        Ok(m) => {
+                            monitors.insert((*topic).to_owned(), m);
+                        }
+                        Err(err) => tracing::debug!(topic, %err, "no rate for this topic"),
+                    }
+                }
+                continue;
+            };
+            if systems.contains_key(*topic) {
+                continue;
+            }
+            match self.system_consumer(topic, kind) {
+                Ok(consumer) => {
+                    systems.insert((*topic).to_owned(), consumer);
+                }
+                Err(err) => tracing::debug!(topic, %err, "not followed"),
+            }
+        }
+    }
+
+    fn monitor(&self, topic: &str, desc: &TypeDescription) -> Result<RateMonitor, String> {
+        let qos = ConsumerQos {
+            every_producer: true,
+            ..ConsumerQos::default()
+        };
+        let consumer = self
+            .participant
+            .raw_consumer(topic, desc.clone(), qos)
+            .map_err(|e| e.to_string())?;
+        let counts = Arc::new(RateCounts::default());
+        let shared = Arc::clone(&counts);
+        let mut last: HashMap<Guid, u64> = HashMap::new();
+        let consumer = consumer
+            .on_raw_sample_direct(move |sample| {
+                shared.samples.fetch_add(1, Ordering::Relaxed);
+                let seq = sample.info.seq;
+                if let Some(prev) = last.insert(sample.info.writer, seq)
+                    && seq > prev + 1
+                {
+                    shared.lost.fetch_add(seq - prev - 1, Ordering::Relaxed);
+                }
+            })
+            .map_err(|e| e.to_string())?;
+        Ok(RateMonitor {
+            _consumer: consumer,
+            counts,
+            last: (0, Instant::now()),
+            rate: 0.0,
+        })
+    }
+
+    fn system_consumer(
+        self: &Arc<Self>,
+        topic: &str,
+        kind: Watch,
+    ) -> Result<DirectConsumer, String> {
+        let weak = Arc::downgrade(self);
+        let key = topic.to_owned();
+        let err = |e: ndds_client::RecvError| e.to_string();
+        let declare = |e: ndds_client::DeclareError| e.to_string();
+        Ok(match kind {
+            Watch::Description => {
+                let qos = ConsumerQos {
+                    reliability: Reliability::Reliable { depth: 4 },
+                    ..ConsumerQos::default()
+                };
+                let desc = ndds_runtime::describe::description_type();
+                self.participant
+                    .consumer_with_type::<SystemDescription>(topic, desc, qos)
+                    .map_err(declare)?
+                    .on_sample_direct(move |sample| {
+                        if let Some(hub) = weak.upgrade() {
+                            let runtime = sample.value.runtime.clone();
+                            let text =
+                                hub.publish(json!({"type": "system", "system": sample.value}));
+                            lock(&hub.latest).descriptions.insert(runtime, text);
+                        }
+                    })
+                    .map_err(err)?
+            }
+            Watch::Stats => {
+                let desc = TypeDescription::named::<HabitatStats>(builtin::HABITAT_STATS);
+                self.participant
+                    .consumer_with_type::<HabitatStats>(topic, desc, ConsumerQos::default())
+                    .map_err(declare)?
+                    .on_sample_direct(move |sample| {
+                        if let Some(hub) = weak.upgrade() {
+                            let text = hub.publish(json!({"type": "stats", "stats": sample.value}));
+                            lock(&hub.latest).stats.insert(key.clone(), text);
+                        }
+                    })
+                    .map_err(err)?
+            }
+            Watch::Machine => {
+                let desc = TypeDescription::named::<MachineState>(builtin::FSM_STATE);
+                self.participant
+                    .consumer_with_type::<MachineState>(topic, desc, ConsumerQos::default())
+                    .map_err(declare)?
+                    .on_sample_direct(move |sample| {
+                        if let Some(hub) = weak.upgrade() {
+                            let machine = sample.value.machine.clone();
+                            let text =
+                                hub.publish(json!({"type": "machine", "state": sample.value}));
+                            lock(&hub.latest).machines.insert(machine, text);
+                        }
+                    })
+                    .map_err(err)?
+            }
+        })
+    }
+
+    /// A page wants the points of `topic`.
+    pub fn watch(&self, topic: &str) -> Result<(), String> {
+        let mut plots = lock(&self.plots);
+        if let Some(plot) = plots.get_mut(topic) {
+            plot.watchers += 1;
+            return Ok(());
+        }
+        let graph = self.participant.graph().map_err(|e| e.to_string())?;
+        let desc = graph
+            .endpoints
+            .iter()
+            .filter(|e| e.info.topic == topic)
+            .min_by_key(|e| e.info.kind() != ndds_core::wire::EndpointKind::Producer)
+            .map(|e| e.info.type_desc.clone())
+            .ok_or_else(|| format!("no topic `{topic}` in the graph"))?;
+        let is_csmat = desc.fingerprint() == TypeDescription::of::<CsMat>().fingerprint();
+        if !is_csmat && desc.layout.is_none() {
+            return Err(format!(
+                "`{topic}` carries {} without a layout: its fields cannot be decoded",
+                desc.name
+            ));
+        }
+        let series = Arc::new(Mutex::new(Series::default()));
+        let shared = Arc::clone(&series);
+        let mut mat = CsMat::zeros("", 0, 0);
+        let qos = ConsumerQos {
+            every_producer: true,
+            depth: 1024,
+            ..ConsumerQos::default()
+        };
+        let consumer = self
+            .participant
+            .raw_consumer(topic, desc.clone(), qos)
+            .map_err(|e| e.to_string())?
+            .on_raw_sample_direct(move |sample| {
+                let t = unix_seconds(sample.info.source_timestamp);
+                let fields = if is_csmat {
+                    mat.decode_into(&sample.payload)
+                        .map(|()| plot::csmat_fields(&mat))
+                        .map_err(|e| e.to_string())
+                } else {
+                    match &desc.layout {
+                        Some(layout) => ndds_core::dynamic::decode_json(layout, &sample.payload)
+                            .map(|v| plot::json_fields(&v))
+                            .map_err(|e| e.to_string()),
+                        None => Ok(Vec::new()),
+                    }
+                };
+                let mut series = lock(&shared);
+                match fields {
+                    Ok(fields) => {
+                        if series.names.len() != fields.len()
+                            || series.names.iter().zip(&fields).any(|(a, b)| *a != b.0)
+                        {
+                            series.names = fields.iter().map(|f| f.0.clone()).collect();
+                            series.decimators =
+                                fields.iter().map(|_| Decimator::new(BUCKET_S)).collect();
+                        }
+                        for (d, (_, v)) in series.decimators.iter_mut().zip(fields) {
+                            d.push(t, v);
+                        }
+                    }
+                    Err(e) => series.error = Some(e),
+                }
+            })
+            .map_err(|e| e.to_string())?;
+        plots.insert(
+            topic.to_owned(),
+            PlotTopic {
+                _consumer: consumer,
+                watchers: 1,
+                series,
+            },
+        );
+        Ok(())
+    }
+
+    /// A page no longer wants the points of `topic`.
+    pub fn unwatch(&self, topic: &str) {
+        let mut plots = lock(&self.plots);
+        if let Some(plot) = plots.get_mut(topic) {
+            plot.watchers = plot.watchers.saturating_sub(1);
+            if plot.watchers == 0 {
+                plots.remove(topic);
+            }
+        }
+    }
+
+    fn send_points(self: Arc<Self>) {
+        while !self.stop.load(Ordering::Acquire) {
+            std::thread::sleep(Duration::from_millis(100));
+            let now = unix_seconds(SystemTime::now());
+            let taken: Vec<(String, serde_json::Value)> = {
+                let plots = lock(&self.plots);
+                plots
+                    .iter()
+                    .filter_map(|(topic, plot)| {
+                        let mut series = lock(&plot.series);
+                        let error = series.error.take();
+                        let names = series.names.clone();
+                        let points: Vec<Vec<(f64, f64)>> =
+                            series.decimators.iter_mut().map(|d| d.take(now)).collect();
+                        if points.iter().all(Vec::is_empty) && error.is_none() {
+                            return None;
+                        }
+                        Some((
+                            topic.clone(),
+                            json!({"fields": names, "points": points, "error": error}),
+                        ))
+                    })
+                    .collect()
+            };
+            for (topic, body) in taken {
+                self.publish(json!({"type": "points", "topic": topic, "data": body}));
+            }
+        }
+    }
+
+    /// A port user of `port`, declared once and kept.
+    fn port_user<Q, R>(&self, port: &str) -> Result<Arc<PortUser<Q, R>>, String>
+    where
+        Q: serde::Serialize + serde::de::DeserializeOwned + Send + Sync + 'static,
+        R: serde::Serialize + serde::de::DeserializeOwned + Send + Sync + 'static,
+    {
+        let mut ports = lock(&self.ports);
+        if let Some(user) = ports.get(port).cloned()
+            && let Ok(user) = user.downcast::<PortUser<Q, R>>()
+        {
+            return Ok(user);
+        }
+        let user = Arc::new(
+            PortUser::<Q, R>::declare(&self.participant, port, "studio")
+                .map_err(|e| e.to_string())?,
+        );
+        ports.insert(port.to_owned(), user.clone());
+        Ok(user)
+    }
+
+    /// Runs a command of a page, blocking until the system answers (or the timeout); the
+    /// answer in words.
+    pub fn command(&self, command: &Command) -> CommandReply {
+        match command {
+            Command::Configure {
+                runtime,
+                configuration,
+            } => {
+                let user = self.port_user::<RuntimeCommand, CommandReply>(
+                    &ndds_runtime::command_port(runtime),
+                )?;
+                user.send(
+                    &RuntimeCommand::Configure(configuration.clone()),
+                    COMMAND_TIMEOUT,
+                )
+                .map_err(|e| e.to_string())?
+            }
+            Command::Set {
+                runtime,
+                mat,
+                values,
+            } => {
+                let user = self.port_user::<RuntimeCommand, CommandReply>(
+                    &ndds_runtime::command_port(runtime),
+                )?;
+                let command = RuntimeCommand::SetMat {
+                    name: mat.clone(),
+                    values: values.clone(),
+                };
+                user.send(&command, COMMAND_TIMEOUT)
+                    .map_err(|e| e.to_string())?
+            }
+            Command::Stimulus { machine, stimuli } => {
+                let parsed: Vec<Stimulus> = stimuli
+                    .split(',')
+                    .map(str::trim)
+                    .filter(|s| !s.is_empty())
+                    .map(Stimulus::parse)
+                    .collect();
+                if parsed.is_empty() {
+                    return Err("no stimulus given".into());
+                }
+                let user = self.port_user::<Vec<Stimulus>, CommandReply>(
+                    &ndds_runtime::fsm::command_port(machine),
+                )?;
+                user.send(&parsed, COMMAND_TIMEOUT)
+                    .map_err(|e| e.to_string())?
+            }
+            Command::Read { runtime, mats } => {
+                let user = self.port_user::<RuntimeCommand, CommandReply>(
+                    &ndds_runtime::command_port(runtime),
+                )?;
+                user.send(&RuntimeCommand::ReadMats(mats.clone()), COMMAND_TIMEOUT)
+                    .map_err(|e| e.to_string())?
+            }
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Watch {
+    Description,
+    Stats,
+    Machine,
+}
+
+/// What a page may ask of a running system.
+#[derive(Clone, Debug, serde::Deserialize)]
+#[serde(tag = "command", rename_all = "lowercase")]
+pub enum Command {
+    /// Switch `runtime` to `configuration`.
+    Configure {
+        /// The system.
+        runtime: String,
+        /// The configuration.
+        configuration: String,
+    },
+    /// Set a parameter (a CSMat no module writes).
+    Set {
+        /// The system.
+        runtime: String,
+        /// The CSMat.
+        mat: String,
+        /// Its values, row-major.
+        values: Vec<f64>,
+    },
+    /// Send stimuli (`Name` or `Name=value`, comma-separated) to a machine.
+    Stimulus {
+        /// The machine.
+        machine: String,
+        /// The stimuli.
+        stimuli: String,
+    },
+    /// Read CSMats' values (answered as JSON text).
+    Read {
+        /// The system.
+        runtime: String,
+        /// The CSMats.
+        mats: Vec<String>,
+    },
+}
+
+impl Command {
+    /// Whether it changes the system (and so needs the page's token).
+    pub fn changes(&self) -> bool {
+        !matches!(self, Command::Read { .. })
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
