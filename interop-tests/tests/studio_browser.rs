@@ -227,6 +227,7 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
         }
         assert_eq!(until(&page, "the configuration", "document.getElementById('sys-config').textContent").await, "JointPD");
         screenshot(&page, "system").await;
+
         click(&page, "button[data-configuration=\"endptLQG\"]").await;
         let reply = until(&page, "the switch's reply", "document.getElementById('sys-reply').textContent").await;
         assert!(reply.as_str().unwrap().contains("switched to configuration `endptLQG`"), "{reply}");

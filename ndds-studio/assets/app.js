@@ -140,14 +140,18 @@ for (const button of document.querySelectorAll('nav button')) {
 }
 
 const graphStyle = [
-  { selector: 'node', style: { label: 'data(label)', 'font-size': 10, 'text-valign': 'center', 'text-wrap': 'wrap', 'text-max-width': 110, width: 'label', height: 'label', padding: 6, shape: 'round-rectangle', 'background-color': '#e3ecf4', 'border-width': 1, 'border-color': '#7d93a8' } },
+  // Fixed sizes: sizes from labels measured at the wrong moment were cached as 0 by
+  // Cytoscape, which then drew neither those nodes nor their edges.
+  { selector: 'node', style: { label: 'data(label)', 'font-size': 10, 'text-valign': 'center', 'text-wrap': 'wrap', 'text-max-width': 124, width: 130, height: 34, shape: 'round-rectangle', 'background-color': '#e3ecf4', 'border-width': 1, 'border-color': '#7d93a8' } },
   { selector: 'node:parent', style: { 'text-valign': 'top', 'background-opacity': 0.25, 'font-weight': 'bold' } },
   { selector: 'node.topic', style: { shape: 'ellipse', 'background-color': '#fff7df', 'border-color': '#c7a43c' } },
   { selector: 'node.port', style: { shape: 'diamond', 'background-color': '#efe5fb', 'border-color': '#8c6bb8' } },
   { selector: 'node.host', style: { 'background-color': '#dfe7ee' } },
+  { selector: 'node[colour]', style: { 'background-color': 'data(colour)', color: '#fff', 'border-color': '#333' } },
+  { selector: 'node.habitat', style: { 'background-opacity': 0, 'border-width': 0, 'font-weight': 'bold', 'font-size': 12, width: 90 } },
   { selector: 'node.inactive', style: { opacity: 0.35 } },
   { selector: 'node.current', style: { 'background-color': '#2b7bbf', color: '#fff', 'border-color': '#174b78', 'border-width': 3 } },
-  { selector: 'node.star', style: { shape: 'star', width: 22, height: 22, label: '*' } },
+  { selector: 'node.star', style: { shape: 'star', width: 30, height: 30, label: '*' } },
   { selector: '.fading', style: { opacity: 0.3 } },
   { selector: 'edge', style: { width: 1.5, 'curve-style': 'bezier', 'target-arrow-shape': 'triangle', 'line-color': '#8aa0b4', 'target-arrow-color': '#8aa0b4', label: 'data(label)', 'font-size': 9, 'text-rotation': 'autorotate', 'text-background-color': '#fff', 'text-background-opacity': 0.8 } },
   { selector: 'edge.mismatch', style: { 'line-color': '#d2402f', 'target-arrow-color': '#d2402f', 'line-style': 'dashed', width: 2.5 } },
@@ -342,21 +346,19 @@ function renderSystem() {
   for (const m of s.modules) for (const o of m.outputs) (writers[o.mat] = writers[o.mat] || []).push(m.name);
   const position = {};
   s.habitats.forEach((h, row) => {
-    elements.push({ group: 'nodes', data: { id: `hab:${h.name}`, label: `${h.name} — ${h.rate_hz.toFixed(0)} Hz${h.running ? '' : ' (stopped)'}` } });
+    // A habitat is a row headed by its name and rate (compound parents hid the modules that
+    // have outgoing edges in Cytoscape 3.35 with preset positions).
+    elements.push({ group: 'nodes', data: { id: `hab:${h.name}`, label: `${h.name}\n${h.rate_hz.toFixed(0)} Hz${h.running ? '' : ' (stopped)'}` }, position: { x: -190, y: 130 * row }, classes: 'habitat' });
     const members = s.modules.filter((m) => m.habitat === h.name);
     const ordered = h.order.concat(members.map((m) => m.name).filter((n) => !h.order.includes(n)));
-    ordered.forEach((name, col) => { position[name] = { x: 170 * col, y: 170 * row }; });
+    ordered.forEach((name, col) => { position[name] = { x: 170 * col, y: 130 * row }; });
   });
   for (const m of s.modules) {
     const group = m.groups[0];
     const label = `${m.name}${m.component ? `\n${m.component}` : ''}`;
-    elements.push({
-      group: 'nodes',
-      data: { id: `mod:${m.name}`, parent: `hab:${m.habitat}`, label, module: m.name },
-      position: position[m.name] || { x: 0, y: 0 },
-      classes: m.active ? '' : 'inactive',
-      style: group ? { 'background-color': groupColour(s, group), color: '#fff' } : {},
-    });
+    const data = { id: `mod:${m.name}`, label, module: m.name, habitat: m.habitat };
+    if (group) data.colour = groupColour(s, group);
+    elements.push({ group: 'nodes', data, position: position[m.name] || { x: 0, y: 0 }, classes: m.active ? '' : 'inactive' });
   }
   const seen = new Set();
   for (const m of s.modules) {
