@@ -225,7 +225,9 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
         for module in ["arm", "joint_pd", "endpoint_lqg", "joint_error", "tip_error"] {
             assert!(modules.as_array().unwrap().iter().any(|m| m == module), "{module} in {modules}");
         }
-        assert_eq!(until(&page, "the configuration", "document.getElementById('sys-config').textContent").await, "JointPD");
+        // The description the page got first may be from before `Coarse` switched to JointPD;
+        // the runtime writes the new one within a second.
+        until(&page, "JointPD as the configuration", "document.getElementById('sys-config').textContent === 'JointPD'").await;
         screenshot(&page, "system").await;
 
         click(&page, "button[data-configuration=\"endptLQG\"]").await;
