@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use ndds_client::{ConnectError, EmbeddedPolicy, Participant};
+use ndds_client::{ConnectError, EmbeddedPolicy, Participant, ParticipantBuilder};
 
 /// Where the daemon is: flags first, then `NDDS_DOMAIN` / `NDDS_SOCKET` (read by the SDK).
 #[derive(Clone, Debug, Default, clap::Args)]
@@ -22,10 +22,20 @@ pub struct DaemonArgs {
 
 /// Opens a tool session with the local daemon; never starts an embedded daemon.
 pub fn connect(args: &DaemonArgs) -> anyhow::Result<Participant> {
-    let mut builder = Participant::builder()
-        .embedded(EmbeddedPolicy::Never)
-        .name("ndds")
-        .tool();
+    connect_with(args, |builder| builder)
+}
+
+/// As [`connect`], with `options` applied to the participant's builder.
+pub fn connect_with(
+    args: &DaemonArgs,
+    options: impl FnOnce(ParticipantBuilder) -> ParticipantBuilder,
+) -> anyhow::Result<Participant> {
+    let mut builder = options(
+        Participant::builder()
+            .embedded(EmbeddedPolicy::Never)
+            .name("ndds")
+            .tool(),
+    );
     if let Some(domain) = args.domain {
         builder = builder.domain(domain);
     }

@@ -74,6 +74,7 @@ pub struct ParticipantBuilder {
     name: Option<String>,
     role: Option<Role>,
     max_sample: Option<usize>,
+    recv_buffer: Option<usize>,
     key_file: Option<PathBuf>,
     integrity_only: bool,
 }
@@ -124,6 +125,17 @@ impl ParticipantBuilder {
     /// range: 1 KiB to 4 GiB − 1.
     pub fn max_sample_size(mut self, bytes: usize) -> Self {
         self.max_sample = Some(bytes);
+        self
+    }
+
+    /// Bytes of the data socket's receive buffer asked of the kernel (default:
+    /// `NDDS_RECV_BUFFER`, else 8 MiB). Datagrams that arrive while the participant's
+    /// receive thread is not scheduled wait there; when it is full they are lost (a best-effort
+    /// gap, a reliable repair). The kernel grants at most `net.core.rmem_max` unless the
+    /// process has `CAP_NET_ADMIN`; a larger ask that is not granted is logged as a warning.
+    /// A recorder of fast topics asks for more (`ndds record` asks for 64 MiB).
+    pub fn receive_buffer(mut self, bytes: usize) -> Self {
+        self.recv_buffer = Some(bytes);
         self
     }
 
@@ -233,6 +245,20 @@ impl ParticipantBuilder {
                 "maximum sample size {max_sample} is outside {MIN_MAX_SAMPLE}..={MAX_MAX_SAMPLE} bytes"
             )));
         }
+        let recv_buffer = match (self.recv_buffer, env("NDDS_RECV_BUFFER")) {
+            (Some(bytes), _) => bytes,
+            (None, Some(text)) => text.parse().map_err(|_| {
+                ConnectError::Setting(format!(
+                    "NDDS_RECV_BUFFER={text:?} is not a number of bytes"
+                ))
+            })?,
+            (None, None) => crate::data_plane::DEFAULT_SOCKET_BUFFER,
+        };
+        if !(64 * 1024..=1 << 30).contains(&recv_buffer) {
+            return Err(ConnectError::Setting(format!(
+                "receive buffer {recv_buffer} is outside 64 KiB..=1 GiB"
+            )));
+        }
         Ok(Settings {
             socket,
             embedded,
@@ -241,6 +267,7 @@ impl ParticipantBuilder {
             name: self.name.unwrap_or_else(process_name),
             role: self.role.unwrap_or(Role::Client),
             max_sample,
+            recv_buffer,
             seal,
             key_file,
         })
@@ -257,6 +284,7 @@ struct Settings {
     name: String,
     role: Role,
     max_sample: usize,
+    recv_buffer: usize,
     /// The domain's keys and how to seal, in a sealed domain.
     seal: Option<(Keyring, SealMode)>,
     /// The file the keys were read from (watched for rotation steps).
@@ -395,6 +423,7 @@ impl Participant {
         let interface = Ipv4Addr::from(welcome.interface);
         let limits = |interface| Limits {
             max_sample: settings.max_sample,
+            recv_buffer: settings.recv_buffer,
             ..Limits::for_interface(interface)
         };
         let seal = || {

@@ -96,6 +96,9 @@ fn snapshot_port(name: &str) -> String {
 
 type SnapshotReply = Result<String, String>;
 
+/// The receive buffer `ndds record` asks for.
+const RECORDER_RECV_BUFFER: usize = 64 << 20;
+
 /// `ndds record --trigger NAME`.
 fn trigger(daemon: &DaemonArgs, name: &str, reason: &str) -> anyhow::Result<()> {
     let participant = connect(daemon)?;
@@ -133,7 +136,16 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         signal_hook::flag::register(signal, Arc::clone(&stop)).context("cannot catch signals")?;
     }
     let output = args.output.clone().unwrap_or_else(default_name);
-    let participant = connect(daemon)?;
+    // A recorder's receive thread shares the cores with the disk's writeback and often with
+    // the publishers: a large socket buffer rides out the moments it is not scheduled
+    // (granted up to `net.core.rmem_max`, or fully with CAP_NET_ADMIN; NDDS_RECV_BUFFER
+    // overrides it).
+    let participant = crate::connect::connect_with(daemon, |builder| {
+        match std::env::var_os("NDDS_RECV_BUFFER") {
+            Some(_) => builder,
+            None => builder.receive_buffer(RECORDER_RECV_BUFFER),
+        }
+    })?;
     let mut metadata = std::collections::BTreeMap::new();
     metadata.insert(
         "recorder".into(),

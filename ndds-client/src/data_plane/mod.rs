@@ -35,7 +35,7 @@ use ndds_core::participant::{
 use ndds_core::seal::OpenError;
 use ndds_core::wire::{DropReason, Guid, Locator};
 
-pub use socket::{DEFAULT_MAX_SAMPLE, Limits};
+pub use socket::{DEFAULT_MAX_SAMPLE, DEFAULT_SOCKET_BUFFER, Limits};
 
 use crate::consumer::Delivery;
 use crate::error::WriteError;
@@ -271,7 +271,7 @@ impl DataPlane {
         seal: Option<SealSetup>,
     ) -> io::Result<Self> {
         let socket = UdpSocket::bind(SocketAddrV4::new(interface, 0))?;
-        socket::set_buffers(&socket);
+        socket::set_buffers(&socket, limits.recv_buffer);
         let locator = match socket.local_addr()? {
             SocketAddr::V4(addr) => Locator::from(addr),
             SocketAddr::V6(_) => return Err(io::Error::other("data socket is not IPv4")),
