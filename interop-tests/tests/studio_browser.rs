@@ -298,3 +298,153 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
         page.close().await.unwrap();
     });
 }
+
+/// The p99 period jitter (µs) of `habitat` over `window`, from the system's own statistics:
+/// the median of the per-interval p99s it reports (one per second).
+fn jitter_p99(socket: &Path, habitat: &str, window: Duration) -> f64 {
+    let watcher = participant(socket, "jitter");
+    let consumer = watcher
+        .consumer_with_type::<HabitatStats>(
+            &format!("cs/arm/{habitat}/stats"),
+            ndds_client::TypeDescription::named::<HabitatStats>(builtin::HABITAT_STATS),
+            ConsumerQos::default(),
+        )
+        .unwrap();
+    let end = Instant::now() + window;
+    let mut p99s = Vec::new();
+    while Instant::now() < end {
+        if let Ok(sample) = consumer.recv_timeout(Duration::from_millis(200)) {
+            p99s.push(sample.value.period_jitter.p99_us);
+        }
+    }
+    assert!(p99s.len() >= 3, "statistics of {habitat}: {p99s:?}");
+    p99s.sort_by(f64::total_cmp);
+    p99s[p99s.len() / 2]
+}
+
+/// CPU seconds (user + system) a process used so far.
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .unwrap()
+        .1
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
+
+/// The studio's cost (issue 19, "Performance"), not a pass/fail test: the arm example plus 50
+/// topics at 100 Hz, its habitats' jitter without a studio, then with a studio and a page
+/// plotting `arm/endpoint`, and the studio's CPU meanwhile. Run with a release build:
+/// `cargo build --release -p ndds-cli -p ndds-daemon && cargo test --release -p interop-tests
+/// --test studio_browser -- --ignored --nocapture`.
+#[test]
+#[ignore = "a benchmark: run it alone (docs/benchmarks.md, \"The studio's cost\")"]
+fn the_cost_of_watching_a_system_with_the_studio() {
+    if !browser_available() {
+        return;
+    }
+    const WINDOW: Duration = Duration::from_secs(30);
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let arm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/arm.toml");
+    let _system = ClientProcess::program(
+        "ndds",
+        &socket,
+        &["run", &arm.display().to_string(), "--plain"],
+    );
+    // 50 topics at 100 Hz, from this process.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let publisher = {
+        let socket = socket.clone();
+        let stop = std::sync::Arc::clone(&stop);
+        std::thread::spawn(move || {
+            let source = participant(&socket, "fifty");
+            let producers: Vec<_> = (0..50)
+                .map(|i| {
+                    source
+                        .producer::<(u64, f64)>(
+                            &format!("load/{i}"),
+                            ndds_client::ProducerQos::default(),
+                        )
+                        .unwrap()
+                })
+                .collect();
+            let started = Instant::now();
+            let mut tick = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                for (i, p) in producers.iter().enumerate() {
+                    let _ = p.write(&(tick, (tick as f64 / 100.0 + i as f64).sin()));
+                }
+                tick += 1;
+                let due = started + Duration::from_millis(10 * tick);
+                if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                    std::thread::sleep(wait);
+                }
+            }
+        })
+    };
+    std::thread::sleep(Duration::from_secs(5));
+    let alone = (
+        jitter_p99(&socket, "control", WINDOW),
+        jitter_p99(&socket, "plant", WINDOW),
+    );
+
+    let studio = ClientProcess::program("ndds", &socket, &["studio", "--port", "0"]);
+    let url = studio
+        .line(WAIT)
+        .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
+        .expect("the studio prints its URL");
+    let driver = Driver::start();
+    let profile = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let page = runtime.block_on(async {
+        let page = browser(&driver, profile.path()).await;
+        page.goto(&url).await.unwrap();
+        until(&page, "the load topics", "state.network && state.network.topics.filter(t => t.name.startsWith('load/') && t.rate_hz > 50).length === 50").await;
+        click(&page, "#tab-plots").await;
+        page.execute("const s = document.getElementById('plot-topic'); s.value = 'arm/endpoint'; s.dispatchEvent(new Event('input')); return true;", vec![]).await.unwrap();
+        until(&page, "arm/endpoint's fields", "[...document.getElementById('plot-field').options].some(o => o.value === 'x (m)')").await;
+        page.execute("document.getElementById('plot-field').value = 'x (m)'; return true;", vec![]).await.unwrap();
+        click(&page, "#plot-add").await;
+        until(&page, "points", "Number(document.querySelector('.plot').dataset.points) > 100").await;
+        page
+    });
+    let cpu_before = cpu_seconds(studio.pid());
+    let measuring = Instant::now();
+    let watched = (
+        jitter_p99(&socket, "control", WINDOW),
+        jitter_p99(&socket, "plant", WINDOW),
+    );
+    let studio_cpu = (cpu_seconds(studio.pid()) - cpu_before) / measuring.elapsed().as_secs_f64();
+    runtime.block_on(async { page.close().await.unwrap() });
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    publisher.join().unwrap();
+    println!(
+        "| habitat | period jitter p99 without the studio, µs | with the studio and a plot, µs | ratio |"
+    );
+    println!("|---|---|---|---|");
+    println!(
+        "| control (200 Hz) | {:.0} | {:.0} | {:.2} |",
+        alone.0,
+        watched.0,
+        watched.0 / alone.0
+    );
+    println!(
+        "| plant (500 Hz) | {:.0} | {:.0} | {:.2} |",
+        alone.1,
+        watched.1,
+        watched.1 / alone.1
+    );
+    println!(
+        "studio CPU: {:.1} % of one CPU over {:.0} s",
+        studio_cpu * 100.0,
+        measuring.elapsed().as_secs_f64()
+    );
+}

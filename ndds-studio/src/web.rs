@@ -3,7 +3,7 @@
 //!
 //! Page to server (JSON): `{"type": "auth", "token"}`, `{"type": "watch", "topic"}`,
 //! `{"type": "unwatch", "topic"}`, `{"type": "command", "id", "command": ...}` (see
-//! [`Command`](crate::hub::Command)). Server to page: `hello` (whether this page may change
+//! [`Command`]). Server to page: `hello` (whether this page may change
 //! anything), then `network`, `system`, `stats`, `machine`, `points`, `reply` and `error`
 //! messages (docs/studio.md).
 
