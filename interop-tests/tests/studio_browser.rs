@@ -166,6 +166,26 @@ fn system_reports<T: serde::de::DeserializeOwned + serde::Serialize + Send + 'st
     None
 }
 
+/// `ndds run examples/arm.toml` with the daemon at `socket`.
+fn arm_system(socket: &Path) -> ClientProcess {
+    let arm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/arm.toml");
+    ClientProcess::program(
+        "ndds",
+        socket,
+        &["run", &arm.display().to_string(), "--plain"],
+    )
+}
+
+/// `ndds studio` on any free port with the daemon at `socket`, and the URL it prints.
+fn studio(socket: &Path) -> (ClientProcess, String) {
+    let studio = ClientProcess::program("ndds", socket, &["studio", "--port", "0"]);
+    let url = studio
+        .line(WAIT)
+        .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
+        .expect("the studio prints its URL");
+    (studio, url)
+}
+
 #[test]
 fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
     if !browser_available() {
@@ -174,12 +194,7 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
     let domain = TestDomain::new();
     let _daemon = domain.daemon("a");
     let socket = domain.socket("a");
-    let arm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/arm.toml");
-    let _system = ClientProcess::program(
-        "ndds",
-        &socket,
-        &["run", &arm.display().to_string(), "--plain"],
-    );
+    let _system = arm_system(&socket);
     // The arm settles in Joint and its supervisor switches to endptLQG by itself; `Coarse`
     // takes it to Held in JointPD, where it stays until told otherwise.
     let tool = participant(&socket, "setup");
@@ -191,11 +206,7 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
             .is_ok_and(|r| r.is_ok_and(|text| text.contains("Held")))
     });
     assert!(held.is_some(), "the arm's machine took Coarse");
-    let studio = ClientProcess::program("ndds", &socket, &["studio", "--port", "0"]);
-    let url = studio
-        .line(WAIT)
-        .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
-        .expect("the studio prints its URL");
+    let (_studio, url) = studio(&socket);
     assert!(
         url.starts_with("http://127.0.0.1:") && url.contains("#token="),
         "{url}"
@@ -350,12 +361,7 @@ fn the_cost_of_watching_a_system_with_the_studio() {
     let domain = TestDomain::new();
     let _daemon = domain.daemon("a");
     let socket = domain.socket("a");
-    let arm = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/arm.toml");
-    let _system = ClientProcess::program(
-        "ndds",
-        &socket,
-        &["run", &arm.display().to_string(), "--plain"],
-    );
+    let _system = arm_system(&socket);
     // 50 topics at 100 Hz, from this process.
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let publisher = {
@@ -393,11 +399,7 @@ fn the_cost_of_watching_a_system_with_the_studio() {
         jitter_p99(&socket, "plant", WINDOW),
     );
 
-    let studio = ClientProcess::program("ndds", &socket, &["studio", "--port", "0"]);
-    let url = studio
-        .line(WAIT)
-        .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
-        .expect("the studio prints its URL");
+    let (studio, url) = studio(&socket);
     let driver = Driver::start();
     let profile = tempfile::tempdir().unwrap();
     let runtime = tokio::runtime::Builder::new_current_thread()

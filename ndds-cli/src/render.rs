@@ -122,16 +122,10 @@ fn unknown_topic_hint(name: &str, all: &BTreeMap<&str, Topic<'_>>) -> String {
     text
 }
 
-/// Prefixes of the topics the runtime and the SDK use for themselves: ports' declarations
-/// and requests, state machines' events and states, ControlShell status.
-pub const INTERNAL_PREFIXES: [&str; 3] = ["port/", "fsm/", "cs/"];
-
-/// Whether `topic` is one of the runtime's own (see [`INTERNAL_PREFIXES`]).
-pub fn is_internal(topic: &str) -> bool {
-    INTERNAL_PREFIXES
-        .iter()
-        .any(|prefix| topic.starts_with(prefix))
-}
+/// Prefixes of the topics the runtime and the SDK use for themselves (ports' declarations
+/// and requests, state machines' events and states, ControlShell status), and whether a topic
+/// is one of them: the studio's, so both tell them apart alike.
+pub use ndds_studio::network::{INTERNAL_PREFIXES, is_internal};
 
 /// `name (fingerprint), ...` of the types on a topic.
 fn type_list(topic: &Topic<'_>) -> String {

@@ -241,7 +241,7 @@ pub(crate) struct Extras {
     pub(crate) description: String,
     pub(crate) files: Vec<String>,
     /// Module → component type.
-    pub(crate) components: Vec<(String, String)>,
+    pub(crate) components: std::collections::BTreeMap<String, String>,
     pub(crate) bindings: Vec<BindingDescription>,
     pub(crate) machines: Vec<MachineDescription>,
 }
@@ -260,14 +260,6 @@ impl Runtime {
     /// [`Habitat::order`](super::Habitat::order) does), never both at once.
     pub fn describe(&self) -> SystemDescription {
         let extras = self.extras();
-        let component_of = |module: &str| {
-            extras
-                .components
-                .iter()
-                .find(|(m, _)| m == module)
-                .map(|(_, t)| t.clone())
-                .unwrap_or_default()
-        };
         let mut d = SystemDescription {
             runtime: self.name().to_owned(),
             description: extras.description.clone(),
@@ -288,7 +280,7 @@ impl Runtime {
                 d.modules.push(ModuleDescription {
                     name: name.clone(),
                     habitat: module.habitat.clone(),
-                    component: component_of(name),
+                    component: extras.components.get(name).cloned().unwrap_or_default(),
                     groups: db
                         .groups_of(name)
                         .map(|g| {

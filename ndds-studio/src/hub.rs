@@ -271,68 +271,76 @@ impl Hub {
         topic: &str,
         kind: Watch,
     ) -> Result<DirectConsumer, String> {
-        let weak = Arc::downgrade(self);
-        let key = topic.to_owned();
-        let err = |e: ndds_client::RecvError| e.to_string();
-        let declare = |e: ndds_client::DeclareError| e.to_string();
-        Ok(match kind {
-            Watch::Description => {
-                let qos = ConsumerQos {
+        match kind {
+            Watch::Description => self.forward::<SystemDescription>(
+                topic,
+                ndds_runtime::describe::description_type(),
+                ConsumerQos {
                     reliability: Reliability::Reliable { depth: 4 },
                     ..ConsumerQos::default()
-                };
-                let desc = ndds_runtime::describe::description_type();
-                self.participant
-                    .consumer_with_type::<SystemDescription>(topic, desc, qos)
-                    .map_err(declare)?
-                    .on_sample_direct(move |sample| {
-                        if let Some(hub) = weak.upgrade() {
-                            let runtime = sample.value.runtime.clone();
-                            let text =
-                                hub.publish(json!({"type": "system", "system": sample.value}));
-                            lock(&hub.latest).descriptions.insert(runtime, text);
-                        }
-                    })
-                    .map_err(err)?
-            }
-            Watch::Stats => {
-                let desc = TypeDescription::named::<HabitatStats>(builtin::HABITAT_STATS);
-                self.participant
-                    .consumer_with_type::<HabitatStats>(topic, desc, ConsumerQos::default())
-                    .map_err(declare)?
-                    .on_sample_direct(move |sample| {
-                        if let Some(hub) = weak.upgrade() {
-                            let text = hub.publish(json!({"type": "stats", "stats": sample.value}));
-                            lock(&hub.latest).stats.insert(key.clone(), text);
-                        }
-                    })
-                    .map_err(err)?
-            }
-            Watch::Machine => {
-                let desc = TypeDescription::named::<MachineState>(builtin::FSM_STATE);
-                self.participant
-                    .consumer_with_type::<MachineState>(topic, desc, ConsumerQos::default())
-                    .map_err(declare)?
-                    .on_sample_direct(move |sample| {
-                        if let Some(hub) = weak.upgrade() {
-                            let machine = sample.value.machine.clone();
-                            let text =
-                                hub.publish(json!({"type": "machine", "state": sample.value}));
-                            lock(&hub.latest).machines.insert(machine, text);
-                        }
-                    })
-                    .map_err(err)?
-            }
-        })
+                },
+                ("system", "system"),
+                |latest| &mut latest.descriptions,
+                |d, _| d.runtime.clone(),
+            ),
+            Watch::Stats => self.forward::<HabitatStats>(
+                topic,
+                TypeDescription::named::<HabitatStats>(builtin::HABITAT_STATS),
+                ConsumerQos::default(),
+                ("stats", "stats"),
+                |latest| &mut latest.stats,
+                |_, topic| topic.to_owned(),
+            ),
+            Watch::Machine => self.forward::<MachineState>(
+                topic,
+                TypeDescription::named::<MachineState>(builtin::FSM_STATE),
+                ConsumerQos::default(),
+                ("machine", "state"),
+                |latest| &mut latest.machines,
+                |m, _| m.machine.clone(),
+            ),
+        }
+    }
+
+    /// A consumer of `topic` whose every sample goes to the pages as `{"type": kind, field:
+    /// sample}` and is kept, under `key(sample, topic)`, as the last of its kind for pages that
+    /// connect later.
+    fn forward<T>(
+        self: &Arc<Self>,
+        topic: &str,
+        desc: TypeDescription,
+        qos: ConsumerQos,
+        (kind, field): (&'static str, &'static str),
+        slot: fn(&mut Latest) -> &mut BTreeMap<String, Message>,
+        key: fn(&T, &str) -> String,
+    ) -> Result<DirectConsumer, String>
+    where
+        T: serde::Serialize + serde::de::DeserializeOwned + Send + 'static,
+    {
+        let weak = Arc::downgrade(self);
+        let name = topic.to_owned();
+        self.participant
+            .consumer_with_type::<T>(topic, desc, qos)
+            .map_err(|e| e.to_string())?
+            .on_sample_direct(move |sample| {
+                if let Some(hub) = weak.upgrade() {
+                    let mut message = serde_json::Map::new();
+                    message.insert("type".into(), kind.into());
+                    message.insert(field.into(), json!(sample.value));
+                    let text = hub.publish(serde_json::Value::Object(message));
+                    slot(&mut lock(&hub.latest)).insert(key(&sample.value, &name), text);
+                }
+            })
+            .map_err(|e| e.to_string())
     }
 
     /// A page wants the points of `topic`.
     pub fn watch(&self, topic: &str) -> Result<(), String> {
-        let mut plots = lock(&self.plots);
-        if let Some(plot) = plots.get_mut(topic) {
+        if let Some(plot) = lock(&self.plots).get_mut(topic) {
             plot.watchers += 1;
             return Ok(());
         }
+        // Asked of the daemon without holding the plots, which the points thread takes.
         let graph = self.participant.graph().map_err(|e| e.to_string())?;
         let desc = graph
             .endpoints
@@ -351,6 +359,8 @@ impl Hub {
         let series = Arc::new(Mutex::new(Series::default()));
         let shared = Arc::clone(&series);
         let mut mat = CsMat::zeros("", 0, 0);
+        // A CSMat's element names change only with its shape or fields: made again then only.
+        let mut named: Option<(CsMat, Vec<String>)> = None;
         let qos = ConsumerQos {
             every_producer: true,
             depth: 1024,
@@ -362,29 +372,46 @@ impl Hub {
             .map_err(|e| e.to_string())?
             .on_raw_sample_direct(move |sample| {
                 let t = unix_seconds(sample.info.source_timestamp);
-                let fields = if is_csmat {
+                let mut json_names = Vec::new();
+                let decoded: Result<Vec<f64>, String> = if is_csmat {
                     mat.decode_into(&sample.payload)
-                        .map(|()| plot::csmat_fields(&mat))
                         .map_err(|e| e.to_string())
+                        .map(|()| {
+                            let same = named.as_ref().is_some_and(|(m, _)| {
+                                m.shape() == mat.shape()
+                                    && m.row_fields() == mat.row_fields()
+                                    && m.col_fields() == mat.col_fields()
+                            });
+                            if !same {
+                                named = Some((mat.clone(), plot::csmat_names(&mat)));
+                            }
+                            plot::csmat_values(&mat)
+                        })
                 } else {
                     match &desc.layout {
                         Some(layout) => ndds_core::dynamic::decode_json(layout, &sample.payload)
-                            .map(|v| plot::json_fields(&v))
+                            .map(|v| {
+                                let values;
+                                (json_names, values) = plot::json_fields(&v).into_iter().unzip();
+                                values
+                            })
                             .map_err(|e| e.to_string()),
                         None => Ok(Vec::new()),
                     }
                 };
+                let names: &[String] = match (&named, is_csmat) {
+                    (Some((_, names)), true) => names,
+                    _ => &json_names,
+                };
                 let mut series = lock(&shared);
-                match fields {
-                    Ok(fields) => {
-                        if series.names.len() != fields.len()
-                            || series.names.iter().zip(&fields).any(|(a, b)| *a != b.0)
-                        {
-                            series.names = fields.iter().map(|f| f.0.clone()).collect();
+                match decoded {
+                    Ok(values) => {
+                        if series.names != names {
                             series.decimators =
-                                fields.iter().map(|_| Decimator::new(BUCKET_S)).collect();
+                                names.iter().map(|_| Decimator::new(BUCKET_S)).collect();
+                            series.names = names.to_vec();
                         }
-                        for (d, (_, v)) in series.decimators.iter_mut().zip(fields) {
+                        for (d, v) in series.decimators.iter_mut().zip(values) {
                             d.push(t, v);
                         }
                     }
@@ -392,14 +419,21 @@ impl Hub {
                 }
             })
             .map_err(|e| e.to_string())?;
-        plots.insert(
-            topic.to_owned(),
-            PlotTopic {
-                _consumer: consumer,
-                watchers: 1,
-                series,
-            },
-        );
+        let mut plots = lock(&self.plots);
+        match plots.get_mut(topic) {
+            // Another page asked meanwhile: its consumer serves both, this one is dropped.
+            Some(plot) => plot.watchers += 1,
+            None => {
+                plots.insert(
+                    topic.to_owned(),
+                    PlotTopic {
+                        _consumer: consumer,
+                        watchers: 1,
+                        series,
+                    },
+                );
+            }
+        }
         Ok(())
     }
 
@@ -471,30 +505,20 @@ impl Hub {
             Command::Configure {
                 runtime,
                 configuration,
-            } => {
-                let user = self.port_user::<RuntimeCommand, CommandReply>(
-                    &ndds_runtime::command_port(runtime),
-                )?;
-                user.send(
-                    &RuntimeCommand::Configure(configuration.clone()),
-                    COMMAND_TIMEOUT,
-                )
-                .map_err(|e| e.to_string())?
-            }
+            } => self.ask_runtime(runtime, RuntimeCommand::Configure(configuration.clone())),
             Command::Set {
                 runtime,
                 mat,
                 values,
-            } => {
-                let user = self.port_user::<RuntimeCommand, CommandReply>(
-                    &ndds_runtime::command_port(runtime),
-                )?;
-                let command = RuntimeCommand::SetMat {
+            } => self.ask_runtime(
+                runtime,
+                RuntimeCommand::SetMat {
                     name: mat.clone(),
                     values: values.clone(),
-                };
-                user.send(&command, COMMAND_TIMEOUT)
-                    .map_err(|e| e.to_string())?
+                },
+            ),
+            Command::Read { runtime, mats } => {
+                self.ask_runtime(runtime, RuntimeCommand::ReadMats(mats.clone()))
             }
             Command::Stimulus { machine, stimuli } => {
                 let parsed: Vec<Stimulus> = stimuli
@@ -512,14 +536,15 @@ impl Hub {
                 user.send(&parsed, COMMAND_TIMEOUT)
                     .map_err(|e| e.to_string())?
             }
-            Command::Read { runtime, mats } => {
-                let user = self.port_user::<RuntimeCommand, CommandReply>(
-                    &ndds_runtime::command_port(runtime),
-                )?;
-                user.send(&RuntimeCommand::ReadMats(mats.clone()), COMMAND_TIMEOUT)
-                    .map_err(|e| e.to_string())?
-            }
         }
+    }
+
+    /// Sends `command` to the command port of `runtime` and waits for its answer.
+    fn ask_runtime(&self, runtime: &str, command: RuntimeCommand) -> CommandReply {
+        let user =
+            self.port_user::<RuntimeCommand, CommandReply>(&ndds_runtime::command_port(runtime))?;
+        user.send(&command, COMMAND_TIMEOUT)
+            .map_err(|e| e.to_string())?
     }
 }
 

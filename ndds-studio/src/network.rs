@@ -11,7 +11,9 @@ use ndds_core::types::fingerprint_hex;
 use ndds_core::wire::{ConsumerMode, EndpointKind, EndpointQos, Reliability};
 use serde::Serialize;
 
-/// The prefixes of the topics a runtime, a state machine or a port uses itself.
+/// The prefixes of the topics the runtime and the SDK use for themselves: ports'
+/// declarations and requests, state machines' events and states, ControlShell status (`ndds
+/// topics` hides them too).
 pub const INTERNAL_PREFIXES: [&str; 3] = ["port/", "fsm/", "cs/"];
 
 /// Whether `topic` is one of those.

@@ -61,37 +61,53 @@ fn walk(value: &serde_json::Value, path: &mut String, out: &mut Vec<(String, f64
 /// The elements of a CSMat, named by its field names and units where it has them (`q1
 /// (rad)`; `x,vx` for a matrix), else by index (`[0,1]`).
 pub fn csmat_fields(mat: &CsMat) -> Vec<(String, f64)> {
+    csmat_names(mat)
+        .into_iter()
+        .zip(csmat_values(mat))
+        .collect()
+}
+
+/// The names [`csmat_fields`] gives a CSMat's elements (row-major, at most [`MAX_FIELDS`]).
+pub fn csmat_names(mat: &CsMat) -> Vec<String> {
     let (rows, cols) = mat.shape();
     let (row_fields, col_fields) = (mat.row_fields(), mat.col_fields());
     let mut out = Vec::with_capacity((rows * cols).min(MAX_FIELDS));
-    'rows: for r in 0..rows {
-        for c in 0..cols {
-            if out.len() >= MAX_FIELDS {
-                break 'rows;
-            }
-            let row = row_fields.get(r);
-            let col = col_fields.get(c);
-            let mut name = match (rows, cols) {
-                (_, 1) => row.map_or(format!("[{r}]"), |f| f.name.clone()),
-                (1, _) => col.map_or(format!("[{c}]"), |f| f.name.clone()),
-                _ => format!(
-                    "{},{}",
-                    row.map_or(r.to_string(), |f| f.name.clone()),
-                    col.map_or(c.to_string(), |f| f.name.clone())
-                ),
-            };
-            let unit = [row, col]
-                .into_iter()
-                .flatten()
-                .map(|f| f.unit.as_str())
-                .find(|u| !u.is_empty());
-            if let Some(unit) = unit {
-                name.push_str(&format!(" ({unit})"));
-            }
-            out.push((name, mat.get(r, c).unwrap_or(f64::NAN)));
+    for (r, c) in (0..rows)
+        .flat_map(|r| (0..cols).map(move |c| (r, c)))
+        .take(MAX_FIELDS)
+    {
+        let row = row_fields.get(r);
+        let col = col_fields.get(c);
+        let mut name = match (rows, cols) {
+            (_, 1) => row.map_or(format!("[{r}]"), |f| f.name.clone()),
+            (1, _) => col.map_or(format!("[{c}]"), |f| f.name.clone()),
+            _ => format!(
+                "{},{}",
+                row.map_or(r.to_string(), |f| f.name.clone()),
+                col.map_or(c.to_string(), |f| f.name.clone())
+            ),
+        };
+        let unit = [row, col]
+            .into_iter()
+            .flatten()
+            .map(|f| f.unit.as_str())
+            .find(|u| !u.is_empty());
+        if let Some(unit) = unit {
+            name.push_str(&format!(" ({unit})"));
         }
+        out.push(name);
     }
     out
+}
+
+/// A CSMat's elements, row-major, as many as [`csmat_names`] names.
+pub fn csmat_values(mat: &CsMat) -> Vec<f64> {
+    let (rows, cols) = mat.shape();
+    (0..rows)
+        .flat_map(|r| (0..cols).map(move |c| (r, c)))
+        .take(MAX_FIELDS)
+        .map(|(r, c)| mat.get(r, c).unwrap_or(f64::NAN))
+        .collect()
 }
 
 /// A point: (time in seconds, value).
