@@ -385,6 +385,73 @@ fn includes_are_relative_read_once_and_top_file_settings_win() {
     assert_eq!(system.runtime().mat("y").value(0, 0), 6.0);
 }
 
+#[test]
+fn an_overlay_stands_in_for_files_on_disk_and_files_that_do_not_exist_yet() {
+    use ndds_runtime::system::{LoadOptions, Overlay, overlay_key};
+    let dir = tempfile::tempdir().unwrap();
+    let top = dir.path().join("top.toml");
+    std::fs::write(
+        &top,
+        "include = [\"parts/gain.toml\"]\n[[habitat]]\nname = \"h\"\nrate = 100\nclock = \"manual\"\n\n\
+         [[mat]]\nname = \"u\"\nvalue = 2.0\n",
+    )
+    .unwrap();
+    std::fs::create_dir(dir.path().join("parts")).unwrap();
+    let gain = "[[component]]\nname = \"g\"\ntype = \"gain\"\nhabitat = \"h\"\ninput = \"u\"\n\
+                output = \"y\"\nk = 3\n";
+    std::fs::write(dir.path().join("parts/gain.toml"), gain).unwrap();
+    let on_disk = System::load(&top, None, ndds_components::library()).expect("loads");
+    on_disk.start().unwrap();
+    on_disk.runtime().habitat("h").step().unwrap();
+    assert_eq!(on_disk.runtime().mat("y").value(0, 0), 6.0);
+    drop(on_disk);
+
+    // The included file as an editor holds it (named through `..`), and a state machine file
+    // that exists only in the overlay.
+    let mut overlay = Overlay::new();
+    overlay.insert(
+        overlay_key(&dir.path().join("parts/../parts/gain.toml")),
+        format!("{}\n[[state_machine]]\nfile = \"m.toml\"\n", gain.replace("k = 3", "k = 5")),
+    );
+    overlay.insert(
+        overlay_key(&dir.path().join("parts/m.toml")),
+        "main = \"m\"\n[stimuli]\nGo = \"transient\"\n[[machine]]\nname = \"m\"\nstart = \"A\"\n\
+         states = [\"A\", \"B\"]\n[[machine.transition]]\nfrom = \"A\"\nwhen = \"Go\"\nnext = { 0 = \"B\" }\n"
+            .to_owned(),
+    );
+    let options = LoadOptions {
+        overlay: Arc::new(overlay.clone()),
+        ..LoadOptions::default().with_library(ndds_components::library())
+    };
+    let edited = System::load_with(&top, None, options.clone()).expect("the overlay loads");
+    assert_eq!(edited.machine_names(), ["m"]);
+    edited.start().unwrap();
+    edited.runtime().habitat("h").step().unwrap();
+    assert_eq!(edited.runtime().mat("y").value(0, 0), 10.0);
+    drop(edited);
+    assert!(!dir.path().join("parts/m.toml").exists(), "nothing was written");
+
+    // A mistake in a text of the overlay is reported where it is in that text.
+    overlay.insert(
+        overlay_key(&dir.path().join("parts/gain.toml")),
+        gain.replace("k = 3", "k = \"three\""),
+    );
+    let options = LoadOptions {
+        overlay: Arc::new(overlay),
+        ..options
+    };
+    match System::load_with(&top, None, options) {
+        Err(SystemError::Invalid(d)) => {
+            assert_eq!(d.0.len(), 1, "{d}");
+            assert!(d.0[0].location.file.ends_with("parts/gain.toml"), "{d}");
+            assert_eq!(d.0[0].location.line, 7, "{d}");
+            assert!(d.0[0].message.contains("`k`"), "{d}");
+        }
+        Ok(_) => panic!("a text gain loaded"),
+        Err(other) => panic!("{other}"),
+    }
+}
+
 /// A component type that counts its startups: proves nothing started.
 #[derive(Clone, Default)]
 struct Counter(Arc<AtomicUsize>);

@@ -89,6 +89,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             name: args.name.clone(),
             check: args.check,
             library: ndds_components::library(),
+            overlay: Default::default(),
         };
         // Network bindings are built against a daemon: connect only if the file has some.
         let mut participant = None;

@@ -220,7 +220,7 @@ pub(crate) fn build_into(
         None if known.iter().any(|k| k == name) => Ok(None),
         None => Err(known.clone()),
     };
-    let d = decl::describe(&files, &spec, &mut p);
+    let d = decl::describe(&files, &spec, &options.overlay, &mut p);
     let fallback = d.start.clone().unwrap_or_else(|| Location {
         file: Arc::new("<system>".into()),
         line: 1,

@@ -52,7 +52,10 @@ use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 pub use build::PortReply;
 pub use decl::{SECTION_KEYS, SECTIONS, Serves};
-pub use source::{Diagnostic, Diagnostics, Location, MAX_FILE_BYTES, MAX_FILES, MAX_INCLUDE_DEPTH};
+pub use source::{
+    Diagnostic, Diagnostics, Location, MAX_FILE_BYTES, MAX_FILES, MAX_INCLUDE_DEPTH, Overlay,
+    overlay_key,
+};
 
 use crate::fsm::{FsmError, MachineState, StateMachine};
 use crate::sync::lock;
@@ -152,7 +155,7 @@ impl System {
         options: LoadOptions,
     ) -> Result<Self, SystemError> {
         let path = path.as_ref();
-        let files = source::read_all(path).map_err(SystemError::Invalid)?;
+        let files = source::read_all(path, &options.overlay).map_err(SystemError::Invalid)?;
         let stem = path
             .file_stem()
             .map_or_else(|| "system".to_owned(), |s| s.to_string_lossy().into_owned());
@@ -163,7 +166,8 @@ impl System {
     /// registered, see [`Runtime::register_component`]); the runtime's name and participant are
     /// used, `[system] name` is not.
     pub fn load_into(runtime: Runtime, path: impl AsRef<Path>) -> Result<Self, SystemError> {
-        let files = source::read_all(path.as_ref()).map_err(SystemError::Invalid)?;
+        let files =
+            source::read_all(path.as_ref(), &Overlay::new()).map_err(SystemError::Invalid)?;
         let participant = runtime.participant().cloned();
         build::build_into(files, runtime, participant.as_ref(), LoadOptions::default())
     }
@@ -407,6 +411,10 @@ pub struct LoadOptions {
     /// other programs still travel in real time: a loop closed through another process is
     /// not time-accurate in simulation.
     pub simulated: bool,
+    /// Texts that stand in for files (an editor's unsaved files, keyed by [`overlay_key`]):
+    /// the description files, included files and state-machine files named there are read
+    /// from here instead of the disk. Empty by default.
+    pub overlay: Arc<Overlay>,
 }
 
 impl LoadOptions {

@@ -261,9 +261,38 @@ pub(crate) fn parse(path: Arc<PathBuf>, text: &str) -> Result<SourceFile, Diagno
     }
 }
 
+/// Texts that stand in for files: an editor's unsaved files, by absolute path (see
+/// [`overlay_key`]). A file named here is read from here, whether or not it exists on disk.
+pub type Overlay = std::collections::BTreeMap<PathBuf, String>;
+
+/// The key of `path` in an [`Overlay`]: absolute (against the current directory), with `.`
+/// and `..` resolved by name (symbolic links are not followed).
+pub fn overlay_key(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_owned());
+    let mut key = PathBuf::new();
+    for part in absolute.components() {
+        match part {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir => {
+                key.pop();
+            }
+            other => key.push(other),
+        }
+    }
+    key
+}
+
+/// The text of `path` from `overlay`, if it stands in for it.
+pub(crate) fn from_overlay<'a>(overlay: &'a Overlay, path: &Path) -> Option<&'a String> {
+    if overlay.is_empty() {
+        return None;
+    }
+    overlay.get(&overlay_key(path))
+}
+
 /// Reads `path` and every file it includes (depth first, each file once, included files
-/// before the file that includes them).
-pub(crate) fn read_all(path: &Path) -> Result<Vec<SourceFile>, Diagnostics> {
+/// before the file that includes them), taking the files `overlay` holds from there.
+pub(crate) fn read_all(path: &Path, overlay: &Overlay) -> Result<Vec<SourceFile>, Diagnostics> {
     let mut files = Vec::new();
     let mut problems = Diagnostics::default();
     let mut stack = Vec::new();
@@ -272,7 +301,7 @@ pub(crate) fn read_all(path: &Path) -> Result<Vec<SourceFile>, Diagnostics> {
         line: 1,
         column: 1,
     };
-    read_into(path, &whole, &mut stack, &mut files, &mut problems);
+    read_into(path, &whole, overlay, &mut stack, &mut files, &mut problems);
     if problems.is_empty() {
         Ok(files)
     } else {
@@ -295,7 +324,14 @@ pub(crate) fn read_text(
     let mut stack = vec![PathBuf::from(name)];
     for (include, at) in includes(&file, &mut problems) {
         let at_path = dir.join(&include);
-        read_into(&at_path, &at, &mut stack, &mut files, &mut problems);
+        read_into(
+            &at_path,
+            &at,
+            &Overlay::new(),
+            &mut stack,
+            &mut files,
+            &mut problems,
+        );
     }
     files.push(file);
     if problems.is_empty() {
@@ -308,16 +344,21 @@ pub(crate) fn read_text(
 fn read_into(
     path: &Path,
     at: &Location,
+    overlay: &Overlay,
     stack: &mut Vec<PathBuf>,
     files: &mut Vec<SourceFile>,
     problems: &mut Diagnostics,
 ) {
-    let canonical = match path.canonicalize() {
-        Ok(p) => p,
-        Err(err) => {
-            problems.push(at, format!("cannot read `{}`: {err}", path.display()));
-            return;
-        }
+    let standing_in = from_overlay(overlay, path);
+    let canonical = match standing_in {
+        Some(_) => overlay_key(path),
+        None => match path.canonicalize() {
+            Ok(p) => p,
+            Err(err) => {
+                problems.push(at, format!("cannot read `{}`: {err}", path.display()));
+                return;
+            }
+        },
     };
     if stack.contains(&canonical) {
         let chain: Vec<String> = stack
@@ -345,32 +386,47 @@ fn read_into(
         problems.push(at, format!("a system may have at most {MAX_FILES} files"));
         return;
     }
-    let text = match std::fs::metadata(&canonical) {
-        Ok(meta) if !meta.is_file() => {
-            problems.push(at, format!("`{}` is not a regular file", path.display()));
-            return;
-        }
-        Ok(meta) if meta.len() > MAX_FILE_BYTES => {
+    let text = if let Some(text) = standing_in {
+        if text.len() as u64 > MAX_FILE_BYTES {
             problems.push(
                 at,
                 format!(
                     "`{}` is {} bytes; description files are at most {MAX_FILE_BYTES}",
                     path.display(),
-                    meta.len()
+                    text.len()
                 ),
             );
             return;
         }
-        Ok(_) => match read_bounded(&canonical) {
-            Ok(text) => text,
+        text.clone()
+    } else {
+        match std::fs::metadata(&canonical) {
+            Ok(meta) if !meta.is_file() => {
+                problems.push(at, format!("`{}` is not a regular file", path.display()));
+                return;
+            }
+            Ok(meta) if meta.len() > MAX_FILE_BYTES => {
+                problems.push(
+                    at,
+                    format!(
+                        "`{}` is {} bytes; description files are at most {MAX_FILE_BYTES}",
+                        path.display(),
+                        meta.len()
+                    ),
+                );
+                return;
+            }
+            Ok(_) => match read_bounded(&canonical) {
+                Ok(text) => text,
+                Err(err) => {
+                    problems.push(at, format!("cannot read `{}`: {err}", path.display()));
+                    return;
+                }
+            },
             Err(err) => {
                 problems.push(at, format!("cannot read `{}`: {err}", path.display()));
                 return;
             }
-        },
-        Err(err) => {
-            problems.push(at, format!("cannot read `{}`: {err}", path.display()));
-            return;
         }
     };
     // Messages name the file as the user would (relative paths stay relative).
@@ -386,7 +442,7 @@ fn read_into(
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     stack.push(canonical.clone());
     for (include, at) in includes(&file, problems) {
-        read_into(&dir.join(include), &at, stack, files, problems);
+        read_into(&dir.join(include), &at, overlay, stack, files, problems);
     }
     stack.pop();
     let mut file = file;

@@ -29,7 +29,14 @@ fn read(d: &mut Description, r: &Reader<'_>, p: &mut Diagnostics) {
         r.at.file
             .parent()
             .map_or_else(|| PathBuf::from(&name.name), |dir| dir.join(&name.name));
-    let program = match read_text(&path) {
+    let text = match source::from_overlay(&d.overlay, &path) {
+        Some(text) if text.len() as u64 > source::MAX_FILE_BYTES => {
+            Err(format!("`{}` is too large", path.display()))
+        }
+        Some(text) => Ok(text.clone()),
+        None => read_text(&path),
+    };
+    let program = match text {
         Err(problem) => return p.push(&name.at, problem),
         Ok(text) => Program::from_toml(&text),
     };

@@ -114,6 +114,8 @@ pub(crate) struct Description {
     /// Habitats declared with a problem (reported): references to them are not reported
     /// again as unknown.
     pub broken_habitats: Vec<String>,
+    /// Texts standing in for files (state-machine files are read through it).
+    pub overlay: std::sync::Arc<crate::system::source::Overlay>,
 }
 
 /// The documented parameters of a component type: `Ok(None)` for a type registered without
@@ -126,10 +128,12 @@ pub(crate) type SpecLookup<'a> =
 pub(crate) fn describe(
     files: &[SourceFile],
     spec: &SpecLookup<'_>,
+    overlay: &std::sync::Arc<crate::system::source::Overlay>,
     p: &mut Diagnostics,
 ) -> Description {
     let mut d = Description {
         start: files.last().map(|f| f.start.clone()),
+        overlay: std::sync::Arc::clone(overlay),
         ..Description::default()
     };
     // Included files come first, the top file last: its [system] keys win.

@@ -23,7 +23,7 @@ fn check(text: &str) -> (Description, Vec<Diagnostic>) {
         _ => Err(vec!["gain".to_owned()]),
     };
     let mut p = Diagnostics::default();
-    let d = describe(&files, &spec, &mut p);
+    let d = describe(&files, &spec, &Default::default(), &mut p);
     (d, p.0)
 }
 
