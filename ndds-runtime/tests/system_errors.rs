@@ -411,7 +411,10 @@ fn an_overlay_stands_in_for_files_on_disk_and_files_that_do_not_exist_yet() {
     let mut overlay = Overlay::new();
     overlay.insert(
         overlay_key(&dir.path().join("parts/../parts/gain.toml")),
-        format!("{}\n[[state_machine]]\nfile = \"m.toml\"\n", gain.replace("k = 3", "k = 5")),
+        format!(
+            "{}\n[[state_machine]]\nfile = \"m.toml\"\n",
+            gain.replace("k = 3", "k = 5")
+        ),
     );
     overlay.insert(
         overlay_key(&dir.path().join("parts/m.toml")),
@@ -429,7 +432,10 @@ fn an_overlay_stands_in_for_files_on_disk_and_files_that_do_not_exist_yet() {
     edited.runtime().habitat("h").step().unwrap();
     assert_eq!(edited.runtime().mat("y").value(0, 0), 10.0);
     drop(edited);
-    assert!(!dir.path().join("parts/m.toml").exists(), "nothing was written");
+    assert!(
+        !dir.path().join("parts/m.toml").exists(),
+        "nothing was written"
+    );
 
     // A mistake in a text of the overlay is reported where it is in that text.
     overlay.insert(

@@ -9,6 +9,7 @@
 //! Sits above the runtime (it reads the runtime's description, statistics and state-machine
 //! topics and uses its command ports) and below the CLI.
 
+pub mod editor;
 pub mod hub;
 pub mod network;
 pub mod plot;
