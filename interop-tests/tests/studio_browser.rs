@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use fantoccini::actions::{InputSource as _, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
 use fantoccini::{Client, ClientBuilder, Locator};
 use interop_tests::{ClientProcess, TestDomain, participant};
 use ndds_client::ConsumerQos;
@@ -115,7 +116,7 @@ async fn until(page: &Client, what: &str, script: &str) -> serde_json::Value {
         }
         if Instant::now() >= deadline {
             let errors = page
-                .execute("return {errors: window.studioErrors, systems: Object.keys(state.systems), machines: Object.keys(state.machines), topics: state.network ? state.network.topics.map(t => t.name).filter(n => n.startsWith('cs/')) : null}", vec![])
+                .execute("return {editor: (typeof ed !== 'undefined' && ed.state) ? {problems: ed.state.problems, selected: ed.selected, adding: ed.adding, reply: document.getElementById('ed-reply').textContent} : null, errors: window.studioErrors, systems: Object.keys(state.systems), machines: Object.keys(state.machines), topics: state.network ? state.network.topics.map(t => t.name).filter(n => n.startsWith('cs/')) : null}", vec![])
                 .await
                 .unwrap_or_default();
             panic!("the page never showed {what} ({script}): {value}; page errors: {errors}");
@@ -178,7 +179,13 @@ fn arm_system(socket: &Path) -> ClientProcess {
 
 /// `ndds studio` on any free port with the daemon at `socket`, and the URL it prints.
 fn studio(socket: &Path) -> (ClientProcess, String) {
-    let studio = ClientProcess::program("ndds", socket, &["studio", "--port", "0"]);
+    studio_with(socket, &[])
+}
+
+fn studio_with(socket: &Path, extra: &[&str]) -> (ClientProcess, String) {
+    let mut args = vec!["studio", "--port", "0"];
+    args.extend_from_slice(extra);
+    let studio = ClientProcess::program("ndds", socket, &args);
     let url = studio
         .line(WAIT)
         .and_then(|l| l.strip_prefix("ndds studio: ").map(str::to_owned))
@@ -308,6 +315,229 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
         assert_eq!(still.configuration, "endptLQG", "a page without the token changed nothing");
         page.close().await.unwrap();
     });
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+/// Sets a text field the way a person does: all selected (Ctrl+A), typed over, Enter.
+async fn type_into(page: &Client, css: &str, text: &str) {
+    let field = page
+        .find(Locator::Css(css))
+        .await
+        .unwrap_or_else(|e| panic!("no {css} on the page: {e}"));
+    field
+        .send_keys(&format!("\u{E009}a\u{E000}{text}\u{E007}"))
+        .await
+        .unwrap();
+}
+
+/// Clicks the editor's diagram where a component's node is drawn (a real mouse click on the
+/// canvas).
+async fn click_node(page: &Client, component: &str) {
+    let at = page
+        .execute(
+            &format!(
+                "const n = graphs.ed.nodes().filter(n => n.data('label').startsWith({component:?} + '\\n'))[0];
+                 document.getElementById('ed-graph').scrollIntoView();
+                 const box = document.getElementById('ed-graph').getBoundingClientRect();
+                 const p = n.renderedPosition();
+                 return [box.left + p.x, box.top + p.y];"
+            ),
+            vec![],
+        )
+        .await
+        .unwrap();
+    let (x, y) = (at[0].as_f64().unwrap(), at[1].as_f64().unwrap());
+    let mouse = MouseActions::new("mouse".into())
+        .then(PointerAction::MoveTo {
+            duration: None,
+            x,
+            y,
+        })
+        .then(PointerAction::Down {
+            button: MOUSE_BUTTON_LEFT,
+        })
+        .then(PointerAction::Up {
+            button: MOUSE_BUTTON_LEFT,
+        });
+    page.perform_actions(mouse).await.unwrap();
+}
+
+/// The description-file editor (issue 19, item 5): `examples/` copied to a directory the
+/// studio edits; the arm opened, a gain given a wrong value (the loader's problem shown at
+/// that key and on the diagram, saving refused) and then a new one, saved; the file on disk
+/// differs from the example in exactly that line and `ndds run --check` accepts it. The state
+/// machine gets a state and a transition; a file that is not TOML gets the loader's error; a
+/// page without the token cannot open anything.
+#[test]
+fn the_editor_changes_one_gain_of_the_arm_and_ndds_run_accepts_the_file() {
+    if !browser_available() {
+        return;
+    }
+    let domain = TestDomain::new();
+    let _daemon = domain.daemon("a");
+    let socket = domain.socket("a");
+    let files = tempfile::tempdir().unwrap();
+    let examples = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    copy_dir(&examples, files.path());
+    std::fs::write(
+        files.path().join("broken.toml"),
+        "[[habitat]]\nname = \"h\"\nrate = [1, 2\n",
+    )
+    .unwrap();
+    let root = files.path().display().to_string();
+    let (_studio, url) = studio_with(&socket, &["--files", &root]);
+    let driver = Driver::start();
+    let profile = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let page = browser(&driver, profile.path()).await;
+        page.goto(&url).await.unwrap();
+        until(&page, "write access", "document.getElementById('access').textContent === 'may change the system'").await;
+        click(&page, "#tab-editor").await;
+        until(&page, "arm.toml among the files", "[...document.getElementById('ed-files').options].some(o => o.value === 'arm.toml')").await;
+        page.execute("document.getElementById('ed-files').value = 'arm.toml'; return true;", vec![]).await.unwrap();
+        click(&page, "#ed-open").await;
+        let verdict = until(&page, "the arm verifying", "document.getElementById('ed-verdict').textContent.startsWith('✓') && document.getElementById('ed-verdict').textContent").await;
+        assert!(verdict.as_str().unwrap().contains("verifies: 2 habitats, 5 components, 2 configurations, 1 state machine"), "{verdict}");
+        let nodes = until(&page, "the components on the diagram", "graphs.ed.nodes().map(n => n.data('label')).filter(l => l.includes('\\n'))").await;
+        for component in ["joint_pd\npd", "endpoint_lqg\nlqg", "arm\ntwo_link_arm"] {
+            assert!(nodes.as_array().unwrap().iter().any(|n| n == component), "{component} in {nodes}");
+        }
+
+        click(&page, "#ed-components tr[data-component=\"joint_pd\"]").await;
+        let kp = until(&page, "joint_pd's kp in the inspector", "document.querySelector('#ed-inspector input[data-key=\"kp\"]') && document.querySelector('#ed-inspector input[data-key=\"kp\"]').value").await;
+        assert_eq!(kp, "40.0");
+        // Not TOML: refused, nothing changes.
+        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "fast").await;
+        let refused = until(&page, "the refusal", "document.getElementById('ed-reply').className.includes('bad') && document.getElementById('ed-reply').textContent").await;
+        assert!(refused.as_str().unwrap().contains("is not a TOML value"), "{refused}");
+        // The wrong type: the loader's problem at that key, on the diagram, and no save.
+        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "\"fast\"").await;
+        let problem = until(&page, "the problem at kp", "document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem').textContent").await;
+        assert!(problem.as_str().unwrap().contains("`kp`"), "{problem}");
+        until(&page, "one problem in the verdict", "document.getElementById('ed-verdict').textContent === '✗ 1 problem'").await;
+        let marked = until(&page, "the component marked", "graphs.ed.nodes('.problem').map(n => n.data('label')).join(',')").await;
+        assert_eq!(marked, "joint_pd\npd");
+        click(&page, "#ed-save").await;
+        let refused = until(&page, "saving refused", "!document.getElementById('ed-save-anyway').hidden && document.getElementById('ed-reply').textContent").await;
+        assert!(refused.as_str().unwrap().contains("does not verify"), "{refused}");
+        // The new gain: verifies, the diff is that one line, saved.
+        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "55.0").await;
+        until(&page, "the system verifying again", "document.getElementById('ed-verdict').textContent.startsWith('✓')").await;
+        let diff = until(&page, "the diff", "document.getElementById('ed-diff').textContent").await;
+        let changed: Vec<&str> = diff.as_str().unwrap().lines().filter(|l| (l.starts_with('+') || l.starts_with('-')) && !l.starts_with("+++") && !l.starts_with("---")).collect();
+        assert_eq!(changed, ["-kp = 40.0", "+kp = 55.0"], "{diff}");
+        screenshot(&page, "editor").await;
+        click(&page, "#ed-save").await;
+        let saved = until(&page, "saved", "document.getElementById('ed-reply').textContent.startsWith('saved') && document.getElementById('ed-reply').textContent").await;
+        assert_eq!(saved, "saved arm/controller.toml");
+
+        // A component from the library, connected on the diagram: the loader first says what it
+        // lacks, at the new component; connected and given its gain, the system verifies.
+        click(&page, "#ed-palette-list li[data-type=\"gain\"]").await;
+        type_into(&page, "#ed-add-name", "scaled").await;
+        page.execute("document.getElementById('ed-add-habitat').value = 'control'; document.getElementById('ed-add-file').value = 'arm/controller.toml'; return true;", vec![]).await.unwrap();
+        click(&page, "#ed-add").await;
+        let lacks = until(&page, "what the new component lacks", "document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem').textContent").await;
+        assert!(lacks.as_str().unwrap().contains("`input`"), "{lacks}");
+        click(&page, "#ed-connect").await;
+        click_node(&page, "tip_error").await;
+        click_node(&page, "scaled").await;
+        until(&page, "the connection form", "document.getElementById('ed-connect-apply')").await;
+        let offered = page.execute("return [document.getElementById('ed-connect-mat').value, document.getElementById('ed-connect-key').value]", vec![]).await.unwrap();
+        assert_eq!(offered, serde_json::json!(["tip_error", "input"]));
+        click(&page, "#ed-connect-apply").await;
+        until(&page, "the connection drawn", "graphs.ed.edges().some(e => e.source().data('label').startsWith('tip_error') && e.target().data('label').startsWith('scaled') && e.data('label') === 'tip_error')").await;
+        type_into(&page, "#ed-inspector input[data-key=\"output\"]", "scaled_error").await;
+        until(&page, "the output set", "document.getElementById('ed-diff').textContent.includes('+output = \"scaled_error\"')").await;
+        type_into(&page, "#ed-inspector input[data-key=\"k\"]", "0.5").await;
+        let diff = until(&page, "the new component's diff", "document.getElementById('ed-diff').textContent.includes('+k = 0.5') && document.getElementById('ed-diff').textContent").await;
+        until(&page, "the system verifying with the new component", "document.getElementById('ed-verdict').textContent.includes('6 components')").await;
+        assert!(diff.as_str().unwrap().contains("+[[component]]\n+name = \"scaled\"\n+type = \"gain\"\n+habitat = \"control\"\n+input = \"tip_error\"\n+output = \"scaled_error\"\n+k = 0.5"), "{diff}");
+        click(&page, "#ed-revert").await;
+        until(&page, "no unsaved changes", "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'").await;
+
+        // The state machine: a state and a transition drawn and written, then forgotten.
+        until(&page, "the arm's machine", "document.getElementById('ed-machine').value === 'arm/supervisor.toml#0'").await;
+        type_into(&page, "#ed-state-name", "Parked").await;
+        click(&page, "#ed-state-add").await;
+        until(&page, "the new state drawn", "graphs.edFsm.getElementById('s:Parked').length === 1").await;
+        for (field, text) in [("#ed-t-from", "Held"), ("#ed-t-when", "Coarse"), ("#ed-t-next", "Parked")] {
+            let f = page.find(Locator::Css(field)).await.unwrap();
+            f.send_keys(text).await.unwrap();
+        }
+        click(&page, "#ed-t-add").await;
+        until(&page, "the new transition drawn", "graphs.edFsm.edges().filter(e => e.target().id() === 's:Parked').length === 1").await;
+        let diff = until(&page, "the machine's diff", "document.getElementById('ed-diff').textContent.includes('+[[machine.transition]]') && document.getElementById('ed-diff').textContent").await;
+        assert!(diff.as_str().unwrap().contains("+next = { 0 = \"Parked\" }"), "{diff}");
+        until(&page, "the machine verifying", "document.getElementById('ed-verdict').textContent.startsWith('✓')").await;
+        page.execute("document.getElementById('ed-fsm-panel').scrollLeft = 0; document.getElementById('ed-machine').scrollIntoView(); return true;", vec![]).await.unwrap();
+        screenshot(&page, "editor-fsm").await;
+        click(&page, "#ed-revert").await;
+        until(&page, "no unsaved changes", "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'").await;
+
+        // A file that is not TOML: the loader's error on the page, nothing breaks.
+        page.execute("document.getElementById('ed-files').value = 'broken.toml'; return true;", vec![]).await.unwrap();
+        click(&page, "#ed-open").await;
+        let problem = until(&page, "the loader's error", "document.getElementById('ed-problems').textContent.includes('not valid TOML') && document.getElementById('ed-problems').textContent").await;
+        assert!(problem.as_str().unwrap().starts_with("broken.toml:3:"), "{problem}");
+        let errors = page.execute("return window.studioErrors", vec![]).await.unwrap();
+        assert_eq!(errors, serde_json::json!([]), "page errors");
+
+        // Without the token the editor opens nothing.
+        let base = url.split('#').next().unwrap().to_owned();
+        page.goto(&base).await.unwrap();
+        until(&page, "view-only access", "document.getElementById('access').textContent.startsWith('view only')").await;
+        click(&page, "#tab-editor").await;
+        let refused = until(&page, "the editor refused", "document.getElementById('ed-reply').textContent").await;
+        assert!(refused.as_str().unwrap().contains("open the URL with the token"), "{refused}");
+        page.close().await.unwrap();
+    });
+
+    // On disk: the example with exactly that line changed, and `ndds run --check` accepts it.
+    let original = std::fs::read_to_string(examples.join("arm/controller.toml")).unwrap();
+    let saved = std::fs::read_to_string(files.path().join("arm/controller.toml")).unwrap();
+    let changed: Vec<(&str, &str)> = original
+        .lines()
+        .zip(saved.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(original.lines().count(), saved.lines().count());
+    assert_eq!(changed, [("kp = 40.0", "kp = 55.0")]);
+    for other in ["arm.toml", "arm/plant.toml", "arm/supervisor.toml"] {
+        assert_eq!(
+            std::fs::read_to_string(examples.join(other)).unwrap(),
+            std::fs::read_to_string(files.path().join(other)).unwrap(),
+            "{other} unchanged"
+        );
+    }
+    let top = files.path().join("arm.toml").display().to_string();
+    let check = domain.ndds("a", &["run", &top, "--check"], WAIT);
+    assert!(
+        check.code == Some(0),
+        "ndds run --check refused the saved file: {}{}",
+        check.stdout,
+        check.stderr
+    );
+    assert!(
+        check.stdout.contains("verified, nothing started"),
+        "{}",
+        check.stdout
+    );
 }
 
 /// The p99 period jitter (µs) of `habitat` over `window`, from the system's own statistics:

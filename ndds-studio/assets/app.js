@@ -104,6 +104,9 @@ function handle(m) {
       if (callback) callback(m.ok, m.text);
       break;
     }
+    case 'editor':
+      editorMessage(m);
+      break;
     case 'error':
       if (m.topic) showReply('plot-reply', false, m.text);
       else { $('banner').hidden = false; $('banner').textContent = m.text; }
@@ -125,10 +128,10 @@ for (const button of document.querySelectorAll('nav button')) {
     for (const b of document.querySelectorAll('nav button')) b.classList.toggle('active', b === button);
     for (const v of document.querySelectorAll('.view')) v.classList.toggle('active', v.id === `view-${button.dataset.view}`);
     // A graph laid out while its view was hidden has no size: fit it now it shows.
-    const shown = { network: graphs.net, system: graphs.sys, fsm: graphs.fsm }[button.dataset.view];
+    const shownGraphs = { network: [graphs.net], system: [graphs.sys], fsm: [graphs.fsm], editor: [graphs.ed, graphs.edFsm] }[button.dataset.view] || [];
     // Its elements are added again: sizes measured while hidden (labels of no width) are
     // kept by Cytoscape's style caches, and such nodes would not be drawn.
-    if (shown) {
+    for (const shown of shownGraphs) {
       shown.resize();
       const elements = shown.elements().jsons();
       shown.elements().remove();
@@ -136,6 +139,7 @@ for (const button of document.querySelectorAll('nav button')) {
       shown.fit(undefined, 30);
     }
     for (const p of plots) p.plot.setSize(plotSize());
+    if (button.dataset.view === 'editor') editorShown();
   });
 }
 
@@ -156,6 +160,8 @@ const graphStyle = [
   { selector: 'edge', style: { width: 1.5, 'curve-style': 'bezier', 'target-arrow-shape': 'triangle', 'line-color': '#8aa0b4', 'target-arrow-color': '#8aa0b4', label: 'data(label)', 'font-size': 9, 'text-rotation': 'autorotate', 'text-background-color': '#fff', 'text-background-opacity': 0.8 } },
   { selector: 'edge.mismatch', style: { 'line-color': '#d2402f', 'target-arrow-color': '#d2402f', 'line-style': 'dashed', width: 2.5 } },
   { selector: 'edge.fired', style: { 'line-color': '#2b7bbf', 'target-arrow-color': '#2b7bbf', width: 3 } },
+  { selector: 'node.problem', style: { 'border-color': '#d2402f', 'border-width': 3, 'border-style': 'dashed' } },
+  { selector: 'node.source', style: { shape: 'round-tag', 'background-color': '#fff7df', 'border-color': '#c7a43c', width: 110 } },
   { selector: ':selected', style: { 'border-color': '#f08c00', 'border-width': 3, 'line-color': '#f08c00' } },
 ];
 const graphs = {

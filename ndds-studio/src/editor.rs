@@ -603,15 +603,18 @@ impl Editor {
         self.checked = match loaded {
             Ok(system) => {
                 let d = system.runtime().describe();
+                // Modules made from the library (not the runtime's own: bindings, rate
+                // transitions).
+                let components = d.modules.iter().filter(|m| !m.component.is_empty()).count();
                 Checked {
                     problems: Vec::new(),
                     summary: Some(format!(
-                        "verifies: {} habitat{}, {} module{}, {} configuration{}, {} state \
+                        "verifies: {} habitat{}, {} component{}, {} configuration{}, {} state \
                          machine{}",
                         d.habitats.len(),
                         plural(d.habitats.len()),
-                        d.modules.len(),
-                        plural(d.modules.len()),
+                        components,
+                        plural(components),
                         d.configurations.len(),
                         plural(d.configurations.len()),
                         system.machine_names().len(),

@@ -30,6 +30,9 @@ pub struct StudioOptions {
     pub token: Option<String>,
     /// Measure every user topic's rate (one consumer per topic).
     pub rates: bool,
+    /// The directory whose description files the editor opens and saves (it never leaves
+    /// it); `None`: no editor.
+    pub files: Option<std::path::PathBuf>,
 }
 
 /// Why the studio could not run.
@@ -41,6 +44,14 @@ pub enum StudioError {
     Bind {
         /// The address.
         addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The editor's directory does not exist.
+    #[error("cannot edit the files in {}: {source}", root.display())]
+    Files {
+        /// The directory.
+        root: std::path::PathBuf,
         /// Why.
         source: std::io::Error,
     },
@@ -72,6 +83,16 @@ impl Studio {
             })?;
         listener.set_nonblocking(true)?;
         let addr = listener.local_addr()?;
+        let editor = match &options.files {
+            Some(root) => Some(web::EditorSetup {
+                root: root.canonicalize().map_err(|source| StudioError::Files {
+                    root: root.clone(),
+                    source,
+                })?,
+                participant: participant.clone(),
+            }),
+            None => None,
+        };
         let hub = hub::Hub::new(participant, options.rates);
         hub.start()?;
         Ok(Studio {
@@ -80,6 +101,7 @@ impl Studio {
             access: web::Access {
                 token: options.token.unwrap_or_else(new_token),
                 exposed: !web::is_loopback(&addr),
+                editor,
             },
         })
     }

@@ -3,9 +3,9 @@
 //!
 //! Page to server (JSON): `{"type": "auth", "token"}`, `{"type": "watch", "topic"}`,
 //! `{"type": "unwatch", "topic"}`, `{"type": "command", "id", "command": ...}` (see
-//! [`Command`]). Server to page: `hello` (whether this page may change
-//! anything), then `network`, `system`, `stats`, `machine`, `points`, `reply` and `error`
-//! messages (docs/studio.md).
+//! [`Command`]), `{"type": "edit", "id", "op": ...}` (see [`EditOp`]). Server to page: `hello`
+//! (whether this page may change anything), then `network`, `system`, `stats`, `machine`,
+//! `points`, `reply`, `editor` and `error` messages (docs/studio.md).
 
 use std::collections::BTreeSet;
 use std::net::SocketAddr;
@@ -19,6 +19,7 @@ use axum::routing::get;
 use serde_json::json;
 use tokio::sync::broadcast::error::RecvError;
 
+use crate::editor::{EditOp, Editor, palette};
 use crate::hub::{Command, Hub};
 
 /// The page and its assets: (path, content type, bytes).
@@ -32,6 +33,11 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
         "/app.js",
         "text/javascript; charset=utf-8",
         include_bytes!("../assets/app.js"),
+    ),
+    (
+        "/editor.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../assets/editor.js"),
     ),
     (
         "/style.css",
@@ -62,6 +68,17 @@ pub struct Access {
     pub token: String,
     /// Bound to an address other hosts can reach: a page without the token gets nothing.
     pub exposed: bool,
+    /// The description-file editor's directory and participant (`None`: no editor).
+    pub editor: Option<EditorSetup>,
+}
+
+/// What each page's editor is made with.
+#[derive(Clone)]
+pub struct EditorSetup {
+    /// The directory it edits (canonical).
+    pub root: std::path::PathBuf,
+    /// The participant its checks build network bindings with (as `ndds run --check`).
+    pub participant: ndds_client::Participant,
 }
 
 #[derive(Clone)]
@@ -93,8 +110,9 @@ pub fn router(hub: Arc<Hub>, access: Access) -> axum::Router {
 }
 
 async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
-    // A page's requests are small; a larger message is refused by the WebSocket layer.
-    ws.max_message_size(64 * 1024)
+    // A page's requests are small but for a description file's whole text (corrected in the
+    // editor); a larger message is refused by the WebSocket layer.
+    ws.max_message_size(ndds_runtime::system::MAX_FILE_BYTES as usize + 64 * 1024)
         .on_upgrade(move |socket| page(socket, state))
         .into_response()
 }
@@ -147,6 +165,8 @@ async fn page(mut socket: WebSocket, state: AppState) {
         }
     }
     let mut watched: BTreeSet<String> = BTreeSet::new();
+    // This page's editor, made when it first edits.
+    let mut editor: Option<Arc<std::sync::Mutex<Editor>>> = None;
     loop {
         tokio::select! {
             message = messages.recv() => match message {
@@ -167,7 +187,14 @@ async fn page(mut socket: WebSocket, state: AppState) {
             incoming = socket.recv() => {
                 let Some(Ok(incoming)) = incoming else { break };
                 let WsMessage::Text(text) = incoming else { continue };
-                let answer = request(&hub, &access, &mut authorized, &mut watched, &text).await;
+                let is_edit = serde_json::from_str::<serde_json::Value>(&text)
+                    .ok()
+                    .is_some_and(|v| v.get("type").and_then(|t| t.as_str()) == Some("edit"));
+                let answer = if is_edit {
+                    edit(&access, authorized, &mut editor, &text).await
+                } else {
+                    request(&hub, &access, &mut authorized, &mut watched, &text).await
+                };
                 if let Some(answer) = answer
                     && !send(&mut socket, &answer.to_string()).await
                 {
@@ -266,6 +293,67 @@ async fn request(
         }
         other => Some(json!({"type": "error", "text": format!("unknown request `{other}`")})),
     }
+}
+
+/// Handles one request of a page's editor (`{"type": "edit", "id", "op": {...}}`, see
+/// [`EditOp`]): the answer is `{"type": "editor", "id", "ok", "text", "state"}` (the state
+/// also after a refused edit, unchanged), and `palette` the first time.
+async fn edit(
+    access: &Access,
+    authorized: bool,
+    editor: &mut Option<Arc<std::sync::Mutex<Editor>>>,
+    text: &str,
+) -> Option<serde_json::Value> {
+    let value: serde_json::Value = match serde_json::from_str(text) {
+        Ok(v) => v,
+        Err(e) => return Some(json!({"type": "error", "text": format!("not JSON: {e}")})),
+    };
+    let id = value.get("id").cloned().unwrap_or(serde_json::Value::Null);
+    let refuse = |text: &str| Some(json!({"type": "editor", "id": id, "ok": false, "text": text}));
+    let Some(setup) = &access.editor else {
+        return refuse("this studio edits no files: start it with `ndds studio --files DIR`");
+    };
+    if !authorized {
+        return refuse(
+            "the editor reads and writes files: open the URL with the token that `ndds studio` printed",
+        );
+    }
+    let op: EditOp = match value.get("op").cloned().map(serde_json::from_value) {
+        Some(Ok(op)) => op,
+        Some(Err(e)) => return refuse(&format!("not an edit: {e}")),
+        None => return refuse("no edit"),
+    };
+    let first = editor.is_none();
+    let shared = match editor {
+        Some(e) => Arc::clone(e),
+        None => {
+            let library = ndds_components::library();
+            match Editor::new(&setup.root, library, Some(setup.participant.clone())) {
+                Ok(e) => Arc::clone(editor.insert(Arc::new(std::sync::Mutex::new(e)))),
+                Err(e) => return refuse(&e.to_string()),
+            }
+        }
+    };
+    // Loading a system to check it designs its controllers: not on the server's threads.
+    let answer = tokio::task::spawn_blocking(move || {
+        let mut editor = shared
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let result = editor.apply(&op);
+        let palette = first.then(|| palette(&ndds_components::library()));
+        (result, editor.state(), palette)
+    })
+    .await;
+    Some(match answer {
+        Ok((result, state, palette)) => {
+            let (ok, text) = match result {
+                Ok(text) => (true, text),
+                Err(e) => (false, e.to_string()),
+            };
+            json!({"type": "editor", "id": id, "ok": ok, "text": text, "state": state, "palette": palette})
+        }
+        Err(e) => json!({"type": "editor", "id": id, "ok": false, "text": e.to_string()}),
+    })
 }
 
 /// Serves the studio on `listener` until `shutdown` resolves.

@@ -25,6 +25,10 @@ pub struct Args {
     /// Open the page in a browser (`xdg-open`).
     #[arg(long)]
     open: bool,
+    /// The directory whose description files the editor may open and save (it never reads
+    /// or writes outside it).
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    files: std::path::PathBuf,
     /// Do not measure each topic's rate (the studio then declares no consumer of user topics
     /// until a plot asks for one).
     #[arg(long)]
@@ -41,6 +45,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             addr: SocketAddr::new(ip, args.port),
             token: None,
             rates: !args.no_rates,
+            files: Some(args.files.clone()),
         },
     )
     .context("use --port to choose another port (`--port 0` takes any free one)")?;
