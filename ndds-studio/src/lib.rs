@@ -3,11 +3,13 @@
 //! match), the running systems (their data-flow diagrams in execution order, groups and
 //! categories colour-coded, configurations that switch, parameters set in place), their state
 //! machines (the graph, the current state, stimuli sent from the page) and live plots of any
-//! numeric field. The page talks only to this process, which is an ndds participant; the
-//! assets are embedded in the binary. See docs/studio.md.
+//! numeric field, and edits description files (the DFE and FSM editor, [`editor`]). The page
+//! talks only to this process, which is an ndds participant; the assets are embedded in the
+//! binary. See docs/studio.md.
 //!
 //! Sits above the runtime (it reads the runtime's description, statistics and state-machine
-//! topics and uses its command ports) and below the CLI.
+//! topics, uses its command ports, and checks edited files with its loader) and the component
+//! library (the editor's palette), and below the CLI.
 
 pub mod editor;
 pub mod hub;
