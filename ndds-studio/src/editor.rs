@@ -356,8 +356,10 @@ impl Editor {
                 self.root.display()
             ));
         };
-        // A symbolic link may lead out of the root: where it really is counts.
-        if let Ok(real) = joined.canonicalize()
+        // A symbolic link may lead out of the root: where it really is counts (for a file not
+        // made yet, where its nearest existing directory is).
+        let existing = joined.ancestors().find(|a| a.exists());
+        if let Some(real) = existing.and_then(|a| a.canonicalize().ok())
             && !real.starts_with(&self.root)
         {
             return refuse("leads outside the directory the studio edits");

@@ -45,6 +45,8 @@ pub struct Hub {
     ports: Mutex<HashMap<String, Arc<dyn std::any::Any + Send + Sync>>>,
     /// Measure each user topic's rate (a consumer per topic).
     rates: bool,
+    /// The Foxglove WebSocket protocol's channels and subscriptions.
+    foxglove: Arc<crate::foxglove::Bridge>,
     stop: AtomicBool,
 }
 
@@ -95,12 +97,13 @@ impl Hub {
     pub fn new(participant: Participant, rates: bool) -> Arc<Self> {
         let (tx, _) = broadcast::channel(1024);
         Arc::new(Hub {
-            participant,
+            participant: participant.clone(),
             tx,
             latest: Mutex::new(Latest::default()),
             plots: Mutex::new(BTreeMap::new()),
             ports: Mutex::new(HashMap::new()),
             rates,
+            foxglove: Arc::new(crate::foxglove::Bridge::new(participant.clone())),
             stop: AtomicBool::new(false),
         })
     }
@@ -121,6 +124,11 @@ impl Hub {
     /// Ends the watching threads.
     pub fn stop(&self) {
         self.stop.store(true, Ordering::Release);
+    }
+
+    /// The Foxglove WebSocket protocol's side of the hub.
+    pub fn foxglove(&self) -> Arc<crate::foxglove::Bridge> {
+        Arc::clone(&self.foxglove)
     }
 
     /// Messages from now on.
@@ -158,6 +166,7 @@ impl Hub {
                         failing = false;
                     }
                     self.follow(&graph, &mut monitors, &mut systems);
+                    self.foxglove.follow(&graph);
                     let now = Instant::now();
                     let mut rates = BTreeMap::new();
                     for (topic, m) in monitors.iter_mut() {

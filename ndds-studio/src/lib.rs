@@ -12,6 +12,7 @@
 //! library (the editor's palette), and below the CLI.
 
 pub mod editor;
+pub mod foxglove;
 pub mod hub;
 pub mod network;
 pub mod plot;
@@ -113,6 +114,16 @@ impl Studio {
         self.listener
             .local_addr()
             .expect("a bound listener has an address")
+    }
+
+    /// The URL a Foxglove (or Lichtblick) client connects to (the Foxglove WebSocket
+    /// protocol, read-only; off loopback with the token in its query).
+    pub fn foxglove_url(&self) -> String {
+        if self.access.exposed {
+            format!("ws://{}/foxglove?token={}", self.addr(), self.access.token)
+        } else {
+            format!("ws://{}/foxglove", self.addr())
+        }
     }
 
     /// The URL to open: with the token in its fragment (never sent to a server, kept by the

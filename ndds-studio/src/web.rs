@@ -85,11 +85,15 @@ pub struct EditorSetup {
 struct AppState {
     hub: Arc<Hub>,
     access: Access,
+    /// When this server started (ms since the epoch): a Foxglove client's session id.
+    session: String,
 }
 
 /// The router of the studio's web server.
 pub fn router(hub: Arc<Hub>, access: Access) -> axum::Router {
-    let mut router = axum::Router::new().route("/ws", get(upgrade));
+    let mut router = axum::Router::new()
+        .route("/ws", get(upgrade))
+        .route("/foxglove", get(foxglove_upgrade));
     for (path, content_type, bytes) in ASSETS {
         router = router.route(
             path,
@@ -106,7 +110,14 @@ pub fn router(hub: Arc<Hub>, access: Access) -> axum::Router {
     }
     router
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found") })
-        .with_state(AppState { hub, access })
+        .with_state(AppState {
+            hub,
+            access,
+            session: std::time::SystemTime::now()
+                .duration_since(std::time::SystemTime::UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis())
+                .to_string(),
+        })
 }
 
 async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
@@ -114,6 +125,35 @@ async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Respons
     // editor); a larger message is refused by the WebSocket layer.
     ws.max_message_size(ndds_runtime::system::MAX_FILE_BYTES as usize + 64 * 1024)
         .on_upgrade(move |socket| page(socket, state))
+        .into_response()
+}
+
+/// The token in a URL's query (`?token=...`), if any.
+fn query_token(uri: &axum::http::Uri) -> Option<&str> {
+    uri.query()?
+        .split('&')
+        .find_map(|pair| pair.strip_prefix("token="))
+}
+
+/// A Foxglove client (the Foxglove WebSocket protocol, read-only). On loopback anyone local may
+/// look, as on the page; off loopback only with the token in the URL's query.
+async fn foxglove_upgrade(
+    ws: WebSocketUpgrade,
+    uri: axum::http::Uri,
+    State(state): State<AppState>,
+) -> Response {
+    if state.access.exposed && !query_token(&uri).is_some_and(|t| same(t, &state.access.token)) {
+        return (
+            StatusCode::UNAUTHORIZED,
+            "this studio needs its token: connect to the Foxglove URL `ndds studio` printed",
+        )
+            .into_response();
+    }
+    let bridge = state.hub.foxglove();
+    let session = state.session.clone();
+    ws.protocols([crate::foxglove::SUBPROTOCOL])
+        .max_message_size(64 * 1024)
+        .on_upgrade(move |socket| crate::foxglove::serve(socket, bridge, session))
         .into_response()
 }
 
@@ -135,7 +175,7 @@ async fn send(socket: &mut WebSocket, text: &str) -> bool {
 
 /// One page's connection.
 async fn page(mut socket: WebSocket, state: AppState) {
-    let AppState { hub, access } = state;
+    let AppState { hub, access, .. } = state;
     let mut authorized = false;
     // Off loopback, nothing before the token.
     if access.exposed {
@@ -371,4 +411,17 @@ pub async fn serve(
 /// Whether `addr` is reachable from this host only.
 pub fn is_loopback(addr: &SocketAddr) -> bool {
     addr.ip().is_loopback()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_token_is_taken_from_the_query() {
+        let uri: axum::http::Uri = "/foxglove?x=1&token=abc".parse().unwrap();
+        assert_eq!(query_token(&uri), Some("abc"));
+        let uri: axum::http::Uri = "/foxglove".parse().unwrap();
+        assert_eq!(query_token(&uri), None);
+    }
 }

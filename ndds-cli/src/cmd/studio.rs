@@ -51,6 +51,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
     .context("use --port to choose another port (`--port 0` takes any free one)")?;
     let url = studio.url();
     outln!("ndds studio: {url}")?;
+    outln!("ndds studio: Foxglove at {}", studio.foxglove_url())?;
     if !ip.is_loopback() {
         eprintln!(
             "ndds studio: serving on {ip}, reachable from other hosts; only pages opened with the \
