@@ -577,16 +577,33 @@ fn jitter_p99(socket: &Path, window: Duration) -> (f64, f64) {
     (median(control), median(plant))
 }
 
+/// CPU seconds of every Chromium process (the browser showing the page; not its driver).
+fn browser_cpu_seconds() -> f64 {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return 0.0;
+    };
+    entries
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| {
+            std::fs::read_to_string(format!("/proc/{pid}/comm"))
+                .is_ok_and(|c| c.trim() == "chromium" || c.starts_with("chrome"))
+        })
+        // A process that ended meanwhile counts nothing.
+        .filter_map(cpu_seconds_of)
+        .sum()
+}
+
 fn cpu_seconds(pid: u32) -> f64 {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
-    let fields: Vec<&str> = stat
-        .rsplit_once(')')
-        .unwrap()
-        .1
-        .split_whitespace()
-        .collect();
-    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
-    ticks / 100.0
+    cpu_seconds_of(pid).unwrap_or_else(|| panic!("no CPU times for process {pid}"))
+}
+
+/// User and system CPU seconds of `pid` (from `/proc/PID/stat`, in 1/100 s ticks).
+fn cpu_seconds_of(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 /// The studio's cost (issue 19, "Performance"), not a pass/fail test: the arm example plus 50
@@ -734,17 +751,20 @@ fn cost_of_watching(label: &str, top: &Path, studio_args: &[&str], rounds: usize
             page
         });
         let cpu_before = cpu_seconds(studio.pid());
+        let browser_before = browser_cpu_seconds();
         let measuring = Instant::now();
         let seen = jitter_p99(&socket, WINDOW);
         let cpu = (cpu_seconds(studio.pid()) - cpu_before) / measuring.elapsed().as_secs_f64();
+        let browser = (browser_cpu_seconds() - browser_before) / measuring.elapsed().as_secs_f64();
         runtime.block_on(async { page.close().await.unwrap() });
         drop(studio);
         println!(
-            "| {label} | watched {} | {:.0} | {:.0} | {:.1} % |",
+            "| {label} | watched {} | {:.0} | {:.0} | {:.1} % (browser {:.0} %) |",
             round + 1,
             seen.0,
             seen.1,
-            cpu * 100.0
+            cpu * 100.0,
+            browser * 100.0
         );
         watched.push(seen);
         // The browser's processes end before the next quiet phase.

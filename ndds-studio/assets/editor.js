@@ -518,14 +518,21 @@ $('ed-text-file').addEventListener('input', () => renderTextBox(true));
 $('ed-text-apply').addEventListener('click', () => edit({ op: 'text', file: $('ed-text-file').value, text: $('ed-text').value }));
 
 // ---- the toolbar -----------------------------------------------------------------------------------
+// Opening another system forgets unsaved changes only when the user says so.
+function unsavedOk() {
+  const changed = ed.state ? ed.state.files.filter((f) => f.changed).map((f) => f.path) : [];
+  return !changed.length || window.confirm(`Forget the unsaved changes in ${changed.join(', ')}?`);
+}
 $('ed-open').addEventListener('click', () => {
+  if (!unsavedOk()) return;
   ed.selected = null;
   ed.adding = null;
-  edit({ op: 'open', path: $('ed-files').value });
+  edit({ op: 'open', path: $('ed-files').value, discard: true });
 });
 $('ed-new').addEventListener('click', () => {
+  if (!unsavedOk()) return;
   ed.selected = null;
-  edit({ op: 'new', path: $('ed-new-path').value.trim() }, (ok, text) => { showReply('ed-reply', ok, text); if (ok) listFiles(); });
+  edit({ op: 'new', path: $('ed-new-path').value.trim(), discard: true }, (ok, text) => { showReply('ed-reply', ok, text); if (ok) listFiles(); });
 });
 const save = (force) => edit({ op: 'save', force }, (ok, text) => {
   showReply('ed-reply', ok, text);

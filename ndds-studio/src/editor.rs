@@ -62,6 +62,9 @@ pub enum EditError {
     /// A file could not be read or written.
     #[error("`{0}`: {1}")]
     Io(String, std::io::Error),
+    /// Opening another system would forget unsaved changes.
+    #[error("unsaved changes in {0}: save or revert them first, or discard them")]
+    Unsaved(String),
     /// Saving was refused (the reason says what to do).
     #[error("{0}")]
     Refused(String),
@@ -87,11 +90,17 @@ pub enum EditOp {
     Open {
         /// The file.
         path: String,
+        /// Forget unsaved changes of the system open now (refused otherwise).
+        #[serde(default)]
+        discard: bool,
     },
     /// Starts an empty system in a file that does not exist yet.
     New {
         /// The file to save it as.
         path: String,
+        /// Forget unsaved changes of the system open now (refused otherwise).
+        #[serde(default)]
+        discard: bool,
     },
     /// Sets (or, with `value: null`, removes) the key at the end of `path`; `value` is TOML
     /// (`55.0`, `"joints"`, `[1, 2]`, `{ a = 1 }`).
@@ -226,8 +235,9 @@ impl Editor {
     pub fn apply(&mut self, op: &EditOp) -> Result<String, EditError> {
         let said = match op {
             EditOp::List => return Ok(self.list().join("\n")),
-            EditOp::Open { path } => {
+            EditOp::Open { path, discard } => {
                 let rel = self.relative(path)?;
+                self.unsaved(*discard)?;
                 if !self.root.join(&rel).is_file() {
                     return Err(EditError::Path(
                         path.clone(),
@@ -239,8 +249,9 @@ impl Editor {
                 self.discover()?;
                 format!("opened `{}`", rel.display())
             }
-            EditOp::New { path } => {
+            EditOp::New { path, discard } => {
                 let rel = self.relative(path)?;
+                self.unsaved(*discard)?;
                 if self.root.join(&rel).exists() {
                     return Err(EditError::Path(
                         path.clone(),
@@ -308,6 +319,20 @@ impl Editor {
         };
         self.check();
         Ok(said)
+    }
+
+    /// Refuses to forget unsaved changes unless told to.
+    fn unsaved(&self, discard: bool) -> Result<(), EditError> {
+        let changed: Vec<String> = self
+            .files
+            .iter()
+            .filter(|f| f.original.as_ref() != Some(&f.text))
+            .map(|f| f.rel.display().to_string())
+            .collect();
+        if changed.is_empty() || discard {
+            return Ok(());
+        }
+        Err(EditError::Unsaved(changed.join(", ")))
     }
 
     /// The `.toml` files under the root (relative paths, sorted; hidden directories and

@@ -50,6 +50,7 @@ fn opening_the_arm_reads_its_includes_and_machine_and_it_verifies() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     let state = editor.state();
@@ -94,6 +95,7 @@ fn changing_a_gain_changes_that_one_line_and_keeps_comments() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
@@ -143,6 +145,7 @@ fn a_value_of_the_wrong_type_is_shown_at_that_key_and_saving_is_refused() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     editor
@@ -187,6 +190,7 @@ fn text_that_is_not_toml_is_refused_and_changes_nothing() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
@@ -226,13 +230,17 @@ fn paths_outside_the_root_are_refused() {
         "arm.txt",
     ] {
         let err = editor
-            .apply(&EditOp::Open { path: path.into() })
+            .apply(&EditOp::Open {
+                path: path.into(),
+                discard: false,
+            })
             .unwrap_err();
         assert!(matches!(err, EditError::Path(..)), "{path}: {err}");
     }
     let err = editor
         .apply(&EditOp::New {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap_err();
     assert!(err.to_string().contains("exists already"), "{err}");
@@ -244,6 +252,7 @@ fn a_component_added_from_the_palette_is_checked_where_it_was_added() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
@@ -307,6 +316,7 @@ fn transitions_and_states_are_edited_in_the_machine_file() {
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     let file = "arm/supervisor.toml";
@@ -401,6 +411,7 @@ fn a_new_system_with_a_new_machine_is_saved_and_loads_from_disk() {
     editor
         .apply(&EditOp::New {
             path: "lab/new.toml".into(),
+            discard: false,
         })
         .unwrap();
     assert!(editor.verifies(), "{:?}", editor.problems());
@@ -438,11 +449,44 @@ fn a_new_system_with_a_new_machine_is_saved_and_loads_from_disk() {
 }
 
 #[test]
+fn opening_another_system_does_not_forget_unsaved_changes_unless_told() {
+    let (_dir, mut editor) = examples();
+    editor
+        .apply(&EditOp::Open {
+            path: "arm.toml".into(),
+            discard: false,
+        })
+        .unwrap();
+    editor
+        .apply(&set_op(
+            "arm/controller.toml",
+            vec![key("component"), Step::Index(0), key("kp")],
+            Some("41.0"),
+        ))
+        .unwrap();
+    let open = |discard| EditOp::Open {
+        path: "multirate.toml".into(),
+        discard,
+    };
+    let err = editor.apply(&open(false)).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("unsaved changes in arm/controller.toml"),
+        "{err}"
+    );
+    assert!(editor.diff().contains("+kp = 41.0"));
+    editor.apply(&open(true)).unwrap();
+    assert_eq!(editor.diff(), "");
+    assert_eq!(editor.state()["top"], "multirate.toml");
+}
+
+#[test]
 fn a_file_changed_on_disk_since_it_was_opened_is_not_overwritten() {
     let (dir, mut editor) = examples();
     editor
         .apply(&EditOp::Open {
             path: "arm.toml".into(),
+            discard: false,
         })
         .unwrap();
     editor
@@ -471,6 +515,7 @@ fn a_malformed_file_is_shown_with_the_loaders_error_and_can_be_corrected() {
     editor
         .apply(&EditOp::Open {
             path: "broken.toml".into(),
+            discard: false,
         })
         .unwrap();
     let state = editor.state();
