@@ -74,26 +74,28 @@ function handle(m) {
       state.writable = m.writable;
       $('access').textContent = m.writable ? 'may change the system' : 'view only (no token)';
       break;
+    // A view is drawn while it is shown, and when it is shown again (a hidden view costs the
+    // page nothing).
     case 'network':
       state.network = m.network;
-      renderNetwork();
+      if (shown('network')) renderNetwork();
       fillPlotTopics();
       break;
     case 'system':
       state.systems[m.system.runtime] = m.system;
       fillSelect($('sys-select'), Object.keys(state.systems));
       fillSelect($('fsm-select'), machineNames());
-      renderSystem();
-      renderMachine();
+      if (shown('system')) renderSystem();
+      if (shown('fsm')) renderMachine();
       break;
     case 'stats':
       state.stats[`${m.stats.runtime}/${m.stats.habitat}`] = m.stats;
-      renderHabitats();
+      if (shown('system')) renderHabitats();
       break;
     case 'machine':
       state.machines[m.state.machine] = m.state;
       fillSelect($('fsm-select'), machineNames());
-      renderMachine();
+      if (shown('fsm')) renderMachine();
       break;
     case 'points':
       addPoints(m.topic, m.data);
@@ -114,6 +116,10 @@ function handle(m) {
   }
 }
 
+function shown(view) {
+  return $(`view-${view}`).classList.contains('active');
+}
+
 function fillSelect(select, names) {
   const current = select.value;
   const have = [...select.options].map((o) => o.value).join('\n');
@@ -127,6 +133,7 @@ for (const button of document.querySelectorAll('nav button')) {
   button.addEventListener('click', () => {
     for (const b of document.querySelectorAll('nav button')) b.classList.toggle('active', b === button);
     for (const v of document.querySelectorAll('.view')) v.classList.toggle('active', v.id === `view-${button.dataset.view}`);
+    ({ network: renderNetwork, system: renderSystem, fsm: renderMachine }[button.dataset.view] || (() => {}))();
     // A graph laid out while its view was hidden has no size: fit it now it shows.
     const shownGraphs = { network: [graphs.net], system: [graphs.sys], fsm: [graphs.fsm], editor: [graphs.ed, graphs.edFsm] }[button.dataset.view] || [];
     // Its elements are added again: sizes measured while hidden (labels of no width) are
@@ -138,7 +145,7 @@ for (const button of document.querySelectorAll('nav button')) {
       shown.add(elements);
       shown.fit(undefined, 30);
     }
-    for (const p of plots) p.plot.setSize(plotSize());
+    for (const p of plots) if (p.plot) p.plot.setSize(plotSize());
     if (button.dataset.view === 'editor') editorShown();
   });
 }
@@ -633,14 +640,17 @@ function addPoints(topic, data) {
   }
 }
 
-// Redraws every plot ten times a second with the points inside its time window.
+// Redraws every plot ten times a second with the points inside its time window (while the
+// plots are shown; older points are dropped either way).
 setInterval(() => {
   if (paused) return;
   const window = Number($('plot-window').value);
   const now = Date.now() / 1000;
+  const visible = shown('plots');
   for (const p of plots) {
     if (!p.plot) continue;
     for (const t of p.rows.keys()) if (t < now - window - 1) p.rows.delete(t);
+    if (!visible) continue;
     const times = [...p.rows.keys()].sort((a, b) => a - b);
     const data = [times, ...p.series.map((_, i) => times.map((t) => p.rows.get(t)[i]))];
     p.plot.setData(data);
