@@ -504,3 +504,40 @@ fn an_async_write_waits_for_the_window_without_blocking_its_thread() {
     });
     assert_eq!(got, (1..=COUNT).collect::<Vec<_>>());
 }
+
+/// A kept sample too large for one datagram (fragmented) reaches every reliable consumer that
+/// joins later, each on a participant of its own, however many joined before it.
+#[test]
+fn late_joiners_get_a_kept_fragmented_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = unique_config(dir.path(), "a");
+    let writer_side = participant(&config);
+    let producer = writer_side
+        .producer::<Vec<u8>>(
+            "latched/large",
+            ProducerQos {
+                reliability: reliable(16),
+                late_joiners: 1,
+                ..ProducerQos::default()
+            },
+        )
+        .unwrap();
+    let sample: Vec<u8> = (0..40_000u32).map(|i| (i % 251) as u8).collect();
+    producer.write(&sample).unwrap();
+    for joiner in 0..8 {
+        let reader_side = participant(&config);
+        let consumer = reader_side
+            .consumer::<Vec<u8>>(
+                "latched/large",
+                ConsumerQos {
+                    reliability: reliable(4),
+                    ..ConsumerQos::default()
+                },
+            )
+            .unwrap();
+        let got = consumer
+            .recv_timeout(WAIT)
+            .unwrap_or_else(|e| panic!("joiner {joiner}: the kept sample: {e}"));
+        assert_eq!(got.value, sample, "joiner {joiner}");
+    }
+}
