@@ -97,6 +97,22 @@ async fn browser(driver: &Driver, profile: &Path) -> Client {
         .expect("a Chromium session through chromedriver")
 }
 
+/// Opens `url` in a fresh headless Chromium, runs `test` on the page, and closes it.
+fn in_browser(url: &str, test: impl AsyncFnOnce(&Client)) {
+    let driver = Driver::start();
+    let profile = tempfile::tempdir().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let page = browser(&driver, profile.path()).await;
+        page.goto(url).await.unwrap();
+        test(&page).await;
+        page.close().await.unwrap();
+    });
+}
+
 /// Polls `script` (a JS expression) in the page until it is truthy; its last value.
 async fn until(page: &Client, what: &str, script: &str) -> serde_json::Value {
     let deadline = Instant::now() + WAIT;
@@ -218,102 +234,248 @@ fn the_studio_shows_and_drives_the_arm_example_in_a_real_browser() {
         url.starts_with("http://127.0.0.1:") && url.contains("#token="),
         "{url}"
     );
-    let driver = Driver::start();
-    let profile = tempfile::tempdir().unwrap();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    runtime.block_on(async {
-        let page = browser(&driver, profile.path()).await;
-        page.goto(&url).await.unwrap();
-
+    in_browser(&url, async |page: &Client| {
         // Network: the arm's topics, with the processes on them.
-        until(&page, "arm/endpoint in the topic list", "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"]')").await;
-        until(&page, "a rate for arm/endpoint", "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"] td:nth-child(5)').textContent.includes('Hz')").await;
-        let nodes = until(&page, "the topic in the graph", "graphs.net.nodes('[kind = \"topic\"]').map(n => n.data('name')).filter(n => n === 'arm/endpoint').length").await;
+        until(
+            page,
+            "arm/endpoint in the topic list",
+            "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"]')",
+        )
+        .await;
+        until(page, "a rate for arm/endpoint", "document.querySelector('#net-topics tr[data-topic=\"arm/endpoint\"] td:nth-child(5)').textContent.includes('Hz')").await;
+        let nodes = until(page, "the topic in the graph", "graphs.net.nodes('[kind = \"topic\"]').map(n => n.data('name')).filter(n => n === 'arm/endpoint').length").await;
         assert_eq!(nodes, 1);
-        until(&page, "write access", "document.getElementById('access').textContent === 'may change the system'").await;
-        screenshot(&page, "network").await;
+        until(
+            page,
+            "write access",
+            "document.getElementById('access').textContent === 'may change the system'",
+        )
+        .await;
+        screenshot(page, "network").await;
 
         // System: the components in their habitats; the configuration switched from the page.
-        click(&page, "#tab-system").await;
-        until(&page, "the endptLQG button", "document.querySelector('button[data-configuration=\"endptLQG\"]')").await;
-        let modules = until(&page, "the arm's modules", "graphs.sys.nodes().map(n => n.data('module')).filter(Boolean)").await;
-        for module in ["arm", "joint_pd", "endpoint_lqg", "joint_error", "tip_error"] {
-            assert!(modules.as_array().unwrap().iter().any(|m| m == module), "{module} in {modules}");
+        click(page, "#tab-system").await;
+        until(
+            page,
+            "the endptLQG button",
+            "document.querySelector('button[data-configuration=\"endptLQG\"]')",
+        )
+        .await;
+        let modules = until(
+            page,
+            "the arm's modules",
+            "graphs.sys.nodes().map(n => n.data('module')).filter(Boolean)",
+        )
+        .await;
+        for module in [
+            "arm",
+            "joint_pd",
+            "endpoint_lqg",
+            "joint_error",
+            "tip_error",
+        ] {
+            assert!(
+                modules.as_array().unwrap().iter().any(|m| m == module),
+                "{module} in {modules}"
+            );
         }
         // The description the page got first may be from before `Coarse` switched to JointPD;
         // the runtime writes the new one within a second.
-        until(&page, "JointPD as the configuration", "document.getElementById('sys-config').textContent === 'JointPD'").await;
-        screenshot(&page, "system").await;
+        until(
+            page,
+            "JointPD as the configuration",
+            "document.getElementById('sys-config').textContent === 'JointPD'",
+        )
+        .await;
+        screenshot(page, "system").await;
 
-        click(&page, "button[data-configuration=\"endptLQG\"]").await;
-        let reply = until(&page, "the switch's reply", "document.getElementById('sys-reply').textContent").await;
-        assert!(reply.as_str().unwrap().contains("switched to configuration `endptLQG`"), "{reply}");
-        let stats = system_reports::<HabitatStats>(&socket, "cs/arm/control/stats", builtin::HABITAT_STATS, |s| s.configuration == "endptLQG");
-        assert!(stats.is_some(), "the runtime reports endptLQG after the page's button");
-        until(&page, "the new configuration on the page", "document.getElementById('sys-config').textContent === 'endptLQG'").await;
+        click(page, "button[data-configuration=\"endptLQG\"]").await;
+        let reply = until(
+            page,
+            "the switch's reply",
+            "document.getElementById('sys-reply').textContent",
+        )
+        .await;
+        assert!(
+            reply
+                .as_str()
+                .unwrap()
+                .contains("switched to configuration `endptLQG`"),
+            "{reply}"
+        );
+        let stats = system_reports::<HabitatStats>(
+            &socket,
+            "cs/arm/control/stats",
+            builtin::HABITAT_STATS,
+            |s| s.configuration == "endptLQG",
+        );
+        assert!(
+            stats.is_some(),
+            "the runtime reports endptLQG after the page's button"
+        );
+        until(
+            page,
+            "the new configuration on the page",
+            "document.getElementById('sys-config').textContent === 'endptLQG'",
+        )
+        .await;
 
         // A parameter set in place, read back through the runtime's command port.
-        until(&page, "joint_pd.kp among the parameters", "document.querySelector('input[data-mat=\"joint_pd.kp\"]')").await;
+        until(
+            page,
+            "joint_pd.kp among the parameters",
+            "document.querySelector('input[data-mat=\"joint_pd.kp\"]')",
+        )
+        .await;
         page.execute("const i = document.querySelector('input[data-mat=\"joint_pd.kp\"]'); i.value = '41.5'; i.closest('tr').querySelector('button').click(); return true;", vec![]).await.unwrap();
-        let reply = until(&page, "the set's reply", "document.getElementById('sys-reply').textContent.includes('joint_pd.kp') && document.getElementById('sys-reply').textContent").await;
+        let reply = until(page, "the set's reply", "document.getElementById('sys-reply').textContent.includes('joint_pd.kp') && document.getElementById('sys-reply').textContent").await;
         assert!(reply.as_str().unwrap().contains("set to [41.5]"), "{reply}");
         let tool = participant(&socket, "reader");
-        let port = PortUser::<RuntimeCommand, CommandReply>::declare(&tool, "cs.arm", "test").unwrap();
-        let read = port.send(&RuntimeCommand::ReadMats(vec!["joint_pd.kp".into()]), WAIT).unwrap().unwrap();
+        let port =
+            PortUser::<RuntimeCommand, CommandReply>::declare(&tool, "cs.arm", "test").unwrap();
+        let read = port
+            .send(&RuntimeCommand::ReadMats(vec!["joint_pd.kp".into()]), WAIT)
+            .unwrap()
+            .unwrap();
         let read: serde_json::Value = serde_json::from_str(&read).unwrap();
-        assert_eq!(read["joint_pd.kp"]["data"], serde_json::json!([41.5]), "{read}");
-        until(&page, "the new value in the table", "document.querySelector('#sys-params tr[data-mat=\"joint_pd.kp\"] .value').textContent === '41.5'").await;
+        assert_eq!(
+            read["joint_pd.kp"]["data"],
+            serde_json::json!([41.5]),
+            "{read}"
+        );
+        until(page, "the new value in the table", "document.querySelector('#sys-params tr[data-mat=\"joint_pd.kp\"] .value').textContent === '41.5'").await;
         // A parameter of the wrong shape gets the runtime's own refusal.
         page.execute("const i = document.querySelector('input[data-mat=\"joint_pd.kp\"]'); i.value = '1, 2'; i.closest('tr').querySelector('button').click(); return true;", vec![]).await.unwrap();
-        let refusal = until(&page, "the refusal", "document.getElementById('sys-reply').className.includes('bad') && document.getElementById('sys-reply').textContent").await;
-        assert!(refusal.as_str().unwrap().contains("is 1x1 (1 values); 2 given"), "{refusal}");
+        let refusal = until(page, "the refusal", "document.getElementById('sys-reply').className.includes('bad') && document.getElementById('sys-reply').textContent").await;
+        assert!(
+            refusal
+                .as_str()
+                .unwrap()
+                .contains("is 1x1 (1 values); 2 given"),
+            "{refusal}"
+        );
 
         // State machines: the state the machine reports, and a stimulus sent from the page.
-        click(&page, "#tab-fsm").await;
-        until(&page, "the arm machine", "document.getElementById('fsm-select').value === 'arm'").await;
-        let reported = system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |_| true).expect("the machine reports its state");
-        until(&page, "the reported state", &format!("document.getElementById('fsm-state').textContent === {:?}", reported.state)).await;
+        click(page, "#tab-fsm").await;
+        until(
+            page,
+            "the arm machine",
+            "document.getElementById('fsm-select').value === 'arm'",
+        )
+        .await;
+        let reported =
+            system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |_| true)
+                .expect("the machine reports its state");
+        until(
+            page,
+            "the reported state",
+            &format!(
+                "document.getElementById('fsm-state').textContent === {:?}",
+                reported.state
+            ),
+        )
+        .await;
         assert_eq!(reported.state, "Held");
-        click(&page, "button[data-stimulus=\"Precise\"]").await;
-        let reply = until(&page, "the stimulus's reply", "document.getElementById('fsm-reply').textContent").await;
-        assert!(reply.as_str().unwrap().contains("Precise: Held -> Endpoint"), "{reply}");
-        let endpoint = system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |s| s.state == "Endpoint");
-        assert!(endpoint.is_some(), "the machine went to Endpoint on the page's Precise");
-        until(&page, "Endpoint on the page", "document.getElementById('fsm-state').textContent === 'Endpoint'").await;
-        let highlighted = until(&page, "the current state highlighted", "graphs.fsm.nodes('.current').map(n => n.id()).join(',')").await;
+        click(page, "button[data-stimulus=\"Precise\"]").await;
+        let reply = until(
+            page,
+            "the stimulus's reply",
+            "document.getElementById('fsm-reply').textContent",
+        )
+        .await;
+        assert!(
+            reply
+                .as_str()
+                .unwrap()
+                .contains("Precise: Held -> Endpoint"),
+            "{reply}"
+        );
+        let endpoint =
+            system_reports::<MachineState>(&socket, "fsm/arm/state", builtin::FSM_STATE, |s| {
+                s.state == "Endpoint"
+            });
+        assert!(
+            endpoint.is_some(),
+            "the machine went to Endpoint on the page's Precise"
+        );
+        until(
+            page,
+            "Endpoint on the page",
+            "document.getElementById('fsm-state').textContent === 'Endpoint'",
+        )
+        .await;
+        let highlighted = until(
+            page,
+            "the current state highlighted",
+            "graphs.fsm.nodes('.current').map(n => n.id()).join(',')",
+        )
+        .await;
         assert_eq!(highlighted, "s:arm:Endpoint");
-        let fired = until(&page, "the last transition highlighted", "graphs.fsm.edges('.fired').map(e => e.data('from') + '>' + e.data('to')).join(',')").await;
+        let fired = until(
+            page,
+            "the last transition highlighted",
+            "graphs.fsm.edges('.fired').map(e => e.data('from') + '>' + e.data('to')).join(',')",
+        )
+        .await;
         assert_eq!(fired, "Held>Endpoint");
-        screenshot(&page, "fsm").await;
+        screenshot(page, "fsm").await;
 
         // Plots: arm/endpoint's x, decimated on the server, points arriving.
-        click(&page, "#tab-plots").await;
-        until(&page, "arm/endpoint among the plot topics", "[...document.getElementById('plot-topic').options].some(o => o.value === 'arm/endpoint')").await;
+        click(page, "#tab-plots").await;
+        until(page, "arm/endpoint among the plot topics", "[...document.getElementById('plot-topic').options].some(o => o.value === 'arm/endpoint')").await;
         page.execute("const s = document.getElementById('plot-topic'); s.value = 'arm/endpoint'; s.dispatchEvent(new Event('input')); return true;", vec![]).await.unwrap();
-        let field = until(&page, "arm/endpoint's fields", "[...document.getElementById('plot-field').options].map(o => o.value).find(v => v.startsWith('x'))").await;
+        let field = until(page, "arm/endpoint's fields", "[...document.getElementById('plot-field').options].map(o => o.value).find(v => v.startsWith('x'))").await;
         assert_eq!(field, "x (m)");
-        page.execute("document.getElementById('plot-field').value = 'x (m)'; return true;", vec![]).await.unwrap();
-        click(&page, "#plot-add").await;
-        let points = until(&page, "points in the plot", "Number(document.querySelector('.plot').dataset.points) > 100 && Number(document.querySelector('.plot').dataset.points)").await;
+        page.execute(
+            "document.getElementById('plot-field').value = 'x (m)'; return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+        click(page, "#plot-add").await;
+        let points = until(page, "points in the plot", "Number(document.querySelector('.plot').dataset.points) > 100 && Number(document.querySelector('.plot').dataset.points)").await;
         assert!(points.as_f64().unwrap() > 100.0);
         tokio::time::sleep(Duration::from_secs(2)).await;
-        screenshot(&page, "plots").await;
+        screenshot(page, "plots").await;
 
         // Without the token the page may look but not change anything.
         let base = url.split('#').next().unwrap().to_owned();
         page.goto(&base).await.unwrap();
-        until(&page, "view-only access", "document.getElementById('access').textContent.startsWith('view only')").await;
-        click(&page, "#tab-system").await;
-        until(&page, "the JointPD button", "document.querySelector('button[data-configuration=\"JointPD\"]')").await;
-        click(&page, "button[data-configuration=\"JointPD\"]").await;
-        let refused = until(&page, "the refusal", "document.getElementById('sys-reply').textContent").await;
-        assert!(refused.as_str().unwrap().contains("may only look"), "{refused}");
-        let still = system_reports::<HabitatStats>(&socket, "cs/arm/control/stats", builtin::HABITAT_STATS, |_| true).unwrap();
-        assert_eq!(still.configuration, "endptLQG", "a page without the token changed nothing");
-        page.close().await.unwrap();
+        until(
+            page,
+            "view-only access",
+            "document.getElementById('access').textContent.startsWith('view only')",
+        )
+        .await;
+        click(page, "#tab-system").await;
+        until(
+            page,
+            "the JointPD button",
+            "document.querySelector('button[data-configuration=\"JointPD\"]')",
+        )
+        .await;
+        click(page, "button[data-configuration=\"JointPD\"]").await;
+        let refused = until(
+            page,
+            "the refusal",
+            "document.getElementById('sys-reply').textContent",
+        )
+        .await;
+        assert!(
+            refused.as_str().unwrap().contains("may only look"),
+            "{refused}"
+        );
+        let still = system_reports::<HabitatStats>(
+            &socket,
+            "cs/arm/control/stats",
+            builtin::HABITAT_STATS,
+            |_| true,
+        )
+        .unwrap();
+        assert_eq!(
+            still.configuration, "endptLQG",
+            "a page without the token changed nothing"
+        );
     });
 }
 
@@ -397,115 +559,256 @@ fn the_editor_changes_one_gain_of_the_arm_and_ndds_run_accepts_the_file() {
     .unwrap();
     let root = files.path().display().to_string();
     let (_studio, url) = studio_with(&socket, &["--files", &root]);
-    let driver = Driver::start();
-    let profile = tempfile::tempdir().unwrap();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
+    in_browser(&url, async |page: &Client| {
+        until(
+            page,
+            "write access",
+            "document.getElementById('access').textContent === 'may change the system'",
+        )
+        .await;
+        click(page, "#tab-editor").await;
+        until(
+            page,
+            "arm.toml among the files",
+            "[...document.getElementById('ed-files').options].some(o => o.value === 'arm.toml')",
+        )
+        .await;
+        page.execute(
+            "document.getElementById('ed-files').value = 'arm.toml'; return true;",
+            vec![],
+        )
+        .await
         .unwrap();
-    runtime.block_on(async {
-        let page = browser(&driver, profile.path()).await;
-        page.goto(&url).await.unwrap();
-        until(&page, "write access", "document.getElementById('access').textContent === 'may change the system'").await;
-        click(&page, "#tab-editor").await;
-        until(&page, "arm.toml among the files", "[...document.getElementById('ed-files').options].some(o => o.value === 'arm.toml')").await;
-        page.execute("document.getElementById('ed-files').value = 'arm.toml'; return true;", vec![]).await.unwrap();
-        click(&page, "#ed-open").await;
-        let verdict = until(&page, "the arm verifying", "document.getElementById('ed-verdict').textContent.startsWith('✓') && document.getElementById('ed-verdict').textContent").await;
-        assert!(verdict.as_str().unwrap().contains("verifies: 2 habitats, 5 components, 2 configurations, 1 state machine"), "{verdict}");
-        let nodes = until(&page, "the components on the diagram", "graphs.ed.nodes().map(n => n.data('label')).filter(l => l.includes('\\n'))").await;
+        click(page, "#ed-open").await;
+        let verdict = until(page, "the arm verifying", "document.getElementById('ed-verdict').textContent.startsWith('✓') && document.getElementById('ed-verdict').textContent").await;
+        assert!(
+            verdict
+                .as_str()
+                .unwrap()
+                .contains("verifies: 2 habitats, 5 components, 2 configurations, 1 state machine"),
+            "{verdict}"
+        );
+        let nodes = until(
+            page,
+            "the components on the diagram",
+            "graphs.ed.nodes().map(n => n.data('label')).filter(l => l.includes('\\n'))",
+        )
+        .await;
         for component in ["joint_pd\npd", "endpoint_lqg\nlqg", "arm\ntwo_link_arm"] {
-            assert!(nodes.as_array().unwrap().iter().any(|n| n == component), "{component} in {nodes}");
+            assert!(
+                nodes.as_array().unwrap().iter().any(|n| n == component),
+                "{component} in {nodes}"
+            );
         }
 
-        click(&page, "#ed-components tr[data-component=\"joint_pd\"]").await;
-        let kp = until(&page, "joint_pd's kp in the inspector", "document.querySelector('#ed-inspector input[data-key=\"kp\"]') && document.querySelector('#ed-inspector input[data-key=\"kp\"]').value").await;
+        click(page, "#ed-components tr[data-component=\"joint_pd\"]").await;
+        let kp = until(page, "joint_pd's kp in the inspector", "document.querySelector('#ed-inspector input[data-key=\"kp\"]') && document.querySelector('#ed-inspector input[data-key=\"kp\"]').value").await;
         assert_eq!(kp, "40.0");
         // Not TOML: refused, nothing changes.
-        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "fast").await;
-        let refused = until(&page, "the refusal", "document.getElementById('ed-reply').className.includes('bad') && document.getElementById('ed-reply').textContent").await;
-        assert!(refused.as_str().unwrap().contains("is not a TOML value"), "{refused}");
+        type_into(page, "#ed-inspector input[data-key=\"kp\"]", "fast").await;
+        let refused = until(page, "the refusal", "document.getElementById('ed-reply').className.includes('bad') && document.getElementById('ed-reply').textContent").await;
+        assert!(
+            refused.as_str().unwrap().contains("is not a TOML value"),
+            "{refused}"
+        );
         // The wrong type: the loader's problem at that key, on the diagram, and no save.
-        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "\"fast\"").await;
-        let problem = until(&page, "the problem at kp", "document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem').textContent").await;
+        type_into(page, "#ed-inspector input[data-key=\"kp\"]", "\"fast\"").await;
+        let problem = until(page, "the problem at kp", "document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"kp\"] .field-problem').textContent").await;
         assert!(problem.as_str().unwrap().contains("`kp`"), "{problem}");
-        until(&page, "one problem in the verdict", "document.getElementById('ed-verdict').textContent === '✗ 1 problem'").await;
-        let marked = until(&page, "the component marked", "graphs.ed.nodes('.problem').map(n => n.data('label')).join(',')").await;
+        until(
+            page,
+            "one problem in the verdict",
+            "document.getElementById('ed-verdict').textContent === '✗ 1 problem'",
+        )
+        .await;
+        let marked = until(
+            page,
+            "the component marked",
+            "graphs.ed.nodes('.problem').map(n => n.data('label')).join(',')",
+        )
+        .await;
         assert_eq!(marked, "joint_pd\npd");
-        click(&page, "#ed-save").await;
-        let refused = until(&page, "saving refused", "!document.getElementById('ed-save-anyway').hidden && document.getElementById('ed-reply').textContent").await;
-        assert!(refused.as_str().unwrap().contains("does not verify"), "{refused}");
+        click(page, "#ed-save").await;
+        let refused = until(page, "saving refused", "!document.getElementById('ed-save-anyway').hidden && document.getElementById('ed-reply').textContent").await;
+        assert!(
+            refused.as_str().unwrap().contains("does not verify"),
+            "{refused}"
+        );
         // The new gain: verifies, the diff is that one line, saved.
-        type_into(&page, "#ed-inspector input[data-key=\"kp\"]", "55.0").await;
-        until(&page, "the system verifying again", "document.getElementById('ed-verdict').textContent.startsWith('✓')").await;
-        let diff = until(&page, "the diff", "document.getElementById('ed-diff').textContent").await;
-        let changed: Vec<&str> = diff.as_str().unwrap().lines().filter(|l| (l.starts_with('+') || l.starts_with('-')) && !l.starts_with("+++") && !l.starts_with("---")).collect();
+        type_into(page, "#ed-inspector input[data-key=\"kp\"]", "55.0").await;
+        until(
+            page,
+            "the system verifying again",
+            "document.getElementById('ed-verdict').textContent.startsWith('✓')",
+        )
+        .await;
+        let diff = until(
+            page,
+            "the diff",
+            "document.getElementById('ed-diff').textContent",
+        )
+        .await;
+        let changed: Vec<&str> = diff
+            .as_str()
+            .unwrap()
+            .lines()
+            .filter(|l| {
+                (l.starts_with('+') || l.starts_with('-'))
+                    && !l.starts_with("+++")
+                    && !l.starts_with("---")
+            })
+            .collect();
         assert_eq!(changed, ["-kp = 40.0", "+kp = 55.0"], "{diff}");
-        screenshot(&page, "editor").await;
-        click(&page, "#ed-save").await;
-        let saved = until(&page, "saved", "document.getElementById('ed-reply').textContent.startsWith('saved') && document.getElementById('ed-reply').textContent").await;
+        screenshot(page, "editor").await;
+        click(page, "#ed-save").await;
+        let saved = until(page, "saved", "document.getElementById('ed-reply').textContent.startsWith('saved') && document.getElementById('ed-reply').textContent").await;
         assert_eq!(saved, "saved arm/controller.toml");
 
         // A component from the library, connected on the diagram: the loader first says what it
         // lacks, at the new component; connected and given its gain, the system verifies.
-        click(&page, "#ed-palette-list li[data-type=\"gain\"]").await;
-        type_into(&page, "#ed-add-name", "scaled").await;
+        click(page, "#ed-palette-list li[data-type=\"gain\"]").await;
+        type_into(page, "#ed-add-name", "scaled").await;
         page.execute("document.getElementById('ed-add-habitat').value = 'control'; document.getElementById('ed-add-file').value = 'arm/controller.toml'; return true;", vec![]).await.unwrap();
-        click(&page, "#ed-add").await;
-        let lacks = until(&page, "what the new component lacks", "document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem').textContent").await;
+        click(page, "#ed-add").await;
+        let lacks = until(page, "what the new component lacks", "document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem') && document.querySelector('#ed-inspector tr[data-key=\"input\"] .field-problem').textContent").await;
         assert!(lacks.as_str().unwrap().contains("`input`"), "{lacks}");
-        click(&page, "#ed-connect").await;
-        click_node(&page, "tip_error").await;
-        click_node(&page, "scaled").await;
-        until(&page, "the connection form", "document.getElementById('ed-connect-apply')").await;
+        click(page, "#ed-connect").await;
+        click_node(page, "tip_error").await;
+        click_node(page, "scaled").await;
+        until(
+            page,
+            "the connection form",
+            "document.getElementById('ed-connect-apply')",
+        )
+        .await;
         let offered = page.execute("return [document.getElementById('ed-connect-mat').value, document.getElementById('ed-connect-key').value]", vec![]).await.unwrap();
         assert_eq!(offered, serde_json::json!(["tip_error", "input"]));
-        click(&page, "#ed-connect-apply").await;
-        until(&page, "the connection drawn", "graphs.ed.edges().some(e => e.source().data('label').startsWith('tip_error') && e.target().data('label').startsWith('scaled') && e.data('label') === 'tip_error')").await;
-        type_into(&page, "#ed-inspector input[data-key=\"output\"]", "scaled_error").await;
-        until(&page, "the output set", "document.getElementById('ed-diff').textContent.includes('+output = \"scaled_error\"')").await;
-        type_into(&page, "#ed-inspector input[data-key=\"k\"]", "0.5").await;
-        let diff = until(&page, "the new component's diff", "document.getElementById('ed-diff').textContent.includes('+k = 0.5') && document.getElementById('ed-diff').textContent").await;
-        until(&page, "the system verifying with the new component", "document.getElementById('ed-verdict').textContent.includes('6 components')").await;
+        click(page, "#ed-connect-apply").await;
+        until(page, "the connection drawn", "graphs.ed.edges().some(e => e.source().data('label').startsWith('tip_error') && e.target().data('label').startsWith('scaled') && e.data('label') === 'tip_error')").await;
+        type_into(
+            page,
+            "#ed-inspector input[data-key=\"output\"]",
+            "scaled_error",
+        )
+        .await;
+        until(
+            page,
+            "the output set",
+            "document.getElementById('ed-diff').textContent.includes('+output = \"scaled_error\"')",
+        )
+        .await;
+        type_into(page, "#ed-inspector input[data-key=\"k\"]", "0.5").await;
+        let diff = until(page, "the new component's diff", "document.getElementById('ed-diff').textContent.includes('+k = 0.5') && document.getElementById('ed-diff').textContent").await;
+        until(
+            page,
+            "the system verifying with the new component",
+            "document.getElementById('ed-verdict').textContent.includes('6 components')",
+        )
+        .await;
         assert!(diff.as_str().unwrap().contains("+[[component]]\n+name = \"scaled\"\n+type = \"gain\"\n+habitat = \"control\"\n+input = \"tip_error\"\n+output = \"scaled_error\"\n+k = 0.5"), "{diff}");
-        click(&page, "#ed-revert").await;
-        until(&page, "no unsaved changes", "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'").await;
+        click(page, "#ed-revert").await;
+        until(
+            page,
+            "no unsaved changes",
+            "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'",
+        )
+        .await;
 
         // The state machine: a state and a transition drawn and written, then forgotten.
-        until(&page, "the arm's machine", "document.getElementById('ed-machine').value === 'arm/supervisor.toml#0'").await;
-        type_into(&page, "#ed-state-name", "Parked").await;
-        click(&page, "#ed-state-add").await;
-        until(&page, "the new state drawn", "graphs.edFsm.getElementById('s:Parked').length === 1").await;
-        for (field, text) in [("#ed-t-from", "Held"), ("#ed-t-when", "Coarse"), ("#ed-t-next", "Parked")] {
+        until(
+            page,
+            "the arm's machine",
+            "document.getElementById('ed-machine').value === 'arm/supervisor.toml#0'",
+        )
+        .await;
+        type_into(page, "#ed-state-name", "Parked").await;
+        click(page, "#ed-state-add").await;
+        until(
+            page,
+            "the new state drawn",
+            "graphs.edFsm.getElementById('s:Parked').length === 1",
+        )
+        .await;
+        for (field, text) in [
+            ("#ed-t-from", "Held"),
+            ("#ed-t-when", "Coarse"),
+            ("#ed-t-next", "Parked"),
+        ] {
             let f = page.find(Locator::Css(field)).await.unwrap();
             f.send_keys(text).await.unwrap();
         }
-        click(&page, "#ed-t-add").await;
-        until(&page, "the new transition drawn", "graphs.edFsm.edges().filter(e => e.target().id() === 's:Parked').length === 1").await;
-        let diff = until(&page, "the machine's diff", "document.getElementById('ed-diff').textContent.includes('+[[machine.transition]]') && document.getElementById('ed-diff').textContent").await;
-        assert!(diff.as_str().unwrap().contains("+next = { 0 = \"Parked\" }"), "{diff}");
-        until(&page, "the machine verifying", "document.getElementById('ed-verdict').textContent.startsWith('✓')").await;
+        click(page, "#ed-t-add").await;
+        until(
+            page,
+            "the new transition drawn",
+            "graphs.edFsm.edges().filter(e => e.target().id() === 's:Parked').length === 1",
+        )
+        .await;
+        let diff = until(page, "the machine's diff", "document.getElementById('ed-diff').textContent.includes('+[[machine.transition]]') && document.getElementById('ed-diff').textContent").await;
+        assert!(
+            diff.as_str()
+                .unwrap()
+                .contains("+next = { 0 = \"Parked\" }"),
+            "{diff}"
+        );
+        until(
+            page,
+            "the machine verifying",
+            "document.getElementById('ed-verdict').textContent.startsWith('✓')",
+        )
+        .await;
         page.execute("document.getElementById('ed-fsm-panel').scrollLeft = 0; document.getElementById('ed-machine').scrollIntoView(); return true;", vec![]).await.unwrap();
-        screenshot(&page, "editor-fsm").await;
-        click(&page, "#ed-revert").await;
-        until(&page, "no unsaved changes", "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'").await;
+        screenshot(page, "editor-fsm").await;
+        click(page, "#ed-revert").await;
+        until(
+            page,
+            "no unsaved changes",
+            "document.getElementById('ed-diff').textContent.trim() === 'no unsaved changes'",
+        )
+        .await;
 
         // A file that is not TOML: the loader's error on the page, nothing breaks.
-        page.execute("document.getElementById('ed-files').value = 'broken.toml'; return true;", vec![]).await.unwrap();
-        click(&page, "#ed-open").await;
-        let problem = until(&page, "the loader's error", "document.getElementById('ed-problems').textContent.includes('not valid TOML') && document.getElementById('ed-problems').textContent").await;
-        assert!(problem.as_str().unwrap().starts_with("broken.toml:3:"), "{problem}");
-        let errors = page.execute("return window.studioErrors", vec![]).await.unwrap();
+        page.execute(
+            "document.getElementById('ed-files').value = 'broken.toml'; return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+        click(page, "#ed-open").await;
+        let problem = until(page, "the loader's error", "document.getElementById('ed-problems').textContent.includes('not valid TOML') && document.getElementById('ed-problems').textContent").await;
+        assert!(
+            problem.as_str().unwrap().starts_with("broken.toml:3:"),
+            "{problem}"
+        );
+        let errors = page
+            .execute("return window.studioErrors", vec![])
+            .await
+            .unwrap();
         assert_eq!(errors, serde_json::json!([]), "page errors");
 
         // Without the token the editor opens nothing.
         let base = url.split('#').next().unwrap().to_owned();
         page.goto(&base).await.unwrap();
-        until(&page, "view-only access", "document.getElementById('access').textContent.startsWith('view only')").await;
-        click(&page, "#tab-editor").await;
-        let refused = until(&page, "the editor refused", "document.getElementById('ed-reply').textContent").await;
-        assert!(refused.as_str().unwrap().contains("open the URL with the token"), "{refused}");
-        page.close().await.unwrap();
+        until(
+            page,
+            "view-only access",
+            "document.getElementById('access').textContent.startsWith('view only')",
+        )
+        .await;
+        click(page, "#tab-editor").await;
+        let refused = until(
+            page,
+            "the editor refused",
+            "document.getElementById('ed-reply').textContent",
+        )
+        .await;
+        assert!(
+            refused
+                .as_str()
+                .unwrap()
+                .contains("open the URL with the token"),
+            "{refused}"
+        );
     });
 
     // On disk: the example with exactly that line changed, and `ndds run --check` accepts it.

@@ -26,6 +26,14 @@ fn key(k: &str) -> Step {
     Step::Key(k.to_owned())
 }
 
+/// A path written with dots: `"component.0.kp"`.
+fn path(dotted: &str) -> Vec<Step> {
+    dotted
+        .split('.')
+        .map(|part| part.parse().map_or_else(|_| key(part), Step::Index))
+        .collect()
+}
+
 fn set_op(file: &str, path: Vec<Step>, value: Option<&str>) -> EditOp {
     EditOp::Set {
         file: file.into(),
@@ -102,7 +110,7 @@ fn changing_a_gain_changes_that_one_line_and_keeps_comments() {
     editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(0), key("kp")],
+            path("component.0.kp"),
             Some("55.0"),
         ))
         .unwrap();
@@ -151,7 +159,7 @@ fn a_value_of_the_wrong_type_is_shown_at_that_key_and_saving_is_refused() {
     editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(1), key("r")],
+            path("component.1.r"),
             Some("\"small\""),
         ))
         .unwrap();
@@ -197,7 +205,7 @@ fn text_that_is_not_toml_is_refused_and_changes_nothing() {
     let err = editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(0), key("kp")],
+            path("component.0.kp"),
             Some("4 0"),
         ))
         .unwrap_err();
@@ -205,13 +213,13 @@ fn text_that_is_not_toml_is_refused_and_changes_nothing() {
     let err = editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(9), key("kp")],
+            path("component.9.kp"),
             Some("1.0"),
         ))
         .unwrap_err();
     assert!(err.to_string().contains("only 4 `[[component]]`"), "{err}");
     let err = editor
-        .apply(&set_op("arm/elsewhere.toml", vec![key("x")], Some("1")))
+        .apply(&set_op("arm/elsewhere.toml", path("x"), Some("1")))
         .unwrap_err();
     assert!(
         err.to_string().contains("not one of this system's files"),
@@ -259,7 +267,7 @@ fn a_component_added_from_the_palette_is_checked_where_it_was_added() {
     editor
         .apply(&EditOp::Push {
             file: "arm/controller.toml".into(),
-            path: vec![key("component")],
+            path: path("component"),
             fields: vec![
                 ("name".into(), "\"scaled\"".into()),
                 ("type".into(), "\"gain\"".into()),
@@ -303,7 +311,7 @@ fn a_component_added_from_the_palette_is_checked_where_it_was_added() {
     editor
         .apply(&EditOp::Remove {
             file: "arm/controller.toml".into(),
-            path: vec![key("component"), Step::Index(4)],
+            path: path("component.4"),
         })
         .unwrap();
     assert_eq!(editor.text("arm/controller.toml").unwrap(), before);
@@ -323,14 +331,14 @@ fn transitions_and_states_are_edited_in_the_machine_file() {
     editor
         .apply(&set_op(
             file,
-            vec![key("machine"), Step::Index(0), key("states")],
+            path("machine.0.states"),
             Some("[\"Joint\", \"Endpoint\", \"Held\", \"Safe\", \"Parked\"]"),
         ))
         .unwrap();
     editor
         .apply(&EditOp::Push {
             file: file.into(),
-            path: vec![key("machine"), Step::Index(0), key("transition")],
+            path: path("machine.0.transition"),
             fields: vec![
                 ("from".into(), "\"Held\"".into()),
                 ("when".into(), "\"Coarse\"".into()),
@@ -397,7 +405,7 @@ fn transitions_and_states_are_edited_in_the_machine_file() {
         "{problems:?}"
     );
     let err = editor
-        .apply(&set_op(file, vec![key("main")], Some("\"arm\"")))
+        .apply(&set_op(file, path("main"), Some("\"arm\"")))
         .unwrap_err();
     assert!(matches!(err, EditError::Unparsed(..)), "{err}");
     editor.apply(&EditOp::Revert).unwrap();
@@ -418,7 +426,7 @@ fn a_new_system_with_a_new_machine_is_saved_and_loads_from_disk() {
     editor
         .apply(&EditOp::Push {
             file: "lab/new.toml".into(),
-            path: vec![key("component")],
+            path: path("component"),
             fields: vec![
                 ("name".into(), "\"source\"".into()),
                 ("type".into(), "\"constant\"".into()),
@@ -460,7 +468,7 @@ fn opening_another_system_does_not_forget_unsaved_changes_unless_told() {
     editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(0), key("kp")],
+            path("component.0.kp"),
             Some("41.0"),
         ))
         .unwrap();
@@ -492,7 +500,7 @@ fn a_file_changed_on_disk_since_it_was_opened_is_not_overwritten() {
     editor
         .apply(&set_op(
             "arm/controller.toml",
-            vec![key("component"), Step::Index(0), key("kd")],
+            path("component.0.kd"),
             Some("11.0"),
         ))
         .unwrap();
