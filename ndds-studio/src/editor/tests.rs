@@ -10,6 +10,18 @@ fn examples() -> (tempfile::TempDir, Editor) {
     (dir, editor)
 }
 
+/// The same with `arm.toml` open.
+fn arm() -> (tempfile::TempDir, Editor) {
+    let (dir, mut editor) = examples();
+    editor
+        .apply(&EditOp::Open {
+            path: "arm.toml".into(),
+            discard: false,
+        })
+        .unwrap();
+    (dir, editor)
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for entry in std::fs::read_dir(from).unwrap().flatten() {
@@ -54,13 +66,7 @@ fn changed_lines(a: &str, b: &str) -> Vec<(String, String)> {
 
 #[test]
 fn opening_the_arm_reads_its_includes_and_machine_and_it_verifies() {
-    let (_dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (_dir, editor) = arm();
     let state = editor.state();
     let files: Vec<(&str, &str)> = state["files"]
         .as_array()
@@ -99,13 +105,7 @@ fn opening_the_arm_reads_its_includes_and_machine_and_it_verifies() {
 
 #[test]
 fn changing_a_gain_changes_that_one_line_and_keeps_comments() {
-    let (dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (dir, mut editor) = arm();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
     editor
         .apply(&set_op(
@@ -149,13 +149,7 @@ fn changing_a_gain_changes_that_one_line_and_keeps_comments() {
 
 #[test]
 fn a_value_of_the_wrong_type_is_shown_at_that_key_and_saving_is_refused() {
-    let (dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (dir, mut editor) = arm();
     editor
         .apply(&set_op(
             "arm/controller.toml",
@@ -194,13 +188,7 @@ fn a_value_of_the_wrong_type_is_shown_at_that_key_and_saving_is_refused() {
 
 #[test]
 fn text_that_is_not_toml_is_refused_and_changes_nothing() {
-    let (_dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (_dir, mut editor) = arm();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
     let err = editor
         .apply(&set_op(
@@ -256,13 +244,7 @@ fn paths_outside_the_root_are_refused() {
 
 #[test]
 fn a_component_added_from_the_palette_is_checked_where_it_was_added() {
-    let (_dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (_dir, mut editor) = arm();
     let before = editor.text("arm/controller.toml").unwrap().to_owned();
     editor
         .apply(&EditOp::Push {
@@ -320,13 +302,7 @@ fn a_component_added_from_the_palette_is_checked_where_it_was_added() {
 
 #[test]
 fn transitions_and_states_are_edited_in_the_machine_file() {
-    let (_dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (_dir, mut editor) = arm();
     let file = "arm/supervisor.toml";
     editor
         .apply(&set_op(
@@ -458,13 +434,7 @@ fn a_new_system_with_a_new_machine_is_saved_and_loads_from_disk() {
 
 #[test]
 fn opening_another_system_does_not_forget_unsaved_changes_unless_told() {
-    let (_dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (_dir, mut editor) = arm();
     editor
         .apply(&set_op(
             "arm/controller.toml",
@@ -490,13 +460,7 @@ fn opening_another_system_does_not_forget_unsaved_changes_unless_told() {
 
 #[test]
 fn a_file_changed_on_disk_since_it_was_opened_is_not_overwritten() {
-    let (dir, mut editor) = examples();
-    editor
-        .apply(&EditOp::Open {
-            path: "arm.toml".into(),
-            discard: false,
-        })
-        .unwrap();
+    let (dir, mut editor) = arm();
     editor
         .apply(&set_op(
             "arm/controller.toml",
