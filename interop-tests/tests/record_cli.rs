@@ -376,9 +376,21 @@ impl Screen {
         last.unwrap_or_default().replace("\x1b[K", "")
     }
 
+    /// The status line once it shows `what` and has settled (the same twice, 60 ms apart: a
+    /// line read while it was being written is not taken).
     fn wait_for(&self, what: &str) -> String {
-        let found = interop_tests::wait_until(WAIT, || self.status().contains(what));
-        let status = self.status();
+        let mut status = String::new();
+        let found = interop_tests::wait_until(WAIT, || {
+            status = self.status();
+            if !status.contains(what) {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(60));
+            let again = self.status();
+            let settled = again == status;
+            status = again;
+            settled
+        });
         assert!(
             found.is_some(),
             "no {what:?} on the terminal; last: {status:?}"

@@ -194,9 +194,9 @@ fn draw(progress: &Progress, total: u64, control: &PlayControl, interactive: boo
     } else {
         ""
     };
-    let mut err = std::io::stderr().lock();
-    let _ = write!(
-        err,
+    // One write: unbuffered standard error would otherwise write each piece of the format on
+    // its own, and the terminal could show half a line.
+    let line = format!(
         "\r\x1b[K{state} [{bar}] {:.1}/{:.1} s  x{:.2}  {}/{total} msgs{}{keys}",
         progress.position.as_secs_f64(),
         progress.total.as_secs_f64(),
@@ -208,6 +208,8 @@ fn draw(progress: &Progress, total: u64, control: &PlayControl, interactive: boo
             String::new()
         }
     );
+    let mut err = std::io::stderr().lock();
+    let _ = err.write_all(line.as_bytes());
     let _ = err.flush();
 }
 

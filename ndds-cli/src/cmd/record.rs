@@ -292,7 +292,8 @@ fn status_line(recorder: &Recorder, elapsed: Duration) {
         line.push_str("  | ...");
     }
     let mut err = std::io::stderr().lock();
-    let _ = write!(err, "\r\x1b[K{line}");
+    // One write, so the terminal never shows half a line.
+    let _ = err.write_all(format!("\r\x1b[K{line}").as_bytes());
     let _ = err.flush();
 }
 
