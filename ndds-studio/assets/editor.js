@@ -280,7 +280,7 @@ function renderInspector() {
   const spec = specOf(c.data.type);
   const path = (k) => ['component', c.index, k];
   const rows = [];
-  const shown = new Set();
+  const placedShown = new Set();
   // Each problem at the key it concerns: the key it was found at, or (for a key not written,
   // reported at the component's name) the key the message names.
   const keys = ['habitat', 'group'].concat(spec ? spec.params.map((p) => p.name) : [], Object.keys(c.texts));
@@ -293,7 +293,7 @@ function renderInspector() {
     const input = el('input', { 'data-key': key, value: c.texts[key] || '', placeholder: fallback ? `default ${fallback}` : (c.texts[key] === undefined && kind ? 'required' : ''), title: `${takes}${doc ? `: ${doc}` : ''}` });
     if (choices) input.setAttribute('list', choices);
     const problems = placed.filter(([k]) => k === key).map(([, p]) => p);
-    for (const p of problems) shown.add(p);
+    for (const p of problems) placedShown.add(p);
     if (problems.length) input.classList.add('problem');
     const apply = () => {
       if (input.value === (c.texts[key] || '') || input.value === input.dataset.sent) return;
@@ -318,7 +318,7 @@ function renderInspector() {
     }
   }
   for (const k of Object.keys(c.texts)) if (!written.has(k)) row(k, null, 'a key its type does not document', '', null, null);
-  const general = problemsAt(c.file, ['component', c.index]).filter((p) => !shown.has(p));
+  const general = problemsAt(c.file, ['component', c.index]).filter((p) => !placedShown.has(p));
   box.replaceChildren(
     el('h3', {}, `${c.data.name || '?'}: ${c.data.type || '?'}`),
     el('p', { class: 'hint' }, `${spec ? spec.summary : 'no documented parameters'} (${c.file})`),

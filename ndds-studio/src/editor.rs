@@ -12,7 +12,7 @@
 //! refuses a file changed on disk since it was read and, unless forced, a system that does
 //! not verify.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -660,7 +660,11 @@ impl Editor {
                 orders: BTreeMap::new(),
             },
             Err(SystemError::Invalid(d) | SystemError::NeedsParticipant(d)) => Checked {
-                problems: d.0.iter().map(|d| self.problem(d)).collect(),
+                problems: {
+                    // Each file's elements found once, however many problems it has.
+                    let mut found = HashMap::new();
+                    d.0.iter().map(|d| self.problem(d, &mut found)).collect()
+                },
                 summary: None,
                 orders: BTreeMap::new(),
             },
@@ -679,7 +683,18 @@ impl Editor {
     }
 
     /// A diagnostic with its file relative to the root and the element it concerns.
-    fn problem(&self, d: &ndds_runtime::system::Diagnostic) -> Problem {
+    /// `found`: each file's [`elements`], found when first needed.
+    fn problem(
+        &self,
+        d: &ndds_runtime::system::Diagnostic,
+        found: &mut HashMap<PathBuf, Vec<(usize, Vec<Step>)>>,
+    ) -> Problem {
+        let mut path_at = |f: &EditFile, line: usize| {
+            let elements = found
+                .entry(f.rel.clone())
+                .or_insert_with(|| elements(&f.text));
+            element_at(elements, line)
+        };
         let file = d
             .location
             .file
@@ -709,21 +724,21 @@ impl Editor {
             && let Some(f) = self.files.iter().find(|f| f.rel == rel)
         {
             problem.file = Some(rel.display().to_string());
-            problem.path = machine_path(&f.text, &d.message);
             if let Some((line, column)) = toml_line(&d.message) {
                 problem.line = line;
                 problem.column = column;
-                problem.path = element_at(&f.text, line);
+                problem.path = path_at(f, line);
             } else {
                 problem.line = 0;
                 problem.column = 0;
+                problem.path = machine_path(&f.text, &d.message);
             }
             return problem;
         }
         if let Some(rel) = &file
             && let Some(f) = self.files.iter().find(|f| f.rel == *rel)
         {
-            problem.path = element_at(&f.text, d.location.line);
+            problem.path = path_at(f, d.location.line);
         }
         problem
     }
@@ -1070,23 +1085,24 @@ fn elements(text: &str) -> Vec<(usize, Vec<Step>)> {
     out
 }
 
-/// The element of `text` a problem at `line` concerns: the key on that line, else the table
-/// it is in.
-fn element_at(text: &str, line: usize) -> Vec<Step> {
-    let mut best: Option<(usize, Vec<Step>)> = None;
-    for (at, path) in elements(text) {
-        if at > line {
+/// The element a problem at `line` concerns, among a file's [`elements`]: the key on that
+/// line, else the table it is in.
+fn element_at(elements: &[(usize, Vec<Step>)], line: usize) -> Vec<Step> {
+    let mut best: Option<&(usize, Vec<Step>)> = None;
+    for element in elements {
+        let (at, path) = element;
+        if *at > line {
             continue;
         }
-        let better = match &best {
+        let better = match best {
             None => true,
-            Some((b, p)) => at > *b || (at == *b && path.len() > p.len()),
+            Some((b, p)) => at > b || (at == b && path.len() > p.len()),
         };
         if better {
-            best = Some((at, path));
+            best = Some(element);
         }
     }
-    best.map(|(_, path)| path).unwrap_or_default()
+    best.map(|(_, path)| path.clone()).unwrap_or_default()
 }
 
 /// The machine file a loader message is about (`state machine `FILE`: ...`).

@@ -18,7 +18,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
 use axum::extract::ws::{Message as WsMessage, WebSocket};
-use ndds_client::{ConsumerQos, DirectConsumer, Graph, Participant, TypeDescription};
+use ndds_client::{DirectConsumer, Graph, Participant, TypeDescription};
 use serde_json::json;
 use tokio::sync::broadcast;
 use tokio::sync::broadcast::error::RecvError;
@@ -154,21 +154,21 @@ impl Bridge {
             s.subscribers += 1;
             return Ok(());
         }
-        let Some(found) = self.channels().into_iter().find(|c| c.id == channel) else {
+        let found = lock(&self.channels)
+            .by_key
+            .values()
+            .find(|c| c.id == channel)
+            .cloned();
+        let Some(found) = found else {
             return Err(format!("no channel {channel}"));
         };
         let Some(layout) = found.desc.layout.clone() else {
             return Err(format!("channel {channel} has no layout"));
         };
         let tx = self.tx.clone();
-        let qos = ConsumerQos {
-            every_producer: true,
-            depth: 1024,
-            ..ConsumerQos::default()
-        };
         let consumer = self
             .participant
-            .raw_consumer(&found.topic, found.desc.clone(), qos)
+            .raw_consumer(&found.topic, found.desc.clone(), crate::hub::watching_qos())
             .map_err(|e| e.to_string())?
             .on_raw_sample_direct(move |sample| {
                 let Ok(value) = ndds_core::dynamic::decode_json(&layout, &sample.payload) else {

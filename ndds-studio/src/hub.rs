@@ -370,14 +370,9 @@ impl Hub {
         let mut mat = CsMat::zeros("", 0, 0);
         // A CSMat's element names change only with its shape or fields: made again then only.
         let mut named: Option<(CsMat, Vec<String>)> = None;
-        let qos = ConsumerQos {
-            every_producer: true,
-            depth: 1024,
-            ..ConsumerQos::default()
-        };
         let consumer = self
             .participant
-            .raw_consumer(topic, desc.clone(), qos)
+            .raw_consumer(topic, desc.clone(), watching_qos())
             .map_err(|e| e.to_string())?
             .on_raw_sample_direct(move |sample| {
                 let t = unix_seconds(sample.info.source_timestamp);
@@ -604,6 +599,16 @@ impl Command {
     /// Whether it changes the system (and so needs the page's token).
     pub fn changes(&self) -> bool {
         !matches!(self, Command::Read { .. })
+    }
+}
+
+/// How the studio takes a topic it forwards (a plot, a Foxglove channel): every producer's
+/// samples, with room for bursts.
+pub(crate) fn watching_qos() -> ConsumerQos {
+    ConsumerQos {
+        every_producer: true,
+        depth: 1024,
+        ..ConsumerQos::default()
     }
 }
 

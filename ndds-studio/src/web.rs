@@ -227,13 +227,14 @@ async fn page(mut socket: WebSocket, state: AppState) {
             incoming = socket.recv() => {
                 let Some(Ok(incoming)) = incoming else { break };
                 let WsMessage::Text(text) = incoming else { continue };
-                let is_edit = serde_json::from_str::<serde_json::Value>(&text)
-                    .ok()
-                    .is_some_and(|v| v.get("type").and_then(|t| t.as_str()) == Some("edit"));
-                let answer = if is_edit {
-                    edit(&access, authorized, &mut editor, &text).await
-                } else {
-                    request(&hub, &access, &mut authorized, &mut watched, &text).await
+                let answer = match serde_json::from_str::<serde_json::Value>(&text) {
+                    Err(e) => Some(json!({"type": "error", "text": format!("not JSON: {e}")})),
+                    Ok(value) if value.get("type").and_then(|t| t.as_str()) == Some("edit") => {
+                        edit(&access, authorized, &mut editor, &value).await
+                    }
+                    Ok(value) => {
+                        request(&hub, &access, &mut authorized, &mut watched, &value).await
+                    }
                 };
                 if let Some(answer) = answer
                     && !send(&mut socket, &answer.to_string()).await
@@ -263,12 +264,8 @@ async fn request(
     access: &Access,
     authorized: &mut bool,
     watched: &mut BTreeSet<String>,
-    text: &str,
+    value: &serde_json::Value,
 ) -> Option<serde_json::Value> {
-    let value: serde_json::Value = match serde_json::from_str(text) {
-        Ok(v) => v,
-        Err(e) => return Some(json!({"type": "error", "text": format!("not JSON: {e}")})),
-    };
     let kind = value.get("type").and_then(|t| t.as_str()).unwrap_or("");
     let topic = value
         .get("topic")
@@ -342,12 +339,8 @@ async fn edit(
     access: &Access,
     authorized: bool,
     editor: &mut Option<Arc<std::sync::Mutex<Editor>>>,
-    text: &str,
+    value: &serde_json::Value,
 ) -> Option<serde_json::Value> {
-    let value: serde_json::Value = match serde_json::from_str(text) {
-        Ok(v) => v,
-        Err(e) => return Some(json!({"type": "error", "text": format!("not JSON: {e}")})),
-    };
     let id = value.get("id").cloned().unwrap_or(serde_json::Value::Null);
     let refuse = |text: &str| Some(json!({"type": "editor", "id": id, "ok": false, "text": text}));
     let Some(setup) = &access.editor else {

@@ -386,47 +386,11 @@ fn read_into(
         problems.push(at, format!("a system may have at most {MAX_FILES} files"));
         return;
     }
-    let text = if let Some(text) = standing_in {
-        if text.len() as u64 > MAX_FILE_BYTES {
-            problems.push(
-                at,
-                format!(
-                    "`{}` is {} bytes; description files are at most {MAX_FILE_BYTES}",
-                    path.display(),
-                    text.len()
-                ),
-            );
+    let text = match file_text(path, &canonical, standing_in) {
+        Ok(text) => text,
+        Err(problem) => {
+            problems.push(at, problem);
             return;
-        }
-        text.clone()
-    } else {
-        match std::fs::metadata(&canonical) {
-            Ok(meta) if !meta.is_file() => {
-                problems.push(at, format!("`{}` is not a regular file", path.display()));
-                return;
-            }
-            Ok(meta) if meta.len() > MAX_FILE_BYTES => {
-                problems.push(
-                    at,
-                    format!(
-                        "`{}` is {} bytes; description files are at most {MAX_FILE_BYTES}",
-                        path.display(),
-                        meta.len()
-                    ),
-                );
-                return;
-            }
-            Ok(_) => match read_bounded(&canonical) {
-                Ok(text) => text,
-                Err(err) => {
-                    problems.push(at, format!("cannot read `{}`: {err}", path.display()));
-                    return;
-                }
-            },
-            Err(err) => {
-                problems.push(at, format!("cannot read `{}`: {err}", path.display()));
-                return;
-            }
         }
     };
     // Messages name the file as the user would (relative paths stay relative).
@@ -448,6 +412,32 @@ fn read_into(
     let mut file = file;
     file.canonical = Some(canonical);
     files.push(file);
+}
+
+/// The text of a file of a system: `standing_in` (from an [`Overlay`]) if given, else the
+/// regular file at `real` on disk, of at most [`MAX_FILE_BYTES`] either way; else what is
+/// wrong, naming the file as `path`.
+pub(crate) fn file_text(
+    path: &Path,
+    real: &Path,
+    standing_in: Option<&String>,
+) -> Result<String, String> {
+    let shown = path.display();
+    let too_large = |len: u64| {
+        format!("`{shown}` is {len} bytes; description files are at most {MAX_FILE_BYTES}")
+    };
+    if let Some(text) = standing_in {
+        return match text.len() as u64 {
+            len if len > MAX_FILE_BYTES => Err(too_large(len)),
+            _ => Ok(text.clone()),
+        };
+    }
+    match std::fs::metadata(real) {
+        Ok(meta) if !meta.is_file() => Err(format!("`{shown}` is not a regular file")),
+        Ok(meta) if meta.len() > MAX_FILE_BYTES => Err(too_large(meta.len())),
+        Ok(_) => read_bounded(real).map_err(|err| format!("cannot read `{shown}`: {err}")),
+        Err(err) => Err(format!("cannot read `{shown}`: {err}")),
+    }
 }
 
 /// Reads a file of at most [`MAX_FILE_BYTES`] (it may have grown since its size was checked).
