@@ -424,7 +424,7 @@ const RECORDER: ComponentSpec = ComponentSpec {
 
 /// Registers `recorder`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&RECORDER, |b, p| {
+    registry.add_with(&RECORDER, |b, p| {
         let inputs = p.texts("inputs")?;
         let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
         let capacity = whole_number(

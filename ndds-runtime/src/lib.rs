@@ -59,9 +59,15 @@
 //! - [`fsm`], [`system`]: state machines and description files.
 #![warn(missing_docs)]
 
+// The derive's generated code names `::ndds_runtime`, which must resolve inside this crate's
+// own tests and docs too.
+#[allow(unused_extern_crates)]
+extern crate self as ndds_runtime;
+
 mod binding;
 mod clock;
 mod command;
+pub mod component;
 mod config;
 pub mod csmat;
 mod database;
@@ -86,6 +92,7 @@ mod verify;
 pub use binding::{Freshness, InputStatus, stale_after};
 pub use clock::pin_to_cpu;
 pub use command::{RuntimeCommand, command_port};
+pub use component::Component;
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
 pub use error::RuntimeError;
@@ -94,6 +101,12 @@ pub use mat::Mat;
 pub use module::{
     Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,
 };
+/// The matrix crate CSMats are made of (a component's own state is often a `DMatrix<f64>`):
+/// the same version as the runtime's.
+pub use nalgebra;
+/// `#[derive(Component)]`: see [`Component`](trait@Component) and the attributes documented on
+/// the macro.
+pub use ndds_derive::Component;
 pub use registry::{
     ComponentSpec, Factory, ParamError, ParamKind, ParamSpec, ParamValue, Params, Registry,
 };

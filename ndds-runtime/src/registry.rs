@@ -80,8 +80,13 @@ pub struct ParamSpec {
     pub kind: ParamKind,
     /// `None`: required. `Some(text)`: optional, defaulting to what `text` says.
     pub default: Option<&'static str>,
-    /// One line on what it means (with its unit).
+    /// One line on what it means.
     pub doc: &'static str,
+    /// Its unit (`s`, `N·m`), when it has one.
+    pub unit: Option<&'static str>,
+    /// The values it accepts, in words (`≥ 0`, `> 0`, `1 to 65536`), when not every value of
+    /// its kind is accepted.
+    pub range: Option<&'static str>,
 }
 
 impl ParamSpec {
@@ -92,6 +97,8 @@ impl ParamSpec {
             kind,
             default: None,
             doc,
+            unit: None,
+            range: None,
         }
     }
 
@@ -107,7 +114,21 @@ impl ParamSpec {
             kind,
             default: Some(default),
             doc,
+            unit: None,
+            range: None,
         }
+    }
+
+    /// With a unit.
+    pub const fn unit(mut self, unit: &'static str) -> Self {
+        self.unit = Some(unit);
+        self
+    }
+
+    /// With the range of values it accepts, in words.
+    pub const fn range(mut self, range: &'static str) -> Self {
+        self.range = Some(range);
+        self
     }
 }
 
@@ -220,6 +241,14 @@ impl Params {
             ParamValue::Numbers(xs) => Ok(DMatrix::from_column_slice(xs.len(), 1, xs)),
             ParamValue::Number(x) => Ok(DMatrix::from_element(1, 1, *x)),
             other => Err(Self::wrong(name, "a matrix", other)),
+        }
+    }
+
+    /// A flag.
+    pub fn bool(&self, name: &str) -> Result<bool, ParamError> {
+        match self.get(name)? {
+            ParamValue::Bool(b) => Ok(*b),
+            other => Err(Self::wrong(name, "true or false", other)),
         }
     }
 
@@ -336,9 +365,43 @@ impl Registry {
             .insert(name.to_owned(), (description.to_owned(), None, factory));
     }
 
+    /// Registers a component type made with `#[derive(Component)]` (or implementing
+    /// [`Component`](crate::Component) by hand), replacing an earlier type of its name.
+    ///
+    /// ```
+    /// use ndds_runtime::{Component, Mat, Registry, RoutineResult, SampleContext, SampleModule};
+    ///
+    /// /// Doubles its input.
+    /// #[derive(Component)]
+    /// #[component(name = "double")]
+    /// struct Double {
+    ///     /// u (1 × 1)
+    ///     #[input(shape = (1, 1))]
+    ///     input: Mat,
+    ///     /// 2·u
+    ///     #[output(same_as = input)]
+    ///     output: Mat,
+    /// }
+    ///
+    /// impl SampleModule for Double {
+    ///     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
+    ///         let u = self.input.value(0, 0);
+    ///         Ok(self.output.write().set(0, 0, 2.0 * u)?)
+    ///     }
+    /// }
+    ///
+    /// let mut library = Registry::empty();
+    /// library.add::<Double>();
+    /// assert_eq!(library.spec("double").unwrap().params.len(), 2);
+    /// ```
+    pub fn add<C: crate::Component>(&mut self) -> &mut Self {
+        self.add_with(C::spec(), C::build);
+        self
+    }
+
     /// Registers a documented type: description files are checked against `spec` (unknown,
     /// missing and mistyped parameters) before `factory` runs.
-    pub fn add<F, M>(&mut self, spec: &'static ComponentSpec, factory: F)
+    pub fn add_with<F, M>(&mut self, spec: &'static ComponentSpec, factory: F)
     where
         F: Fn(&mut Binder<'_>, &Params) -> Result<M, ModuleError> + Send + Sync + 'static,
         M: SampleModule,

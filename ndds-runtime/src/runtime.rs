@@ -301,7 +301,7 @@ impl Runtime {
             + 'static,
         M: SampleModule,
     {
-        lock(&self.inner.registry).add(spec, factory);
+        lock(&self.inner.registry).add_with(spec, factory);
     }
 
     /// The documented parameters of component type `name` (`None` if unknown or registered

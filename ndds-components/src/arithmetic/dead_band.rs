@@ -110,7 +110,7 @@ fn dead_band(b: &mut Binder<'_>, p: &Params) -> Result<DeadBand, ModuleError> {
 
 /// Registers `dead_band`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&DEAD_BAND, dead_band);
+    registry.add_with(&DEAD_BAND, dead_band);
 }
 
 #[cfg(test)]

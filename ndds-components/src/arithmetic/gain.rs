@@ -2,30 +2,36 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, scalar_param};
+use crate::mats::{copy_in, copy_out};
 
-/// `y = k·u`, element by element (`k` is the 1 × 1 parameter `"{module}.k"`).
+/// y = k·u, element by element.
+#[derive(Component)]
+#[component(name = "gain")]
 pub struct Gain {
+    /// u, any shape
+    #[input]
     input: Mat,
+    /// y, the shape of u
+    #[output(same_as = input)]
     output: Mat,
+    /// the gain (a 1 × 1 CSMat `<module>.k`, tunable)
+    #[param(tunable, default = 1.0)]
     k: Mat,
     value: DMatrix<f64>,
 }
 
 impl Gain {
-    /// Reads `input`, writes `output` (same shape).
+    /// Reads `input`, writes `output` (same shape); `k` is the tunable parameter
+    /// `"{module}.k"`.
     pub fn new(b: &mut Binder<'_>, input: &str, output: &str, k: f64) -> Result<Self, ModuleError> {
-        distinct(&[input, output])?;
-        let input_mat = b.input(input, Shape::Any);
-        Ok(Self {
-            output: b.output_same_as(output, &input_mat),
-            input: input_mat,
-            k: scalar_param(b, "k", k),
-            value: DMatrix::zeros(0, 0),
-        })
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("k", k);
+        Self::build(b, &params)
     }
 }
 
@@ -38,31 +44,9 @@ impl SampleModule for Gain {
     }
 }
 
-const GAIN: ComponentSpec = ComponentSpec {
-    name: "gain",
-    summary: "y = k·u, element by element.",
-    params: &[
-        P::required("input", K::Input, "u, any shape"),
-        P::required("output", K::Output, "y, the shape of u"),
-        P::optional(
-            "k",
-            K::Number,
-            "1",
-            "the gain (a 1 × 1 CSMat `<module>.k`, tunable)",
-        ),
-    ],
-};
-
 /// Registers `gain`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&GAIN, |b, p| {
-        Gain::new(
-            b,
-            p.text("input")?,
-            p.text("output")?,
-            p.number_or("k", 1.0)?,
-        )
-    });
+    registry.add::<Gain>();
 }
 
 #[cfg(test)]

@@ -163,7 +163,7 @@ const PRODUCT: ComponentSpec = ComponentSpec {
 
 /// Registers `product`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&PRODUCT, |b, p| {
+    registry.add_with(&PRODUCT, |b, p| {
         let inputs = input_names(p)?;
         let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
         Product::new(b, &names, p.text("output")?, p.bool_or("matrix", false)?)

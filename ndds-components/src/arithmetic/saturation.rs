@@ -58,7 +58,7 @@ const SATURATION: ComponentSpec = ComponentSpec {
 
 /// Registers `saturation`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&SATURATION, |b, p| {
+    registry.add_with(&SATURATION, |b, p| {
         Saturation::new(
             b,
             p.text("input")?,

@@ -91,7 +91,7 @@ const SUM: ComponentSpec = ComponentSpec {
 
 /// Registers `sum`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&SUM, |b, p| {
+    registry.add_with(&SUM, |b, p| {
         let inputs = input_names(p)?;
         let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
         let signs = p.numbers_or("signs", &vec![1.0; names.len()])?;

@@ -114,7 +114,7 @@ const PD: ComponentSpec = ComponentSpec {
 
 /// Registers `pd`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&PD, |b, p| {
+    registry.add_with(&PD, |b, p| {
         Pd::new(
             b,
             p.text("measured")?,

@@ -310,7 +310,7 @@ fn pid(b: &mut Binder<'_>, p: &Params) -> Result<Pid, ModuleError> {
 
 /// Registers `pid`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&PID, pid);
+    registry.add_with(&PID, pid);
 }
 
 #[cfg(test)]

@@ -87,7 +87,7 @@ const LOWPASS: ComponentSpec = ComponentSpec {
 
 /// Registers `lowpass`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&LOWPASS, |b, p| {
+    registry.add_with(&LOWPASS, |b, p| {
         LowPass::new(b, p.text("input")?, p.text("output")?, p.number("tau")?)
     });
 }

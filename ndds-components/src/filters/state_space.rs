@@ -189,7 +189,7 @@ fn state_space(b: &mut Binder<'_>, p: &Params) -> Result<StateSpace, ModuleError
 
 /// Registers `state_space`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&STATE_SPACE, state_space);
+    registry.add_with(&STATE_SPACE, state_space);
 }
 
 #[cfg(test)]

@@ -211,7 +211,7 @@ const TRANSFER_FUNCTION: ComponentSpec = ComponentSpec {
 
 /// Registers `transfer_function`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&TRANSFER_FUNCTION, |b, p| {
+    registry.add_with(&TRANSFER_FUNCTION, |b, p| {
         TransferFunction::new(
             b,
             p.text("input")?,

@@ -148,7 +148,7 @@ const MASS_SPRING_DAMPER: ComponentSpec = ComponentSpec {
 
 /// Registers `mass_spring_damper`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&MASS_SPRING_DAMPER, |b, p| {
+    registry.add_with(&MASS_SPRING_DAMPER, |b, p| {
         MassSpringDamper::new(
             b,
             p.text("force")?,

@@ -189,7 +189,7 @@ const TWO_LINK_ARM: ComponentSpec = ComponentSpec {
 
 /// Registers `two_link_arm`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&TWO_LINK_ARM, |b, p| {
+    registry.add_with(&TWO_LINK_ARM, |b, p| {
         let velocities = if p.has("velocities") {
             Some(p.text("velocities")?)
         } else {

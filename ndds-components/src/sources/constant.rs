@@ -48,7 +48,7 @@ const CONSTANT: ComponentSpec = ComponentSpec {
 
 /// Registers `constant`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&CONSTANT, |b, p| {
+    registry.add_with(&CONSTANT, |b, p| {
         let n = rows(p)?;
         Constant::new(b, p.text("output")?, &list(p, "value", None, n)?)
     });

@@ -96,7 +96,7 @@ const NOISE: ComponentSpec = ComponentSpec {
 
 /// Registers `noise`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&NOISE, |b, p| {
+    registry.add_with(&NOISE, |b, p| {
         let n = rows(p)?;
         let seed = whole_number("seed", p.number_or("seed", 1.0)?, 0.0, 2f64.powi(53))?;
         Noise::new(

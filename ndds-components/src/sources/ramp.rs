@@ -63,7 +63,7 @@ const RAMP: ComponentSpec = ComponentSpec {
 
 /// Registers `ramp`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&RAMP, |b, p| {
+    registry.add_with(&RAMP, |b, p| {
         let n = rows(p)?;
         Ramp::new(
             b,

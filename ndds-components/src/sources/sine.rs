@@ -73,7 +73,7 @@ const SINE: ComponentSpec = ComponentSpec {
 
 /// Registers `sine`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&SINE, |b, p| {
+    registry.add_with(&SINE, |b, p| {
         let n = rows(p)?;
         Sine::new(
             b,

@@ -66,7 +66,7 @@ const STEP: ComponentSpec = ComponentSpec {
 
 /// Registers `step`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&STEP, |b, p| {
+    registry.add_with(&STEP, |b, p| {
         let n = rows(p)?;
         Step::new(
             b,

@@ -73,7 +73,7 @@ const QUINTIC: ComponentSpec = ComponentSpec {
 
 /// Registers `quintic`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&QUINTIC, |b, p| {
+    registry.add_with(&QUINTIC, |b, p| {
         let (start, goal, at) = path_params(p)?;
         let path = PointToPoint {
             start: &start,

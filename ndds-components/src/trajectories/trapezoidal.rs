@@ -149,7 +149,7 @@ const TRAPEZOIDAL: ComponentSpec = ComponentSpec {
 
 /// Registers `trapezoidal`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&TRAPEZOIDAL, |b, p| {
+    registry.add_with(&TRAPEZOIDAL, |b, p| {
         let (start, goal, at) = path_params(p)?;
         let path = PointToPoint {
             start: &start,

@@ -320,7 +320,7 @@ const LQG: ComponentSpec = ComponentSpec {
 
 /// Registers `lqg`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add(&LQG, |b, p| {
+    registry.add_with(&LQG, |b, p| {
         let model = LqgModel::from_params(p)?;
         let (n, m, outputs) = model.dimensions()?;
         let weights = LqgWeights {

@@ -1,0 +1,862 @@
+//! A component struct as the derive understands it: every field's role (input, inputs,
+//! output, parameter, state) with its options, checked, so that code generation
+//! (`expand.rs`) never meets a malformed declaration.
+
+use proc_macro2::Span;
+use syn::spanned::Spanned as _;
+use syn::{Attribute, Data, DeriveInput, Expr, ExprLit, Fields, Ident, Lit, LitStr, Meta, Type};
+
+/// The whole component.
+pub struct Component {
+    /// The struct.
+    pub ident: Ident,
+    /// The type name description files use.
+    pub name: String,
+    /// The spec's summary.
+    pub summary: String,
+    /// `#[component(finish = path)]`: called with the built struct and the binder.
+    pub finish: Option<Expr>,
+    /// Every field, in declaration order (the spec lists parameters in this order).
+    pub fields: Vec<Field>,
+}
+
+/// One field.
+pub struct Field {
+    /// Its name in Rust.
+    pub ident: Ident,
+    /// Its key in a description file (the field's name unless `key = "..."`).
+    pub key: String,
+    /// Its doc comment, joined into one line.
+    pub doc: String,
+    /// What it is.
+    pub role: Role,
+    /// Its Rust type.
+    pub ty: Type,
+    /// Where it is declared (for errors).
+    pub span: Span,
+}
+
+/// What a field is.
+pub enum Role {
+    /// `#[input]`: a CSMat it reads (`Mat`, or `Option<Mat>` for an optional one).
+    Input {
+        optional: bool,
+        state: bool,
+        shape: Shape,
+    },
+    /// `#[inputs]`: CSMats it reads (`Vec<Mat>`), at least one.
+    Inputs { same_shape: bool },
+    /// `#[output]`: a CSMat it writes (`Mat`).
+    Output { shape: Shape },
+    /// `#[param]`: a value from the description file.
+    Param(Param),
+    /// Anything unmarked or `#[state]`: the module's own state, `Default::default()` unless
+    /// `#[state(init = EXPR)]`.
+    State { init: Option<Expr> },
+}
+
+/// The shape a CSMat is declared with.
+pub enum Shape {
+    /// Whatever it is.
+    Any,
+    /// `shape = EXPR` (a `(rows, cols)`; may name parameters and earlier CSMats).
+    Expr(Expr),
+    /// `same_as = FIELD`: the shape of an earlier CSMat field.
+    SameAs(Ident),
+    /// `like = EXPR`: an output created from a template CSMat (field names and units).
+    Like(Expr),
+}
+
+/// A parameter field.
+pub struct Param {
+    /// The value type.
+    pub ty: ParamType,
+    /// `Option<T>`: optional without a default.
+    pub optional: bool,
+    /// `default = EXPR`.
+    pub default: Option<Expr>,
+    /// How the spec shows the default.
+    pub default_doc: Option<String>,
+    /// `unit = "..."`.
+    pub unit: Option<String>,
+    /// `min`, `max`, `above`, `below`.
+    pub range: Range,
+}
+
+/// Bounds, as literals.
+#[derive(Default)]
+pub struct Range {
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub above: Option<f64>,
+    pub below: Option<f64>,
+}
+
+impl Range {
+    fn is_empty(&self) -> bool {
+        self.min.is_none() && self.max.is_none() && self.above.is_none() && self.below.is_none()
+    }
+
+    /// The range in words (the same text as `support::Range::words` gives at run time).
+    pub fn words(&self) -> Option<String> {
+        if self.is_empty() {
+            return None;
+        }
+        let parts: Vec<String> = [
+            self.min.map(|m| format!("≥ {m}")),
+            self.above.map(|m| format!("> {m}")),
+            self.max.map(|m| format!("≤ {m}")),
+            self.below.map(|m| format!("< {m}")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        Some(parts.join(" and "))
+    }
+}
+
+/// The types a parameter field may have.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamType {
+    /// `f64`.
+    Number,
+    /// An integer type: a whole number in its range.
+    Whole,
+    /// `Vec<f64>`.
+    Numbers,
+    /// `DMatrix<f64>`.
+    Matrix,
+    /// `String`.
+    Text,
+    /// `PathBuf`.
+    File,
+    /// `bool`.
+    Bool,
+    /// `Params`: a table of sub-parameters.
+    Table,
+    /// `Mat` with `tunable`: a 1 × 1 parameter CSMat `<module>.<key>` set from a number.
+    Tunable,
+    /// `Mat` with `tunable`, given as a list: a column parameter CSMat.
+    TunableColumn,
+}
+
+impl ParamType {
+    /// The runtime's `ParamKind` variant.
+    pub fn kind(self) -> &'static str {
+        match self {
+            ParamType::Number | ParamType::Whole | ParamType::Tunable => "Number",
+            ParamType::Numbers | ParamType::TunableColumn => "Numbers",
+            ParamType::Matrix => "Matrix",
+            ParamType::Text => "Text",
+            ParamType::File => "File",
+            ParamType::Bool => "Bool",
+            ParamType::Table => "Table",
+        }
+    }
+
+    /// Whether a range applies to it.
+    pub fn numeric(self) -> bool {
+        !matches!(
+            self,
+            ParamType::Text | ParamType::File | ParamType::Bool | ParamType::Table
+        )
+    }
+}
+
+const PARAM_TYPES: &str = "f64, an integer type, Vec<f64>, DMatrix<f64>, String, PathBuf, \
+                           bool, Params (a table), or Mat with `tunable`; or Option of one of \
+                           these";
+
+impl Component {
+    /// Reads a struct deriving `Component`.
+    pub fn parse(input: &DeriveInput) -> syn::Result<Self> {
+        if !input.generics.params.is_empty() {
+            return Err(syn::Error::new(
+                input.generics.span(),
+                "#[derive(Component)] does not take generic structs: a description file names \
+                 one concrete type; register each instance type of its own",
+            ));
+        }
+        let Data::Struct(data) = &input.data else {
+            return Err(syn::Error::new(
+                input.ident.span(),
+                "#[derive(Component)] takes a struct with named fields",
+            ));
+        };
+        let Fields::Named(named) = &data.fields else {
+            return Err(syn::Error::new(
+                input.ident.span(),
+                "#[derive(Component)] takes a struct with named fields",
+            ));
+        };
+        let mut name = None;
+        let mut summary = None;
+        let mut finish = None;
+        for attr in input
+            .attrs
+            .iter()
+            .filter(|a| a.path().is_ident("component"))
+        {
+            attr.parse_nested_meta(|meta| {
+                let key = meta.path.get_ident().map(Ident::to_string);
+                match key.as_deref() {
+                    Some("name") => name = Some(meta.value()?.parse::<LitStr>()?.value()),
+                    Some("summary") => summary = Some(meta.value()?.parse::<LitStr>()?.value()),
+                    Some("finish") => finish = Some(meta.value()?.parse::<Expr>()?),
+                    _ => {
+                        return Err(meta.error(
+                            "unknown #[component] option; it takes `name = \"...\"`, \
+                             `summary = \"...\"` and `finish = path`",
+                        ));
+                    }
+                }
+                Ok(())
+            })?;
+        }
+        let Some(name) = name else {
+            return Err(syn::Error::new(
+                input.ident.span(),
+                "#[derive(Component)] needs the type's name for description files: \
+                 #[component(name = \"my_filter\")]",
+            ));
+        };
+        check_type_name(&name, input.ident.span())?;
+        let summary = summary.unwrap_or_else(|| first_paragraph(&input.attrs));
+        if summary.is_empty() {
+            return Err(syn::Error::new(
+                input.ident.span(),
+                "a component needs a summary: a doc comment on the struct, or \
+                 #[component(summary = \"...\")]",
+            ));
+        }
+        let mut fields = Vec::new();
+        for field in &named.named {
+            fields.push(Field::parse(field)?);
+        }
+        check_references(&fields)?;
+        Ok(Self {
+            ident: input.ident.clone(),
+            name,
+            summary,
+            finish,
+            fields,
+        })
+    }
+}
+
+fn check_type_name(name: &str, span: Span) -> syn::Result<()> {
+    let ok = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if ok {
+        Ok(())
+    } else {
+        Err(syn::Error::new(
+            span,
+            format!(
+                "component name `{name}`: use letters, digits, `_` and `-` (it is written in \
+                 description files as type = \"{name}\")"
+            ),
+        ))
+    }
+}
+
+/// `same_as` must name an earlier CSMat field; keys must be unique.
+fn check_references(fields: &[Field]) -> syn::Result<()> {
+    for (i, field) in fields.iter().enumerate() {
+        if fields[..i]
+            .iter()
+            .any(|f| f.is_described() && f.key == field.key)
+            && field.is_described()
+        {
+            return Err(syn::Error::new(
+                field.span,
+                format!("two fields have the key `{}`", field.key),
+            ));
+        }
+        let same_as = match &field.role {
+            Role::Input {
+                shape: Shape::SameAs(other),
+                ..
+            }
+            | Role::Output {
+                shape: Shape::SameAs(other),
+            } => other,
+            _ => continue,
+        };
+        let earlier = fields[..i].iter().find(|f| f.ident == *same_as);
+        match earlier.map(|f| &f.role) {
+            Some(Role::Input {
+                optional: false, ..
+            })
+            | Some(Role::Output { .. }) => {}
+            _ => {
+                return Err(syn::Error::new(
+                    same_as.span(),
+                    format!(
+                        "field `{}`: `same_as = {same_as}` must name an earlier #[input] or \
+                         #[output] field of type Mat",
+                        field.ident
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+impl Field {
+    fn parse(field: &syn::Field) -> syn::Result<Self> {
+        let ident = field.ident.clone().expect("named fields have names");
+        let doc = doc_text(&field.attrs).join(" ");
+        let mut role = None;
+        let mut key = None;
+        for attr in &field.attrs {
+            let Some(which) = attr.path().get_ident().map(Ident::to_string) else {
+                continue;
+            };
+            let parsed = match which.as_str() {
+                "input" => parse_input(attr, &field.ty, &ident, &mut key)?,
+                "inputs" => parse_inputs(attr, &field.ty, &ident, &mut key)?,
+                "output" => parse_output(attr, &field.ty, &ident, &mut key)?,
+                "param" => Role::Param(parse_param(attr, &field.ty, &ident, &mut key)?),
+                "state" => parse_state(attr)?,
+                _ => continue,
+            };
+            if role.is_some() {
+                return Err(syn::Error::new(
+                    attr.span(),
+                    format!(
+                        "field `{ident}` has two roles; give it one of #[input], #[inputs], \
+                         #[output], #[param] or #[state]"
+                    ),
+                ));
+            }
+            role = Some(parsed);
+        }
+        let role = role.unwrap_or(Role::State { init: None });
+        let described = !matches!(role, Role::State { .. });
+        if described && doc.trim().is_empty() {
+            return Err(syn::Error::new(
+                ident.span(),
+                format!(
+                    "field `{ident}` needs a doc comment: it is the parameter's line in the \
+                     reference docs and the editor"
+                ),
+            ));
+        }
+        let key = key.unwrap_or_else(|| ident.to_string().trim_start_matches("r#").to_owned());
+        Ok(Self {
+            span: ident.span(),
+            ident,
+            key,
+            doc,
+            role,
+            ty: field.ty.clone(),
+        })
+    }
+
+    /// Whether the field is a key of the description file's table.
+    pub fn is_described(&self) -> bool {
+        !matches!(self.role, Role::State { .. })
+    }
+}
+
+fn parse_input(
+    attr: &Attribute,
+    ty: &Type,
+    ident: &Ident,
+    key: &mut Option<String>,
+) -> syn::Result<Role> {
+    let optional = match mat_type(ty) {
+        Some(MatType::Mat) => false,
+        Some(MatType::Optional) => true,
+        _ => return Err(wrong_type(ty, ident, "#[input]", "Mat, or Option<Mat>")),
+    };
+    let mut state = false;
+    let mut shape = Shape::Any;
+    if matches!(attr.meta, Meta::List(_)) {
+        attr.parse_nested_meta(|meta| {
+            let name = meta.path.get_ident().map(Ident::to_string);
+            match name.as_deref() {
+                Some("state") => state = true,
+                Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
+                Some("same_as") => shape = Shape::SameAs(meta.value()?.parse()?),
+                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
+                _ => {
+                    return Err(meta.error(
+                        "unknown #[input] option; it takes `state`, `shape = (ROWS, COLS)`, \
+                         `same_as = FIELD` and `key = \"...\"`",
+                    ));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(Role::Input {
+        optional,
+        state,
+        shape,
+    })
+}
+
+fn parse_inputs(
+    attr: &Attribute,
+    ty: &Type,
+    ident: &Ident,
+    key: &mut Option<String>,
+) -> syn::Result<Role> {
+    if mat_type(ty) != Some(MatType::List) {
+        return Err(wrong_type(ty, ident, "#[inputs]", "Vec<Mat>"));
+    }
+    let mut same_shape = false;
+    if matches!(attr.meta, Meta::List(_)) {
+        attr.parse_nested_meta(|meta| {
+            let name = meta.path.get_ident().map(Ident::to_string);
+            match name.as_deref() {
+                Some("same_shape") => same_shape = true,
+                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
+                _ => {
+                    return Err(meta.error(
+                        "unknown #[inputs] option; it takes `same_shape` and `key = \"...\"`",
+                    ));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(Role::Inputs { same_shape })
+}
+
+fn parse_output(
+    attr: &Attribute,
+    ty: &Type,
+    ident: &Ident,
+    key: &mut Option<String>,
+) -> syn::Result<Role> {
+    if mat_type(ty) != Some(MatType::Mat) {
+        return Err(wrong_type(ty, ident, "#[output]", "Mat"));
+    }
+    let mut shape = Shape::Any;
+    if matches!(attr.meta, Meta::List(_)) {
+        attr.parse_nested_meta(|meta| {
+            let name = meta.path.get_ident().map(Ident::to_string);
+            match name.as_deref() {
+                Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
+                Some("same_as") => shape = Shape::SameAs(meta.value()?.parse()?),
+                Some("like") => shape = Shape::Like(meta.value()?.parse()?),
+                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
+                _ => {
+                    return Err(meta.error(
+                        "unknown #[output] option; it takes `shape = (ROWS, COLS)`, \
+                         `same_as = FIELD`, `like = TEMPLATE` and `key = \"...\"`",
+                    ));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    Ok(Role::Output { shape })
+}
+
+fn parse_param(
+    attr: &Attribute,
+    ty: &Type,
+    ident: &Ident,
+    key: &mut Option<String>,
+) -> syn::Result<Param> {
+    let mut tunable = false;
+    let mut default = None;
+    let mut default_doc = None;
+    let mut unit = None;
+    let mut range = Range::default();
+    if matches!(attr.meta, Meta::List(_)) {
+        attr.parse_nested_meta(|meta| {
+            let name = meta.path.get_ident().map(Ident::to_string);
+            match name.as_deref() {
+                Some("tunable") => tunable = true,
+                Some("default") => default = Some(meta.value()?.parse::<Expr>()?),
+                Some("default_doc") => {
+                    default_doc = Some(meta.value()?.parse::<LitStr>()?.value());
+                }
+                Some("unit") => unit = Some(meta.value()?.parse::<LitStr>()?.value()),
+                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
+                Some(bound @ ("min" | "max" | "above" | "below")) => {
+                    let value = number_literal(&meta.value()?.parse::<Expr>()?)?;
+                    let slot = match bound {
+                        "min" => &mut range.min,
+                        "max" => &mut range.max,
+                        "above" => &mut range.above,
+                        _ => &mut range.below,
+                    };
+                    *slot = Some(value);
+                }
+                _ => {
+                    return Err(meta.error(
+                        "unknown #[param] option; it takes `default = EXPR`, \
+                         `default_doc = \"...\"`, `unit = \"...\"`, `min`, `max`, `above`, \
+                         `below` (number literals), `tunable` and `key = \"...\"`",
+                    ));
+                }
+            }
+            Ok(())
+        })?;
+    }
+    let (inner, optional) = match option_inner(ty) {
+        Some(inner) => (inner, true),
+        None => (ty, false),
+    };
+    let ty_kind = if tunable {
+        match (mat_type(inner), optional) {
+            (Some(MatType::Mat), false) => {
+                if default
+                    .as_ref()
+                    .is_some_and(|d| matches!(d, Expr::Array(_) | Expr::Macro(_)))
+                {
+                    ParamType::TunableColumn
+                } else {
+                    ParamType::Tunable
+                }
+            }
+            _ => {
+                return Err(syn::Error::new(
+                    ty.span(),
+                    format!(
+                        "field `{ident}`: a `tunable` parameter is a Mat (its CSMat \
+                         `<module>.{ident}`), not an Option"
+                    ),
+                ));
+            }
+        }
+    } else {
+        param_type(inner).ok_or_else(|| wrong_type(ty, ident, "#[param]", PARAM_TYPES))?
+    };
+    if optional && default.is_some() {
+        return Err(syn::Error::new(
+            ident.span(),
+            format!(
+                "field `{ident}`: an Option parameter is `None` when absent; give either \
+                 Option<T> or a `default`, not both"
+            ),
+        ));
+    }
+    if !range.is_empty() && !ty_kind.numeric() {
+        return Err(syn::Error::new(
+            ident.span(),
+            format!("field `{ident}`: `min`/`max`/`above`/`below` apply to numbers only"),
+        ));
+    }
+    if default_doc.is_some() && default.is_none() && !optional {
+        return Err(syn::Error::new(
+            ident.span(),
+            format!("field `{ident}`: `default_doc` without a `default`"),
+        ));
+    }
+    Ok(Param {
+        ty: ty_kind,
+        optional,
+        default,
+        default_doc,
+        unit,
+        range,
+    })
+}
+
+fn parse_state(attr: &Attribute) -> syn::Result<Role> {
+    let mut init = None;
+    if matches!(attr.meta, Meta::List(_)) {
+        attr.parse_nested_meta(|meta| {
+            if meta.path.is_ident("init") {
+                init = Some(meta.value()?.parse::<Expr>()?);
+                Ok(())
+            } else {
+                Err(meta.error("unknown #[state] option; it takes `init = EXPR`"))
+            }
+        })?;
+    }
+    Ok(Role::State { init })
+}
+
+fn number_literal(expr: &Expr) -> syn::Result<f64> {
+    let (negative, inner) = match expr {
+        Expr::Unary(unary) if matches!(unary.op, syn::UnOp::Neg(_)) => (true, &*unary.expr),
+        other => (false, other),
+    };
+    let value = match inner {
+        Expr::Lit(ExprLit {
+            lit: Lit::Float(f), ..
+        }) => f.base10_parse::<f64>()?,
+        Expr::Lit(ExprLit {
+            lit: Lit::Int(i), ..
+        }) => i.base10_parse::<f64>()?,
+        other => {
+            return Err(syn::Error::new(
+                other.span(),
+                "a bound is a number literal (`min = 0.0`)",
+            ));
+        }
+    };
+    Ok(if negative { -value } else { value })
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum MatType {
+    Mat,
+    Optional,
+    List,
+}
+
+/// The last segment of a type's path, with its one generic argument if any.
+fn last_segment(ty: &Type) -> Option<(String, Option<&Type>)> {
+    let Type::Path(path) = ty else { return None };
+    if path.qself.is_some() {
+        return None;
+    }
+    let segment = path.path.segments.last()?;
+    let argument = match &segment.arguments {
+        syn::PathArguments::None => None,
+        syn::PathArguments::AngleBracketed(args) => {
+            let mut types = args.args.iter().filter_map(|a| match a {
+                syn::GenericArgument::Type(t) => Some(t),
+                _ => None,
+            });
+            let first = types.next()?;
+            if types.next().is_some() {
+                return None;
+            }
+            Some(first)
+        }
+        syn::PathArguments::Parenthesized(_) => return None,
+    };
+    Some((segment.ident.to_string(), argument))
+}
+
+fn is_plain(ty: &Type, name: &str) -> bool {
+    matches!(last_segment(ty), Some((n, None)) if n == name)
+}
+
+fn mat_type(ty: &Type) -> Option<MatType> {
+    match last_segment(ty)? {
+        (name, None) if name == "Mat" => Some(MatType::Mat),
+        (name, Some(inner)) if name == "Option" && is_plain(inner, "Mat") => {
+            Some(MatType::Optional)
+        }
+        (name, Some(inner)) if name == "Vec" && is_plain(inner, "Mat") => Some(MatType::List),
+        _ => None,
+    }
+}
+
+fn option_inner(ty: &Type) -> Option<&Type> {
+    match last_segment(ty)? {
+        (name, Some(inner)) if name == "Option" => Some(inner),
+        _ => None,
+    }
+}
+
+fn param_type(ty: &Type) -> Option<ParamType> {
+    const WHOLE: &[&str] = &[
+        "u8", "u16", "u32", "u64", "usize", "i8", "i16", "i32", "i64", "isize",
+    ];
+    Some(match last_segment(ty)? {
+        (name, None) => match name.as_str() {
+            "f64" => ParamType::Number,
+            "String" => ParamType::Text,
+            "PathBuf" => ParamType::File,
+            "bool" => ParamType::Bool,
+            "Params" => ParamType::Table,
+            n if WHOLE.contains(&n) => ParamType::Whole,
+            _ => return None,
+        },
+        (name, Some(inner)) if name == "Vec" && is_plain(inner, "f64") => ParamType::Numbers,
+        (name, Some(inner)) if name == "DMatrix" && is_plain(inner, "f64") => ParamType::Matrix,
+        _ => return None,
+    })
+}
+
+fn wrong_type(ty: &Type, ident: &Ident, role: &str, takes: &str) -> syn::Error {
+    let shown = quote::quote!(#ty).to_string().replace(' ', "");
+    syn::Error::new(
+        ty.span(),
+        format!("field `{ident}`: {role} does not take `{shown}`; it takes {takes}"),
+    )
+}
+
+/// The lines of the `///` comments on `attrs`, trimmed.
+fn doc_text(attrs: &[Attribute]) -> Vec<String> {
+    attrs
+        .iter()
+        .filter(|a| a.path().is_ident("doc"))
+        .filter_map(|a| match &a.meta {
+            Meta::NameValue(nv) => match &nv.value {
+                Expr::Lit(ExprLit {
+                    lit: Lit::Str(s), ..
+                }) => Some(s.value().trim().to_owned()),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect()
+}
+
+/// The first paragraph of the doc comment, as one line.
+fn first_paragraph(attrs: &[Attribute]) -> String {
+    let lines = doc_text(attrs);
+    lines
+        .iter()
+        .take_while(|l| !l.is_empty())
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(code: &str) -> syn::Result<Component> {
+        Component::parse(&syn::parse_str(code).expect("valid Rust"))
+    }
+
+    fn error(code: &str) -> String {
+        match parse(code) {
+            Ok(_) => panic!("expected an error for {code}"),
+            Err(err) => err.to_string(),
+        }
+    }
+
+    #[test]
+    fn fields_get_their_roles_keys_docs_and_types() {
+        let c = parse(
+            r#"
+            /// Sums things.
+            ///
+            /// More words, not in the summary.
+            #[component(name = "adder")]
+            struct Adder {
+                /// the terms
+                #[inputs(same_shape)] terms: Vec<Mat>,
+                /// the sum
+                #[output(same_as = terms_first)] out: Mat,
+                /// a gain
+                #[param(tunable, default = 2.0, unit = "1/s", min = 0.0)] k: Mat,
+                /// the count
+                #[param(key = "n")] count: Option<u32>,
+                scratch: Vec<f64>,
+            }"#,
+        );
+        // `same_as` must name an earlier CSMat field: `terms_first` is none.
+        assert!(c.is_err());
+        let c = parse(
+            r#"
+            /// Sums things.
+            ///
+            /// More words, not in the summary.
+            #[component(name = "adder")]
+            struct Adder {
+                /// the first
+                #[input] first: Mat,
+                /// the sum
+                #[output(same_as = first)] out: Mat,
+                /// a gain
+                #[param(tunable, default = 2.0, unit = "1/s", min = 0.0)] k: Mat,
+                /// the count
+                #[param(key = "n")] count: Option<u32>,
+                scratch: Vec<f64>,
+            }"#,
+        )
+        .unwrap();
+        assert_eq!(
+            (c.name.as_str(), c.summary.as_str()),
+            ("adder", "Sums things.")
+        );
+        let keys: Vec<&str> = c.fields.iter().map(|f| f.key.as_str()).collect();
+        assert_eq!(keys, ["first", "out", "k", "n", "scratch"]);
+        let Role::Param(k) = &c.fields[2].role else {
+            panic!("k is a parameter")
+        };
+        assert_eq!(k.ty, ParamType::Tunable);
+        assert_eq!(k.range.words().as_deref(), Some("≥ 0"));
+        assert_eq!(k.unit.as_deref(), Some("1/s"));
+        let Role::Param(n) = &c.fields[3].role else {
+            panic!("n is a parameter")
+        };
+        assert!(n.optional && n.ty == ParamType::Whole);
+        assert!(matches!(c.fields[4].role, Role::State { init: None }));
+    }
+
+    #[test]
+    fn unsupported_types_name_the_field_and_what_is_taken() {
+        let err = error(
+            r#"/// x
+            #[component(name = "x")]
+            struct X { /// a map
+            #[param] table: HashMap<String, f64> }"#,
+        );
+        assert!(err.contains("field `table`"), "{err}");
+        assert!(err.contains("HashMap<String,f64>"), "{err}");
+        assert!(err.contains("Vec<f64>"), "{err}");
+        let err = error(
+            r#"/// x
+            #[component(name = "x")]
+            struct X { /// in
+            #[input] u: f64 }"#,
+        );
+        assert!(
+            err.contains("field `u`: #[input] does not take `f64`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn malformed_declarations_are_refused_with_what_to_write() {
+        let cases = [
+            ("struct X { }", "needs the type's name"),
+            ("#[component(name = \"x\")] struct X {}", "needs a summary"),
+            (
+                "/// x\n#[component(name = \"a b\")] struct X {}",
+                "letters, digits",
+            ),
+            (
+                "/// x\n#[component(name = \"x\", colour = 1)] struct X {}",
+                "unknown #[component] option",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { #[input] u: Mat }",
+                "needs a doc comment",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// u\n #[input] #[output] u: Mat }",
+                "two roles",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// k\n #[param(default = 1.0)] k: Option<f64> }",
+                "not both",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// k\n #[param(min = 0.0)] k: String }",
+                "numbers only",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// k\n #[param(min = a)] k: f64 }",
+                "number literal",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X<T> { t: T }",
+                "generic",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X(f64);",
+                "named fields",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// a\n #[param] a: f64, /// b\n #[param(key = \"a\")] b: f64 }",
+                "two fields have the key `a`",
+            ),
+        ];
+        for (code, expected) in cases {
+            let err = error(code);
+            assert!(err.contains(expected), "{code}: {err}");
+        }
+    }
+}
