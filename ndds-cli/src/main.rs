@@ -11,6 +11,7 @@ mod out;
 mod render;
 mod seconds;
 mod status_term;
+mod systems;
 
 use clap::Parser;
 

@@ -46,6 +46,64 @@ pub enum RuntimeCommand {
     /// The values of these CSMats now, answered as JSON text: an object from each name to
     /// `{"rows", "cols", "data"}` (row-major) or `{"error"}`.
     ReadMats(Vec<String>),
+    /// Sample habitat `habitat` at `hz` from its next sample boundary (`ndds habitat NAME
+    /// rate HZ`; [`RuntimeCommand::habitat`] makes the four habitat commands).
+    HabitatRate {
+        /// The habitat.
+        habitat: String,
+        /// Samples per second.
+        hz: f64,
+    },
+    /// Reset this habitat's modules at its next sample boundary.
+    HabitatReset(String),
+    /// Start this habitat.
+    HabitatStart(String),
+    /// Stop this habitat.
+    HabitatStop(String),
+    /// Every habitat's statistics now, answered as JSON text (a list of
+    /// [`HabitatStats`](crate::HabitatStats)).
+    Stats,
+    /// The system's description now, answered as JSON text (a
+    /// [`SystemDescription`](crate::describe::SystemDescription)).
+    Describe,
+}
+
+impl RuntimeCommand {
+    /// The command that does `action` to `habitat`.
+    pub fn habitat(habitat: &str, action: HabitatAction) -> Self {
+        let habitat = habitat.to_owned();
+        match action {
+            HabitatAction::Rate(hz) => RuntimeCommand::HabitatRate { habitat, hz },
+            HabitatAction::Reset => RuntimeCommand::HabitatReset(habitat),
+            HabitatAction::Start => RuntimeCommand::HabitatStart(habitat),
+            HabitatAction::Stop => RuntimeCommand::HabitatStop(habitat),
+        }
+    }
+}
+
+/// What can be done to a habitat from outside: [`Runtime::habitat_explained`],
+/// [`RuntimeCommand::habitat`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HabitatAction {
+    /// Sample at this rate (Hz) from the next sample boundary (`timing_changed` runs).
+    Rate(f64),
+    /// Call every module's `reset` at the next sample boundary.
+    Reset,
+    /// Begin sampling (verifies the system first).
+    Start,
+    /// Stop sampling (disable and shutdown routines run).
+    Stop,
+}
+
+impl std::fmt::Display for HabitatAction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            HabitatAction::Rate(hz) => write!(f, "rate {hz}"),
+            HabitatAction::Reset => f.write_str("reset"),
+            HabitatAction::Start => f.write_str("start"),
+            HabitatAction::Stop => f.write_str("stop"),
+        }
+    }
 }
 
 /// The name of runtime `runtime`'s command port.
@@ -192,12 +250,88 @@ impl Runtime {
         Ok(serde_json::Value::Object(out).to_string())
     }
 
+    /// Carries out `action` on habitat `name`, in words (see [`RuntimeCommand::habitat`]): an
+    /// unknown habitat names the close one and every habitat.
+    pub fn habitat_explained(&self, name: &str, action: HabitatAction) -> CommandReply {
+        let system = self.name();
+        let Some(habitat) = self.find_habitat(name) else {
+            let known: Vec<String> = self
+                .habitats()
+                .iter()
+                .map(|h| h.name().to_owned())
+                .collect();
+            return Err(format!(
+                "system `{system}` has no habitat `{name}`{}; habitats: {}",
+                crate::system::decl::suggest(name, &known),
+                if known.is_empty() {
+                    "none".to_owned()
+                } else {
+                    known.join(", ")
+                }
+            ));
+        };
+        let refused = |err: super::HabitatError| format!("system `{system}`: {err}");
+        match action {
+            HabitatAction::Rate(hz) => {
+                let before = habitat.rate_hz();
+                habitat.set_rate(hz).map_err(refused)?;
+                Ok(format!(
+                    "habitat `{name}` of system `{system}`: rate {before} Hz -> {hz} Hz from its \
+                     next sample"
+                ))
+            }
+            HabitatAction::Reset => {
+                habitat.reset();
+                Ok(format!(
+                    "habitat `{name}` of system `{system}`: reset at its next sample"
+                ))
+            }
+            HabitatAction::Start if habitat.is_running() => Ok(format!(
+                "habitat `{name}` of system `{system}` samples already; nothing changed"
+            )),
+            HabitatAction::Start => {
+                habitat.start().map_err(refused)?;
+                Ok(format!("habitat `{name}` of system `{system}` started"))
+            }
+            HabitatAction::Stop if !habitat.is_running() => Ok(format!(
+                "habitat `{name}` of system `{system}` is stopped already; nothing changed"
+            )),
+            HabitatAction::Stop => {
+                habitat.stop();
+                Ok(format!("habitat `{name}` of system `{system}` stopped"))
+            }
+        }
+    }
+
     fn answer(&self, command: RuntimeCommand) -> CommandReply {
         match command {
             RuntimeCommand::Configure(name) => self.switch_explained(name.trim()),
             RuntimeCommand::CheckSample { topic, sample } => self.check_sample(&topic, &sample),
             RuntimeCommand::SetMat { name, values } => self.set_mat(name.trim(), &values),
             RuntimeCommand::ReadMats(names) => self.read_mats(&names),
+            RuntimeCommand::HabitatRate { habitat, hz } => {
+                self.habitat_explained(habitat.trim(), HabitatAction::Rate(hz))
+            }
+            RuntimeCommand::HabitatReset(habitat) => {
+                self.habitat_explained(habitat.trim(), HabitatAction::Reset)
+            }
+            RuntimeCommand::HabitatStart(habitat) => {
+                self.habitat_explained(habitat.trim(), HabitatAction::Start)
+            }
+            RuntimeCommand::HabitatStop(habitat) => {
+                self.habitat_explained(habitat.trim(), HabitatAction::Stop)
+            }
+            RuntimeCommand::Stats => {
+                let stats: Vec<_> = self
+                    .habitats()
+                    .iter()
+                    .map(|h| self.habitat_stats(h))
+                    .collect();
+                serde_json::to_string(&stats).map_err(|e| e.to_string())
+            }
+            RuntimeCommand::Describe => {
+                serde_json::to_string(&self.describe()).map_err(|e| e.to_string())
+            }
         }
     }
 }

@@ -20,7 +20,7 @@ use std::time::Duration;
 
 use super::database::{CategoryEntry, Database, GroupEntry, ObjectKind};
 use super::error::RuntimeError;
-use super::habitat::Habitat;
+use super::habitat::{Habitat, HabitatError};
 use super::list::inside_routine;
 use super::list::{ExecList, Lent, Routine};
 use super::module::SampleContext;
@@ -116,6 +116,35 @@ impl Runtime {
         Ok(())
     }
 
+    /// Makes a switch to configuration `name` (declared) also set these habitats' rates, once
+    /// its lists are swapped in (each habitat's modules see the new period, with
+    /// `timing_changed`, at its next sample boundary). Replaces rates given before.
+    pub fn configuration_rates(
+        &self,
+        name: &str,
+        rates: &[(&str, f64)],
+    ) -> Result<(), RuntimeError> {
+        refuse_inside_routine("configuration_rates")?;
+        let mut db = self.db();
+        if !db.configurations.contains_key(name) {
+            return Err(RuntimeError::Unknown {
+                kind: ObjectKind::Configuration,
+                name: name.to_owned(),
+            });
+        }
+        for (habitat, hz) in rates {
+            if crate::habitat::period_of(*hz).is_none() {
+                return Err(RuntimeError::Habitat(HabitatError::InvalidRate {
+                    habitat: (*habitat).to_owned(),
+                    hz: *hz,
+                }));
+            }
+        }
+        let rates = rates.iter().map(|(h, hz)| ((*h).to_owned(), *hz)).collect();
+        db.rates.insert(name.to_owned(), rates);
+        Ok(())
+    }
+
     /// Switches to configuration `name`: each affected habitat swaps in its prepared list at
     /// its next sample boundary (see the module doc for the steps, and where `enable` and
     /// `disable` run). If the new active set cannot be sorted nothing changes. Called from
@@ -143,7 +172,22 @@ impl Runtime {
             active
         };
         self.apply(&active)?;
-        self.db().current = Some(name.to_owned());
+        let rates = {
+            let mut db = self.db();
+            db.current = Some(name.to_owned());
+            db.rates.get(name).cloned().unwrap_or_default()
+        };
+        for (habitat, hz) in rates {
+            match self.find_habitat(&habitat) {
+                Some(h) => h.set_rate(hz)?,
+                None => {
+                    return Err(RuntimeError::Unknown {
+                        kind: ObjectKind::Habitat,
+                        name: habitat,
+                    });
+                }
+            }
+        }
         Ok(())
     }
 

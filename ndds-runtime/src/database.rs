@@ -78,6 +78,8 @@ pub(crate) struct Database {
     /// configuration -> category -> group.
     pub(crate) configurations: BTreeMap<String, BTreeMap<String, String>>,
     pub(crate) current: Option<String>,
+    /// configuration -> (habitat, Hz): rates a switch to it sets.
+    pub(crate) rates: BTreeMap<String, Vec<(String, f64)>>,
     /// `(follower, leader)`: CSMats created with the shape of another once it exists.
     pub(crate) follows: Vec<(String, String)>,
 }

@@ -72,6 +72,8 @@ pub struct HabitatDescription {
     pub running: bool,
     /// Its active modules, in execution order.
     pub order: Vec<String>,
+    /// What clocks it: `timer`, `topic NAME` or `manual` (empty when not created).
+    pub clock: String,
 }
 
 /// One module: a component instance, or one the runtime made (`publish:TOPIC`,
@@ -346,6 +348,12 @@ impl Runtime {
                 rate_hz: if period > 0.0 { 1.0 / period } else { 0.0 },
                 running: habitat.is_running(),
                 order: habitat.order(),
+                clock: match habitat.clock() {
+                    Some(crate::Clock::Timer) => "timer".to_owned(),
+                    Some(crate::Clock::Topic(topic)) => format!("topic {topic}"),
+                    Some(crate::Clock::Manual) => "manual".to_owned(),
+                    None => String::new(),
+                },
             });
         }
         d

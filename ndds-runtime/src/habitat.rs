@@ -226,6 +226,24 @@ impl Habitat {
         &self.shared.name
     }
 
+    /// A handle that does not keep the habitat alive (what a module keeps).
+    pub fn downgrade(&self) -> HabitatLink {
+        HabitatLink {
+            name: self.shared.name.clone(),
+            shared: Arc::downgrade(&self.shared),
+        }
+    }
+
+    /// What clocks it (`None` until it is created).
+    pub fn clock(&self) -> Option<Clock> {
+        lock(&self.shared.options).as_ref().map(|o| o.clock.clone())
+    }
+
+    /// Its rate in Hz: the one last set (see [`period`](Self::period)).
+    pub fn rate_hz(&self) -> f64 {
+        1.0 / self.period().as_secs_f64()
+    }
+
     /// Whether it was created (not just referenced).
     pub fn is_created(&self) -> bool {
         lock(&self.shared.options).is_some()
@@ -501,6 +519,73 @@ impl Habitat {
         stats.exec = percentiles(&slot.total.exec);
         stats.interval_s = 0.0;
         stats
+    }
+}
+
+/// A habitat as a module keeps it ([`Binder::habitat`](crate::Binder::habitat)): it does
+/// not keep the habitat alive (the habitat holds the module), so each use may find it gone.
+///
+/// From inside a routine, [`set_rate`](Self::set_rate), [`reset`](Self::reset),
+/// [`start`](Self::start) and [`stop`](Self::stop) are queued to the runtime's request thread
+/// and take effect at a sample boundary after the routine returns; the queries answer at once.
+#[derive(Clone)]
+pub struct HabitatLink {
+    name: String,
+    shared: std::sync::Weak<Shared>,
+}
+
+impl HabitatLink {
+    /// The habitat's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The habitat, while it exists.
+    pub fn upgrade(&self) -> Option<Habitat> {
+        self.shared.upgrade().map(|shared| Habitat { shared })
+    }
+
+    fn get(&self) -> Result<Habitat, HabitatError> {
+        self.upgrade()
+            .ok_or_else(|| HabitatError::RuntimeGone(self.name.clone()))
+    }
+
+    /// What clocks it (`None` if it was dropped or not created).
+    pub fn clock(&self) -> Option<Clock> {
+        self.upgrade().and_then(|h| h.clock())
+    }
+
+    /// Its rate in Hz (the one last set).
+    pub fn rate_hz(&self) -> Option<f64> {
+        self.upgrade().map(|h| h.rate_hz())
+    }
+
+    /// [`Habitat::set_rate`].
+    pub fn set_rate(&self, hz: f64) -> Result<(), HabitatError> {
+        self.get()?.set_rate(hz)
+    }
+
+    /// [`Habitat::reset`].
+    pub fn reset(&self) -> Result<(), HabitatError> {
+        self.get().map(|h| h.reset())
+    }
+
+    /// [`Habitat::start`].
+    pub fn start(&self) -> Result<(), HabitatError> {
+        self.get()?.start()
+    }
+
+    /// [`Habitat::stop`].
+    pub fn stop(&self) -> Result<(), HabitatError> {
+        self.get().map(|h| h.stop())
+    }
+}
+
+impl std::fmt::Debug for HabitatLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HabitatLink")
+            .field("name", &self.name)
+            .finish()
     }
 }
 

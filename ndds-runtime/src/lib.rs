@@ -91,12 +91,14 @@ mod verify;
 
 pub use binding::{Freshness, InputStatus, stale_after};
 pub use clock::pin_to_cpu;
-pub use command::{RuntimeCommand, command_port};
+pub use command::{HabitatAction, RuntimeCommand, command_port};
 pub use component::Component;
 pub use csmat::{CsMat, Field, MatError};
 pub use database::ObjectKind;
 pub use error::RuntimeError;
-pub use habitat::{Clock, Habitat, HabitatError, HabitatOptions, MAX_RATE_HZ, MIN_RATE_HZ};
+pub use habitat::{
+    Clock, Habitat, HabitatError, HabitatLink, HabitatOptions, MAX_RATE_HZ, MIN_RATE_HZ,
+};
 pub use mat::Mat;
 pub use module::{
     Binder, Interface, ModuleError, Port, RoutineResult, SampleContext, SampleModule, Shape, Use,

@@ -218,6 +218,8 @@ pub struct Binder<'a> {
     pub(crate) follows: Vec<(String, String)>,
     /// CSMats this module's declarations created (undone if the install fails).
     pub(crate) created: Vec<Mat>,
+    /// The habitat the module is installed into (none for a detached binder).
+    pub(crate) habitat: Option<super::habitat::HabitatLink>,
 }
 
 impl<'a> Binder<'a> {
@@ -230,7 +232,15 @@ impl<'a> Binder<'a> {
             interface: Interface::default(),
             follows: Vec::new(),
             created: Vec::new(),
+            habitat: None,
         }
+    }
+
+    /// The habitat the module is being installed into (`None` for a detached binder): keep it
+    /// to ask, from a routine, for the habitat's clock source and rate, or to change its rate,
+    /// reset, start or stop it (queued to the sample boundary, see [`SampleModule`]).
+    pub fn habitat(&self) -> Option<super::habitat::HabitatLink> {
+        self.habitat.clone()
     }
 
     /// The declarations made so far.

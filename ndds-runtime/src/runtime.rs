@@ -569,6 +569,7 @@ impl Runtime {
                 db_ref.mat(name)
             };
             let mut binder = Binder::detached(module, &mut lookup);
+            binder.habitat = Some(target.downgrade());
             let result = build(&mut binder);
             let Binder {
                 interface,

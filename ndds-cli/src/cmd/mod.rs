@@ -3,6 +3,7 @@
 mod bag;
 mod echo;
 mod fsm;
+mod habitat;
 mod hz;
 mod key;
 mod modules;
@@ -47,6 +48,8 @@ enum Command {
     Perf(perf::Args),
     /// Send stimuli to a state machine, or show its state.
     Fsm(fsm::Args),
+    /// Change a habitat of a running system: its rate, reset, start or stop.
+    Habitat(habitat::Args),
     /// List ports with their owner, users, restrictions and queue.
     Ports(ports::Args),
     /// Show the module tree: each running module with its children, tasks and ports.
@@ -86,6 +89,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Hz(args) => hz::run(&cli.daemon, &args),
         Command::Perf(args) => perf::run(&cli.daemon, &args),
         Command::Fsm(args) => fsm::run(&cli.daemon, &args),
+        Command::Habitat(args) => habitat::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
         Command::Modules(args) => modules::run(&cli.daemon, &args),
         Command::Record(args) => record::run(&cli.daemon, &args),

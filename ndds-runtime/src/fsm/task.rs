@@ -46,8 +46,10 @@ impl ActionSet {
     }
 
     /// The runtime's actions: `switch CONFIGURATION`, `start HABITAT`, `stop HABITAT`, `reset
-    /// HABITAT` — each returns 0 when done, 1 when refused (unknown configuration or habitat,
-    /// a system that does not verify; the refusal is logged).
+    /// HABITAT`, `rate HABITAT HZ` — each returns 0 when done, 1 when refused (unknown
+    /// configuration or habitat, a rate out of range, a system that does not verify; the
+    /// refusal is logged). A rate change reaches the habitat's modules (`timing_changed`) at
+    /// its next sample boundary.
     pub fn runtime(runtime: &Runtime) -> Self {
         let mut set = Self::new();
         let rt = runtime.clone();
@@ -75,6 +77,14 @@ impl ActionSet {
         let rt = runtime.clone();
         set.add("reset", &[0, 1], move |arg| {
             Ok(refused(find(&rt, arg, "reset").map(|h| h.reset())))
+        });
+        let rt = runtime.clone();
+        set.add("rate", &[0, 1], move |arg| {
+            let (habitat, hz) = rate_argument(arg)?;
+            Ok(refused(
+                find(&rt, Some(habitat), "rate")
+                    .and_then(|h| h.set_rate(hz).map_err(|e| e.to_string())),
+            ))
         });
         set
     }
@@ -116,6 +126,21 @@ impl ActionSet {
     pub fn codes(&self, name: &str) -> Option<Vec<i32>> {
         self.actions.get(name).map(|(codes, _)| codes.clone())
     }
+}
+
+/// `HABITAT HZ` of a `rate` action (an error, hence the machine's error state, when it is not
+/// of that form: the file is wrong, not the moment).
+fn rate_argument(arg: Option<&str>) -> Result<(&str, f64), String> {
+    let usage = "`rate` takes a habitat and a rate in Hz: `rate servo 500`";
+    let mut words = arg.ok_or(usage)?.split_whitespace();
+    let (Some(habitat), Some(hz), None) = (words.next(), words.next(), words.next()) else {
+        return Err(usage.to_owned());
+    };
+    let hz: f64 = hz
+        .trim_end_matches("Hz")
+        .parse()
+        .map_err(|_| format!("`rate {habitat} {hz}`: `{hz}` is not a number; {usage}"))?;
+    Ok((habitat, hz))
 }
 
 fn refused(result: Result<(), String>) -> i32 {

@@ -285,6 +285,16 @@ pub(crate) fn build_into(
         if let Err(err) = rt.configuration(&conf.name.name, &pairs) {
             found.refuse(&conf.name.at, &err);
         }
+        let rates: Vec<(&str, f64)> = conf
+            .rates
+            .iter()
+            .map(|(h, hz, _)| (h.as_str(), *hz))
+            .collect();
+        if !rates.is_empty()
+            && let Err(err) = rt.configuration_rates(&conf.name.name, &rates)
+        {
+            found.refuse(&conf.name.at, &err);
+        }
     }
     for c in &d.components {
         places

@@ -20,6 +20,68 @@ pub(super) fn cross_check(d: &Description, p: &mut Diagnostics) {
     start_configuration(d, p);
     machine_references(d, p);
     provided.check_set_actions(d, p);
+    rate_actions(d, p);
+    configuration_rates(d, p);
+}
+
+/// `rate HABITAT HZ` actions name a habitat of the system and a usable rate.
+fn rate_actions(d: &Description, p: &mut Diagnostics) {
+    let habitats: Vec<&str> = d.habitats.iter().map(|h| h.name.name.as_str()).collect();
+    for m in &d.machines {
+        for (machine, def) in &m.program.machines {
+            for t in &def.transitions {
+                let crate::fsm::ActionRef::Named { name, argument } = &t.action else {
+                    continue;
+                };
+                if name != "rate" {
+                    continue;
+                }
+                let argument = argument.as_deref().unwrap_or("");
+                let mut words = argument.split_whitespace();
+                let habitat = words.next().unwrap_or("");
+                let hz = words.next().and_then(|w| w.parse::<f64>().ok());
+                let usable = hz.is_some_and(|hz| crate::habitat::period_of(hz).is_some());
+                if habitats.contains(&habitat) && usable && words.next().is_none() {
+                    continue;
+                }
+                p.expected(
+                    &m.at,
+                    format!(
+                        "state machine `{machine}` ({}): action `rate {argument}`",
+                        m.file.display()
+                    ),
+                    format!(
+                        "`rate HABITAT HZ` with a habitat of this system{} and a rate from \
+                         {:.6} to {} Hz",
+                        suggest(habitat, &habitats),
+                        crate::MIN_RATE_HZ,
+                        crate::MAX_RATE_HZ
+                    ),
+                );
+            }
+        }
+    }
+}
+
+/// A configuration's `rates` name habitats of the system.
+fn configuration_rates(d: &Description, p: &mut Diagnostics) {
+    let habitats: Vec<&str> = d.habitats.iter().map(|h| h.name.name.as_str()).collect();
+    for conf in &d.configurations {
+        for (habitat, _, at) in &conf.rates {
+            if !habitats.contains(&habitat.as_str()) {
+                p.push(
+                    at,
+                    format!(
+                        "configuration `{}` sets the rate of habitat `{habitat}`, which this \
+                         system does not declare{}; habitats: {}",
+                        conf.name.name,
+                        suggest(habitat, &habitats),
+                        list(&habitats)
+                    ),
+                );
+            }
+        }
+    }
 }
 
 /// Habitats, CSMats, components, configurations, rate transitions, ports and state machines
