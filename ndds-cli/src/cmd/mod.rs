@@ -13,7 +13,7 @@ mod play;
 mod ports;
 mod publish;
 mod record;
-mod run;
+pub(crate) mod run;
 mod security;
 mod studio;
 mod topics;
@@ -97,7 +97,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bag(args) => bag::run(&args),
         Command::Key(args) => key::run(&args),
         Command::Security(args) => security::run(&args),
-        Command::Run(args) => run::run(&cli.daemon, &args),
+        Command::Run(args) => run::run(&cli.daemon, &args, ndds_components::library()),
         Command::Studio(args) => studio::run(&cli.daemon, &args),
     }
 }

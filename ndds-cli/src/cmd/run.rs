@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context as _;
 use ndds_client::{EmbeddedPolicy, Participant};
 use ndds_runtime::system::{LoadOptions, Status, System, SystemError};
-use ndds_runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace};
+use ndds_runtime::{BEHIND_BELOW, CsMat, Freshness, InputStatus, Pace, Registry};
 
 use crate::connect::DaemonArgs;
 use crate::seconds;
@@ -74,8 +74,42 @@ pub struct Args {
     record: Option<PathBuf>,
 }
 
-/// Runs `ndds run`.
-pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
+/// `ndds run` in a program of your own: parses `program`'s command line as `ndds run`'s (the
+/// description file, every `ndds run` flag and the daemon's), adds `extend`'s component types
+/// to the built-in library, runs the system and returns the exit status (the error, if any,
+/// said on stderr as `program: ...`). See the crate's doc for an example and
+/// docs/components.md, "Your own components".
+pub fn run_main(
+    program: &'static str,
+    extend: impl FnOnce(&mut Registry),
+) -> std::process::ExitCode {
+    use clap::{CommandFactory as _, FromArgMatches as _};
+
+    /// `ndds run`'s command line, for a program of its own.
+    #[derive(Debug, clap::Parser)]
+    struct RunCli {
+        #[command(flatten)]
+        daemon: DaemonArgs,
+        #[command(flatten)]
+        run: Args,
+    }
+
+    let command = RunCli::command()
+        .name(program)
+        .bin_name(program)
+        .about("Load a system description file, verify it and run it, with a live status.");
+    let cli = match RunCli::from_arg_matches(&command.get_matches()) {
+        Ok(cli) => cli,
+        Err(err) => err.exit(),
+    };
+    crate::init_logging(false);
+    let mut library = ndds_components::library();
+    extend(&mut library);
+    crate::exit_code(program, run(&cli.daemon, &cli.run, library))
+}
+
+/// Runs `ndds run` with the component types of `library`.
+pub fn run(daemon: &DaemonArgs, args: &Args, library: Registry) -> anyhow::Result<()> {
     // First Ctrl-C (or SIGTERM): stop cleanly; a second one exits at once.
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -88,7 +122,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
             simulated: args.simulate.is_some(),
             name: args.name.clone(),
             check: args.check,
-            library: ndds_components::library(),
+            library: library.clone(),
             overlay: Default::default(),
         };
         // Network bindings are built against a daemon: connect only if the file has some.
@@ -115,7 +149,7 @@ pub fn run(daemon: &DaemonArgs, args: &Args) -> anyhow::Result<()> {
         Some(&participant),
         LoadOptions {
             name: args.name.clone(),
-            ..LoadOptions::default().with_library(ndds_components::library())
+            ..LoadOptions::default().with_library(library)
         },
     )
     .map_err(|e| describe_error(&args.file, e))?;

@@ -72,7 +72,20 @@ fn unknown_type(type_name: &Named, known: &[String], p: &mut Diagnostics) {
             .to_owned()
     } else {
         let close = suggest(&type_name.name, known);
-        format!("a registered type{close}: {}", known.join(", "))
+        // Not a typo: most likely a type of the user's own, which only the program that
+        // registers it knows.
+        let own = if close.is_empty() {
+            format!(
+                " (a component type of your own is known only to the program that registers \
+                 it: run this file with that program instead of `ndds run`, e.g. \
+                 `cargo run -- {}` in the crate `ndds new component` made; see \
+                 docs/components.md, \"Your own components\")",
+                type_name.at.file.display()
+            )
+        } else {
+            String::new()
+        };
+        format!("a registered type{close}{own}: {}", known.join(", "))
     };
     p.expected(
         &type_name.at,
