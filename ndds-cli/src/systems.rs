@@ -27,6 +27,38 @@ pub fn running(participant: &Participant) -> anyhow::Result<Vec<String>> {
     Ok(names)
 }
 
+/// The ports the process of system `name` owns, by name: its command port `cs.NAME`, its
+/// state machines' `fsm.MACHINE`, those its description files declare (and any other the
+/// process owns). Empty when the command port has no owner in the daemon's view.
+pub fn ports_of(participant: &Participant, name: &str) -> anyhow::Result<Vec<String>> {
+    let graph = participant.graph()?;
+    let owners: Vec<(&str, (u64, u32))> = graph
+        .endpoints
+        .iter()
+        .filter(|e| e.info.qos.kind() == ndds_core::wire::EndpointKind::Producer)
+        .filter_map(|e| {
+            let port = e.info.topic.strip_prefix("port/")?.strip_suffix("/owner")?;
+            Some((port, (e.node, e.info.pid)))
+        })
+        .collect();
+    let command = command_port(name);
+    let Some(process) = owners
+        .iter()
+        .find(|(p, _)| *p == command)
+        .map(|(_, at)| *at)
+    else {
+        return Ok(Vec::new());
+    };
+    let mut ports: Vec<String> = owners
+        .iter()
+        .filter(|(_, at)| *at == process)
+        .map(|(port, _)| (*port).to_owned())
+        .collect();
+    ports.sort();
+    ports.dedup();
+    Ok(ports)
+}
+
 /// A connection to one system's command port.
 pub struct SystemLink {
     name: String,
@@ -52,26 +84,38 @@ impl SystemLink {
 
     /// Sends `command`; the system's answer (done, in words, or refused with the reason).
     pub fn ask(&self, command: &RuntimeCommand) -> anyhow::Result<CommandReply> {
-        match self.user.send(command, self.wait) {
+        self.ask_within(command, self.wait)
+    }
+
+    /// As [`ask`](Self::ask), waiting at most `wait` for the answer.
+    pub fn ask_within(
+        &self,
+        command: &RuntimeCommand,
+        wait: Duration,
+    ) -> anyhow::Result<CommandReply> {
+        match self.user.send(command, wait) {
             Ok(reply) => Ok(reply),
             Err(PortError::Timeout { owner: None, .. }) => anyhow::bail!(
                 "system `{}` is not running (its command port has no owner); `ndds run FILE` \
                  starts it",
                 self.name
             ),
-            Err(PortError::Timeout { .. }) => anyhow::bail!(
-                "system `{}` did not answer within {:?}",
-                self.name,
-                self.wait
-            ),
+            Err(PortError::Timeout { .. }) => {
+                anyhow::bail!("system `{}` did not answer within {wait:?}", self.name)
+            }
             Err(err) => Err(err.into()),
         }
     }
 
     /// The system's description now.
     pub fn describe(&self) -> anyhow::Result<SystemDescription> {
+        self.describe_within(self.wait)
+    }
+
+    /// As [`describe`](Self::describe), waiting at most `wait` for the answer.
+    pub fn describe_within(&self, wait: Duration) -> anyhow::Result<SystemDescription> {
         let text = self
-            .ask(&RuntimeCommand::Describe)?
+            .ask_within(&RuntimeCommand::Describe, wait)?
             .map_err(|refused| anyhow::anyhow!("system `{}`: {refused}", self.name))?;
         serde_json::from_str(&text).with_context(|| format!("system `{}`'s description", self.name))
     }

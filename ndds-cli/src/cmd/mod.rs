@@ -7,6 +7,7 @@ mod habitat;
 mod hz;
 mod key;
 mod modules;
+mod new;
 mod nodes;
 mod perf;
 mod play;
@@ -15,6 +16,7 @@ mod publish;
 mod record;
 pub(crate) mod run;
 mod security;
+mod shell;
 mod studio;
 mod topics;
 
@@ -54,6 +56,10 @@ enum Command {
     Ports(ports::Args),
     /// Show the module tree: each running module with its children, tasks and ports.
     Modules(modules::Args),
+    /// The operator's console on a running system: look at it, set, switch, send, watch.
+    Shell(shell::Args),
+    /// Make a crate with a component type of your own, or a system description to start from.
+    New(new::Args),
     /// Load a system description file, verify it and run it, with a live status.
     Run(run::Args),
     /// Record topics into an MCAP file (Foxglove, rosbag2 and Python's mcap read it).
@@ -92,6 +98,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Habitat(args) => habitat::run(&cli.daemon, &args),
         Command::Ports(args) => ports::run(&cli.daemon, &args),
         Command::Modules(args) => modules::run(&cli.daemon, &args),
+        Command::Shell(args) => shell::run(&cli.daemon, &args),
+        Command::New(args) => new::run(&args),
         Command::Record(args) => record::run(&cli.daemon, &args),
         Command::Play(args) => play::run(&cli.daemon, &args),
         Command::Bag(args) => bag::run(&args),
