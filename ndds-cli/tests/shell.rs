@@ -394,3 +394,68 @@ fn on_a_terminal_tab_completes_up_recalls_and_errors_do_not_end_the_shell() {
     assert!(history.contains("switch endptlqg"), "{history}");
     assert!(history.contains("show joint_goal"), "{history}");
 }
+
+/// `ndds habitat`: each action's answer, a refusal naming the habitats, and the new rate in
+/// the habitat's *published* statistics (`cs/arm/control/stats`, as `ndds echo` reads them).
+#[test]
+fn ndds_habitat_changes_a_rate_seen_in_the_published_statistics() {
+    let world = World::start();
+    let _system = start_arm(&world);
+    let published_rate = || -> Option<f64> {
+        let run = world.ndds(&[
+            "echo",
+            "cs/arm/control/stats",
+            "--field",
+            "rate_hz",
+            "--count",
+            "1",
+            "--wait",
+            "5",
+        ]);
+        run.success()
+            .then(|| run.stdout.trim().parse().ok())
+            .flatten()
+    };
+    assert_eq!(published_rate(), Some(200.0));
+
+    let run = world.ndds(&["habitat", "control", "rate", "50"]);
+    assert!(
+        run.ok()
+            .contains("habitat `control` of system `arm`: rate 200 Hz -> 50 Hz"),
+        "{run}"
+    );
+    // Statistics are published once a second: the new rate is in one of the next ones.
+    assert!(
+        common::eventually(common::SETTLE, || published_rate() == Some(50.0)),
+        "the published statistics never said 50 Hz"
+    );
+
+    let run = world.ndds(&["habitat", "control", "reset"]);
+    assert!(run.ok().contains("reset at its next sample"), "{run}");
+    let run = world.ndds(&["habitat", "plant", "stop"]);
+    assert!(
+        run.ok().contains("habitat `plant` of system `arm` stopped"),
+        "{run}"
+    );
+    let run = world.ndds(&["habitat", "plant", "start", "--system", "arm"]);
+    assert!(
+        run.ok().contains("habitat `plant` of system `arm` started"),
+        "{run}"
+    );
+
+    let run = world.ndds(&["habitat", "contrl", "rate", "100"]);
+    assert!(
+        run.err().contains(
+            "system `arm` has no habitat `contrl` (did you mean `control`?); habitats: control, \
+             plant"
+        ),
+        "{run}"
+    );
+    let run = world.ndds(&["habitat", "control", "rate", "0"]);
+    assert!(run.err().contains("0 Hz is not a usable rate"), "{run}");
+    let run = world.ndds(&["habitat", "control", "rate", "100", "--system", "arn"]);
+    assert!(
+        run.err().contains("no system `arn` runs in this domain"),
+        "{run}"
+    );
+}

@@ -28,9 +28,14 @@
 //!
 //! # Layout
 //!
-//! One component type and its spec (its `ComponentSpec` and registry entry) per file, in
-//! directories by the chapters of docs/components.md; each chapter's `mod.rs` holds its table
-//! of types and what its files share.
+//! One component type per file, in directories by the chapters of docs/components.md; each
+//! chapter's `mod.rs` holds its table of types and what its files share. Every type but
+//! `product` is a `#[derive(Component)]` struct: its fields are its inputs, outputs and
+//! parameters (the doc comment of each is its line in docs/components.md) and its state, and
+//! its Rust constructor builds the same `Params` a description file gives and calls the
+//! derived factory. `product` keeps a hand-written spec and factory (`Registry::add_with`):
+//! whether its inputs must share a shape, and how its output's shape follows them, depend on
+//! its `matrix` parameter.
 //!
 //! | file | holds |
 //! |------|-------|

@@ -72,15 +72,6 @@ pub(crate) fn shape_of(mat: &Mat, fallback: Shape) -> Shape {
     }
 }
 
-/// A scalar parameter CSMat `"{module}.{name}"` (created with `value` if absent).
-pub(crate) fn scalar_param(b: &mut Binder<'_>, name: &str, value: f64) -> Mat {
-    let full = format!("{}.{name}", b.module_name());
-    b.param_or(
-        &full,
-        CsMat::from_row_slice(&full, 1, 1, &[value]).unwrap_or_else(|_| CsMat::zeros(&full, 1, 1)),
-    )
-}
-
 /// A matrix parameter CSMat `"{module}.{name}"` created from `value`.
 pub(crate) fn matrix_param(b: &mut Binder<'_>, name: &str, value: &DMatrix<f64>) -> Mat {
     let full = format!("{}.{name}", b.module_name());

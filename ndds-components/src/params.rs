@@ -38,18 +38,6 @@ pub(crate) fn all_finite(name: &str, values: &[f64]) -> Result<(), ModuleError> 
     values.iter().try_for_each(|x| finite(name, *x).map(drop))
 }
 
-/// `x` as a whole number in `min..=max` (for counts, sizes and seeds).
-pub(crate) fn whole_number(name: &str, x: f64, min: f64, max: f64) -> Result<u64, ModuleError> {
-    if x.fract() == 0.0 && (min..=max).contains(&x) {
-        Ok(x as u64)
-    } else {
-        Err(ModuleError::param(
-            name,
-            format!("expected a whole number from {min} to {max}, got {x}"),
-        ))
-    }
-}
-
 /// The length the lists `(name, values)` agree on: each has one value or the longest one's
 /// count. Every value must be finite.
 pub(crate) fn common_length(lists: &[(&str, &[f64])]) -> Result<usize, ModuleError> {
@@ -119,8 +107,6 @@ mod tests {
             err.to_string(),
             "parameter `initial`: has 2 values but `final` has 3; give one value or 3"
         );
-        let (name, _) = refused(whole_number("rows", 0.5, 1.0, 10.0).unwrap_err());
-        assert_eq!(name, "rows");
         let (name, _) = refused(broadcast("value", &[1.0, 2.0], 3).unwrap_err());
         assert_eq!(name, "value");
         let inner = ParamError {
@@ -139,7 +125,6 @@ mod tests {
         let [a, b] = columns([("a", &[1.0][..]), ("b", &[2.0, 3.0][..])]).unwrap();
         assert_eq!(a.as_slice(), [1.0, 1.0]);
         assert_eq!(b.as_slice(), [2.0, 3.0]);
-        assert_eq!(whole_number("seed", 7.0, 0.0, 10.0).unwrap(), 7);
         assert!(matches!(failed("x"), ModuleError::Failed(text) if text == "x"));
     }
 }

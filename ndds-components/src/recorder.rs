@@ -20,18 +20,14 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError, TryLockError};
 
-use ndds_runtime::Mat;
 use ndds_runtime::csmat::CsMat;
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::params::{failed, whole_number};
+use crate::params::failed;
 
 /// Most values (samples × columns) one recorder holds: 1 GiB of `f64`.
 const MAX_VALUES: usize = 1 << 27;
-
-/// Largest `capacity` the `recorder` component accepts.
-const MAX_CAPACITY: f64 = 1e8;
 
 /// The recording: `capacity` rows of `width` values in one buffer, filled in place.
 #[derive(Default)]
@@ -221,18 +217,49 @@ fn column_names(name: &str, mat: &CsMat, out: &mut Vec<String>) {
     }
 }
 
-/// Records its inputs each sample into a ring of `capacity` rows (the last `capacity`
-/// samples are kept): `[time, every element of every input]`. The ring is allocated when
-/// sampling begins (`startup`, which also starts a new recording), so `execute` only copies
-/// values. Read it through [`handle`](Self::handle); with a `file`, `shutdown` writes it there
-/// as CSV (see [`RecorderHandle::write_csv`]).
+/// Records its inputs each sample (time, then every element) into a ring of the last
+/// `capacity` samples, read from code through a RecorderHandle; with `file`, writes them as
+/// CSV or MCAP (`.mcap`) when sampling ends.
+///
+/// Each row is `[time, every element of every input]`. The ring is allocated when sampling
+/// begins (`startup`, which also starts a new recording), so `execute` only copies values.
+/// Read it through [`handle`](Self::handle); with a `file`, `shutdown` writes it there as CSV
+/// (see [`RecorderHandle::write_csv`]).
+#[derive(Component)]
+#[component(name = "recorder", finish = Self::name_after_module)]
 pub struct Recorder {
+    /// the CSMats to record (at least one)
+    #[inputs]
     inputs: Vec<Mat>,
+    /// samples kept (the newest)
+    #[param(default = 10000, min = 1, max = 100000000)]
+    _capacity: usize,
+    /// file written when sampling ends: CSV (header: `time, <mat>[<row>,<col>], …`), or an MCAP
+    /// recording when it ends in .mcap (one channel per input)
+    #[param]
+    file: Option<PathBuf>,
     /// Each input's shape when sampling began.
     shapes: Vec<(usize, usize)>,
-    file: Option<PathBuf>,
+    /// The module's name, for messages.
     name: String,
+    #[state(init = Arc::new(Shared::new(_capacity)))]
     shared: Arc<Shared>,
+}
+
+impl Shared {
+    /// An empty recording of `capacity` samples (allocated when sampling begins).
+    fn new(capacity: usize) -> Self {
+        let ring = Ring {
+            capacity,
+            ..Ring::default()
+        };
+        Self {
+            ring: Mutex::new(ring),
+            templates: Mutex::new(Vec::new()),
+            began: Mutex::new(std::time::SystemTime::UNIX_EPOCH),
+            dropped: AtomicU64::new(0),
+        }
+    }
 }
 
 impl Recorder {
@@ -243,28 +270,22 @@ impl Recorder {
         capacity: usize,
         file: Option<&Path>,
     ) -> Result<Self, ModuleError> {
-        if inputs.is_empty() {
-            return Err(ModuleError::param("inputs", "expected at least one CSMat"));
-        }
         if capacity == 0 {
             return Err(ModuleError::param("capacity", "expected at least 1 sample"));
         }
-        let ring = Ring {
-            capacity,
-            ..Ring::default()
-        };
-        Ok(Self {
-            inputs: inputs.iter().map(|i| b.input(i, Shape::Any)).collect(),
-            shapes: Vec::new(),
-            file: file.map(Path::to_path_buf),
-            name: b.module_name().to_owned(),
-            shared: Arc::new(Shared {
-                ring: Mutex::new(ring),
-                templates: Mutex::new(Vec::new()),
-                began: Mutex::new(std::time::SystemTime::UNIX_EPOCH),
-                dropped: AtomicU64::new(0),
-            }),
-        })
+        let names: Vec<String> = inputs.iter().map(|i| (*i).to_owned()).collect();
+        let params = Params::new().with("inputs", names);
+        let mut recorder = Self::build(b, &params)?;
+        // Set here, not as parameters: a path need not be UTF-8, and a Rust caller's capacity
+        // has no upper limit but memory's (checked when sampling begins).
+        recorder.shared = Arc::new(Shared::new(capacity));
+        recorder.file = file.map(Path::to_path_buf);
+        Ok(recorder)
+    }
+
+    fn name_after_module(&mut self, b: &mut Binder<'_>) -> Result<(), ModuleError> {
+        self.name = b.module_name().to_owned();
+        Ok(())
     }
 
     /// A handle to read the recording with.
@@ -404,42 +425,9 @@ impl SampleModule for Recorder {
     }
 }
 
-const RECORDER: ComponentSpec = ComponentSpec {
-    name: "recorder",
-    summary: "Records its inputs each sample (time, then every element) into a ring of the \
-              last `capacity` samples, read from code through a RecorderHandle; with `file`, \
-              writes them as CSV or MCAP (`.mcap`) when sampling ends.",
-    params: &[
-        P::required("inputs", K::Inputs, "the CSMats to record (at least one)"),
-        P::optional("capacity", K::Number, "10000", "samples kept (the newest)"),
-        P::optional(
-            "file",
-            K::File,
-            "none",
-            "file written when sampling ends: CSV (header: time, <mat>[<row>,<col>], …), or an \
-             MCAP recording when it ends in .mcap (one channel per input)",
-        ),
-    ],
-};
-
 /// Registers `recorder`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&RECORDER, |b, p| {
-        let inputs = p.texts("inputs")?;
-        let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
-        let capacity = whole_number(
-            "capacity",
-            p.number_or("capacity", 10000.0)?,
-            1.0,
-            MAX_CAPACITY,
-        )?;
-        let file = if p.has("file") {
-            Some(Path::new(p.text("file")?))
-        } else {
-            None
-        };
-        Recorder::new(b, &names, capacity as usize, file)
-    });
+    registry.add::<Recorder>();
 }
 
 #[cfg(test)]

@@ -17,7 +17,7 @@ use proc_macro2::TokenStream;
 use quote::{format_ident, quote};
 use syn::Expr;
 
-use crate::model::{Component, Field, Param, ParamType, Role, Shape};
+use crate::model::{Component, Field, Param, ParamType, Reading, Role, Shape};
 
 /// The `impl` for `c`.
 pub fn expand(c: &Component) -> TokenStream {
@@ -67,7 +67,9 @@ fn param_spec(field: &Field) -> Option<TokenStream> {
         Role::State { .. } => return None,
         Role::Input { optional, .. } => ("Input", optional.then(|| "none".to_owned()), None, None),
         Role::Inputs { .. } => ("Inputs", None, None, None),
-        Role::Output { .. } => ("Output", None, None, None),
+        Role::Output { optional, .. } => {
+            ("Output", optional.then(|| "none".to_owned()), None, None)
+        }
         Role::Param(p) => (
             p.ty.kind(),
             default_text(p),
@@ -107,12 +109,18 @@ fn default_text(p: &Param) -> Option<String> {
 }
 
 fn expr_text(expr: &Expr) -> String {
-    if let Expr::Lit(syn::ExprLit {
-        lit: syn::Lit::Str(s),
-        ..
-    }) = expr
-    {
-        return s.value();
+    if let Expr::Lit(syn::ExprLit { lit, .. }) = expr {
+        match lit {
+            syn::Lit::Str(s) => return s.value(),
+            // `1u64` as 1, `0.5_f64` as 0.5.
+            syn::Lit::Int(i) => return i.base10_digits().to_owned(),
+            syn::Lit::Float(f) => {
+                if let Ok(x) = f.base10_parse::<f64>() {
+                    return format!("{x}");
+                }
+            }
+            _ => {}
+        }
     }
     let text = quote!(#expr).to_string().replace(' ', "");
     match text.parse::<f64>() {
@@ -152,7 +160,7 @@ fn read_phase(field: &Field) -> TokenStream {
     let ident = &field.ident;
     match &field.role {
         Role::State { .. } => quote!(),
-        Role::Input { optional: true, .. } => {
+        Role::Input { optional: true, .. } | Role::Output { optional: true, .. } => {
             let name = mat_name(field);
             quote!(let #name: ::core::option::Option<::std::string::String> =
                 __support::optional(__params, #key)?;)
@@ -188,18 +196,36 @@ fn read_phase(field: &Field) -> TokenStream {
     }
 }
 
+/// The value of the parameter `key` as `ty`; with `finite = false` read through
+/// `support::NonFinite`, which accepts infinities and NaN.
 fn param_value(p: &Param, key: &str, ty: &TokenStream) -> TokenStream {
+    let (read, unwrap) = if p.any_number {
+        (quote!(__support::NonFinite<#ty>), quote!(.0))
+    } else {
+        (ty.clone(), quote!())
+    };
     if p.optional {
-        return quote!(__support::optional(__params, #key)?);
+        return if p.any_number {
+            quote!(__support::optional::<__support::NonFinite<_>>(__params, #key)?
+                .map(|__value| __value.0))
+        } else {
+            quote!(__support::optional(__params, #key)?)
+        };
     }
-    match &p.default {
+    // An integer literal has no `Into<u64>` (it would fall back to i32): an integer default
+    // is typed by the field alone.
+    let default = p.default.as_ref().map(|default| match p.ty {
+        ParamType::Whole => quote!(#default),
+        _ => quote!(::core::convert::Into::<#ty>::into(#default)),
+    });
+    match default {
         Some(default) => quote! {
-            match __support::optional::<#ty>(__params, #key)? {
-                ::core::option::Option::Some(value) => value,
-                ::core::option::Option::None => ::core::convert::Into::<#ty>::into(#default),
+            match __support::optional::<#read>(__params, #key)? {
+                ::core::option::Option::Some(value) => value #unwrap,
+                ::core::option::Option::None => #default,
             }
         },
-        None => quote!(__support::required::<#ty>(__params, #key)?),
+        None => quote!(__support::required::<#read>(__params, #key)? #unwrap),
     }
 }
 
@@ -241,7 +267,12 @@ fn distinct(fields: &[Field]) -> TokenStream {
                     quote!(__inputs.extend(#name.iter().map(::std::string::String::as_str));),
                 );
             }
-            Role::Output { .. } => outputs.push(quote!(#name.as_str())),
+            Role::Output { optional: true, .. } => {
+                outputs.push(quote!(if let ::core::option::Option::Some(n) = &#name {
+                    __outputs.push(n.as_str());
+                }));
+            }
+            Role::Output { .. } => outputs.push(quote!(__outputs.push(#name.as_str());)),
             _ => {}
         }
     }
@@ -253,7 +284,9 @@ fn distinct(fields: &[Field]) -> TokenStream {
             #[allow(unused_mut)]
             let mut __inputs: ::std::vec::Vec<&str> = ::std::vec::Vec::new();
             #(#inputs)*
-            __support::distinct(&__inputs, &[#(#outputs),*])?;
+            let mut __outputs: ::std::vec::Vec<&str> = ::std::vec::Vec::new();
+            #(#outputs)*
+            __support::distinct(&__inputs, &__outputs)?;
         }
     }
 }
@@ -262,7 +295,19 @@ fn shape(shape: &Shape) -> TokenStream {
     match shape {
         Shape::Any | Shape::Like(_) => quote!(::ndds_runtime::Shape::Any),
         Shape::Expr(e) => quote!(::ndds_runtime::Shape::from(#e)),
-        Shape::SameAs(other) => quote!(__support::shape_of(&#other)),
+        Shape::SameAs { .. } => {
+            let other = same_as(shape);
+            quote!(__support::shape_of(#other))
+        }
+    }
+}
+
+/// The CSMat a `same_as` names: the field, or the first of an `#[inputs]` field.
+fn same_as(shape: &Shape) -> TokenStream {
+    match shape {
+        Shape::SameAs { field, first: true } => quote!(&#field[0]),
+        Shape::SameAs { field, .. } => quote!(&#field),
+        _ => quote!(),
     }
 }
 
@@ -278,35 +323,58 @@ fn declare_phase(field: &Field) -> TokenStream {
             shape: s,
         } => {
             let shape = shape(s);
-            let declare = if *state {
-                quote!(state_input)
-            } else {
-                quote!(input)
+            let declare = |n: TokenStream| match state {
+                Reading::Execute => quote!(__binder.input(#n, #shape)),
+                Reading::State => quote!(__binder.state_input(#n, #shape)),
+                Reading::StateIf(when) => quote! {
+                    if #when {
+                        __binder.state_input(#n, #shape)
+                    } else {
+                        __binder.input(#n, #shape)
+                    }
+                },
             };
             if *optional {
+                let declare = declare(quote!(n));
                 quote! {
                     let #ident = match &#name {
-                        ::core::option::Option::Some(n) => {
-                            ::core::option::Option::Some(__binder.#declare(n, #shape))
-                        }
+                        ::core::option::Option::Some(n) => ::core::option::Option::Some(#declare),
                         ::core::option::Option::None => ::core::option::Option::None,
                     };
                 }
             } else {
-                quote!(let #ident = __binder.#declare(&#name, #shape);)
+                let declare = declare(quote!(&#name));
+                quote!(let #ident = #declare;)
             }
         }
         Role::Inputs { same_shape } => {
             quote!(let #ident = __support::inputs(__binder, #key, &#name, #same_shape)?;)
         }
-        Role::Output { shape: s } => match s {
-            Shape::SameAs(input) => quote!(let #ident = __binder.output_same_as(&#name, &#input);),
-            Shape::Like(template) => quote!(let #ident = __binder.output_like(&#name, #template);),
-            other => {
-                let shape = shape(other);
-                quote!(let #ident = __binder.output(&#name, #shape);)
+        Role::Output { optional, shape: s } => {
+            let declare = |n: TokenStream| match s {
+                Shape::SameAs { .. } => {
+                    let input = same_as(s);
+                    quote!(__binder.output_same_as(#n, #input))
+                }
+                Shape::Like(template) => quote!(__binder.output_like(#n, #template)),
+                other => {
+                    let shape = shape(other);
+                    quote!(__binder.output(#n, #shape))
+                }
+            };
+            if *optional {
+                let declare = declare(quote!(n));
+                quote! {
+                    let #ident = match &#name {
+                        ::core::option::Option::Some(n) => ::core::option::Option::Some(#declare),
+                        ::core::option::Option::None => ::core::option::Option::None,
+                    };
+                }
+            } else {
+                let declare = declare(quote!(&#name));
+                quote!(let #ident = #declare;)
             }
-        },
+        }
         Role::Param(p) => match p.ty {
             ParamType::Tunable => {
                 let value = format_ident!("__value_{ident}");
@@ -400,11 +468,69 @@ mod tests {
     }
 
     #[test]
+    fn optional_outputs_conditional_inputs_and_unchecked_numbers() {
+        let out = expanded(
+            r#"
+            /// x
+            #[component(name = "x")]
+            struct X {
+                #[state(init = 2)]
+                n: usize,
+                /// terms
+                #[inputs] terms: Vec<Mat>,
+                /// u
+                #[input(state = n > 1)] u: Mat,
+                /// y
+                #[output(same_as = terms)] y: Mat,
+                /// v
+                #[output(shape = (n, 1))] v: Option<Mat>,
+                /// lower
+                #[param(tunable, column, finite = false)] lower: Mat,
+                /// count
+                #[param(default = 3)] count: u32,
+                /// limit
+                #[param(finite = false)] limit: Option<f64>,
+            }"#,
+        );
+        let (spec, build) = out.split_once("fn build").unwrap();
+        assert!(
+            spec.contains("name : \"v\" , kind : :: ndds_runtime :: ParamKind :: Output , default : :: core :: option :: Option :: Some (\"none\")"),
+            "an optional output defaults to none: {spec}"
+        );
+        assert!(spec.contains("Some (\"3\")"), "{spec}");
+        assert!(
+            build.contains("if n > 1 { __binder . state_input"),
+            "{build}"
+        );
+        assert!(
+            build.contains("output_same_as (& __name_y , & terms [0])"),
+            "{build}"
+        );
+        assert!(
+            build.contains("__outputs . push (n . as_str ())"),
+            "{build}"
+        );
+        assert!(
+            build.contains("NonFinite < :: std :: vec :: Vec < f64 > >"),
+            "{build}"
+        );
+        assert!(build.contains("NonFinite < _ >"), "{build}");
+        assert!(
+            build.contains("None => 3"),
+            "an integer default is typed by its field: {build}"
+        );
+        assert!(build.contains("tunable_column"), "{build}");
+    }
+
+    #[test]
     fn defaults_are_shown_as_written() {
         let expr = |code: &str| expr_text(&syn::parse_str(code).unwrap());
         assert_eq!(expr("1.0"), "1");
         assert_eq!(expr("0.25"), "0.25");
         assert_eq!(expr("\"linear\""), "linear");
+        assert_eq!(expr("1u64"), "1");
+        assert_eq!(expr("0.5_f64"), "0.5");
+        assert_eq!(expr("-1.0"), "-1");
         assert_eq!(expr("vec![0.0, 1.0]"), "vec![0.0,1.0]");
     }
 }

@@ -27,7 +27,7 @@ mod model;
 /// |---|---|
 /// | `#[component(name = "NAME")]` | the type name description files give (`type = "NAME"`); required |
 /// | `#[component(summary = "...")]` | the spec's summary; default: the doc comment's first paragraph |
-/// | `#[component(finish = PATH)]` | `fn(&mut Self, &mut Binder<'_>) -> Result<(), ModuleError>`, called once the struct is built (checks across parameters, derived state) |
+/// | `#[component(finish = PATH)]` | `fn(&mut Self, &mut Binder<'_>) -> Result<(), ModuleError>`, called once the struct is built (checks across parameters and CSMats, CSMats of its own) |
 ///
 /// On each field (its doc comment is the parameter's line in the docs; required on every
 /// field that is a key of the table):
@@ -36,27 +36,44 @@ mod model;
 /// |---|---|---|---|
 /// | `#[input]` | `Mat` (`Option<Mat>`: optional) | the name of a CSMat it reads in `execute` | reads CSMat |
 /// | `#[input(state)]` | as above | a CSMat read only in `state_update` (closes loops) | reads CSMat |
+/// | `#[input(state = EXPR)]` | as above | read in `state_update` when `EXPR` is true, else in `execute` (feedthrough that depends on parameters) | reads CSMat |
 /// | `#[inputs]` | `Vec<Mat>` | a list of CSMat names (at least one) | reads CSMats |
-/// | `#[output]` | `Mat` | the name of a CSMat it writes | writes CSMat |
+/// | `#[output]` | `Mat` (`Option<Mat>`: optional) | the name of a CSMat it writes | writes CSMat |
 /// | `#[param]` | `f64`, an integer type, `Vec<f64>`, `DMatrix<f64>`, `String`, `PathBuf`, `bool`, `Params`; `Option<_>` of one | a value | number, numbers, matrix, string, file name, bool, table |
-/// | `#[param(tunable)]` | `Mat` | a number (a list when the default is one) | the 1 × 1 (n × 1) parameter CSMat `<module>.<key>`, changed while it runs |
+/// | `#[param(tunable)]` | `Mat` | a number (a list when the default is one, or with `column`) | the 1 × 1 (n × 1) parameter CSMat `<module>.<key>`, changed while it runs |
 /// | `#[state]` or none | anything with `Default` | nothing: the module's own state | — |
 ///
 /// Options:
-/// - inputs and outputs: `shape = (ROWS, COLS)` (an expression; it may name parameters and
-///   earlier CSMat fields), `same_as = FIELD` (an earlier CSMat's shape; an output then follows
-///   its input's shape once known); outputs: `like = TEMPLATE` (a `CsMat` with field names and
-///   units, created unless it exists); `#[inputs(same_shape)]`: all of the first's shape;
-/// - parameters: `default = EXPR` (absent means required, unless `Option`), `default_doc =
-///   "..."` (how docs show it), `unit = "s"`, `min`, `max` (inclusive), `above`, `below`
-///   (exclusive) as number literals, checked on every number of the value;
+/// - inputs and outputs: `shape = (ROWS, COLS)` (an expression), `same_as = FIELD` (an
+///   earlier CSMat's shape, or the first CSMat's of an `#[inputs]` field; an output then
+///   follows its input's shape once known); outputs: `like = TEMPLATE` (a `CsMat` with field
+///   names and units, created unless it exists; its name is the output's once bound);
+///   `#[inputs(same_shape)]`: all of the first's shape;
+/// - parameters: `default = EXPR` (absent means required, unless `Option`; an integer
+///   parameter's default is typed by the field), `default_doc = "..."` (how docs show it),
+///   `unit = "s"`, `min`, `max` (inclusive), `above`, `below` (exclusive) as number literals,
+///   checked on every number of the value; `finite = false`: infinities and NaN accepted (the
+///   component checks them, e.g. an infinite bound); `column` with `tunable`: given as a list
+///   (one row per value) even without a default;
 /// - any described field: `key = "..."` (the table's key, when it is not the field's name:
-///   `final` is a Rust keyword);
-/// - `#[state(init = EXPR)]`: the state's first value, from parameters and CSMats.
+///   `final` is a Rust keyword). Without it the key is the field's name without `r#` or a
+///   leading `_`: `_rows` is the key `rows`, for a parameter that only the factory reads
+///   (no routine does, so Rust would call the field dead);
+/// - `#[state(init = EXPR)]`: the state's first value.
 ///
-/// Numbers are refused when not finite; integers when not whole or out of their type's range;
-/// a CSMat both read and written by the module is refused. Every refusal is
-/// `ModuleError::Param` naming the key (or, for the CSMat used twice, `ModuleError::Failed`).
+/// The factory reads every parameter first, in field order (so a `default` may name an
+/// earlier parameter), then declares the CSMats and initialises the state fields, in field
+/// order again: a `shape`, `like`, `state = EXPR` or `init` expression may name every
+/// parameter and every earlier CSMat or state field (a tunable parameter is its `Mat`, once
+/// declared), and may use `?` on a `Result<_, ModuleError>`. A state field placed before the CSMats can so hold what their
+/// shapes come from (a model, columns of one length); it is not in the spec, so its place
+/// changes no parameter's order.
+///
+/// Numbers are refused when not finite (unless `finite = false`); integers when not whole or
+/// out of their type's range; a CSMat both read and written by the module is refused. Every
+/// refusal is `ModuleError::Param` naming the key (or, for the CSMat used twice,
+/// `ModuleError::Failed`): "−1 is negative: expected ≥ 0", "0 is not positive: expected > 0",
+/// "2 is out of range: expected ≤ 1", "expected a whole number from 1 to 10, got 0".
 ///
 /// A field of a type the role does not take is a compile error naming the field (the
 /// `trybuild` cases in `ndds-runtime/tests/ui/` hold each error's exact text):

@@ -41,18 +41,29 @@ pub enum Role {
     /// `#[input]`: a CSMat it reads (`Mat`, or `Option<Mat>` for an optional one).
     Input {
         optional: bool,
-        state: bool,
+        state: Reading,
         shape: Shape,
     },
     /// `#[inputs]`: CSMats it reads (`Vec<Mat>`), at least one.
     Inputs { same_shape: bool },
-    /// `#[output]`: a CSMat it writes (`Mat`).
-    Output { shape: Shape },
+    /// `#[output]`: a CSMat it writes (`Mat`, or `Option<Mat>` for an optional one).
+    Output { optional: bool, shape: Shape },
     /// `#[param]`: a value from the description file.
     Param(Param),
     /// Anything unmarked or `#[state]`: the module's own state, `Default::default()` unless
     /// `#[state(init = EXPR)]`.
     State { init: Option<Expr> },
+}
+
+/// When an input is read.
+pub enum Reading {
+    /// In `execute` (direct feedthrough): `#[input]`.
+    Execute,
+    /// Only in `state_update` (closes loops): `#[input(state)]`.
+    State,
+    /// In `state_update` when the expression is true, else in `execute`:
+    /// `#[input(state = EXPR)]` (a system whose feedthrough depends on its parameters).
+    StateIf(Expr),
 }
 
 /// The shape a CSMat is declared with.
@@ -61,8 +72,9 @@ pub enum Shape {
     Any,
     /// `shape = EXPR` (a `(rows, cols)`; may name parameters and earlier CSMats).
     Expr(Expr),
-    /// `same_as = FIELD`: the shape of an earlier CSMat field.
-    SameAs(Ident),
+    /// `same_as = FIELD`: the shape of an earlier CSMat field (`first`: of an `#[inputs]`
+    /// field, its first CSMat's; set by the checks once the field is known).
+    SameAs { field: Ident, first: bool },
     /// `like = EXPR`: an output created from a template CSMat (field names and units).
     Like(Expr),
 }
@@ -81,6 +93,8 @@ pub struct Param {
     pub unit: Option<String>,
     /// `min`, `max`, `above`, `below`.
     pub range: Range,
+    /// `finite = false`: infinities and NaN are accepted (the component checks them).
+    pub any_number: bool,
 }
 
 /// Bounds, as literals.
@@ -233,7 +247,7 @@ impl Component {
         for field in &named.named {
             fields.push(Field::parse(field)?);
         }
-        check_references(&fields)?;
+        check_references(&mut fields)?;
         Ok(Self {
             ident: input.ident.clone(),
             name,
@@ -262,46 +276,63 @@ fn check_type_name(name: &str, span: Span) -> syn::Result<()> {
     }
 }
 
-/// `same_as` must name an earlier CSMat field; keys must be unique.
-fn check_references(fields: &[Field]) -> syn::Result<()> {
-    for (i, field) in fields.iter().enumerate() {
-        if fields[..i]
-            .iter()
-            .any(|f| f.is_described() && f.key == field.key)
-            && field.is_described()
+/// `same_as` must name an earlier CSMat field (marking the first of an `#[inputs]` field);
+/// keys must be unique.
+fn check_references(fields: &mut [Field]) -> syn::Result<()> {
+    for i in 0..fields.len() {
+        let (earlier, rest) = fields.split_at_mut(i);
+        let (field, later) = rest.split_first_mut().expect("i < fields.len()");
+        if field.is_described()
+            && earlier
+                .iter()
+                .any(|f| f.is_described() && f.key == field.key)
         {
             return Err(syn::Error::new(
                 field.span,
                 format!("two fields have the key `{}`", field.key),
             ));
         }
-        let same_as = match &field.role {
+        let (same_as, first) = match &mut field.role {
             Role::Input {
-                shape: Shape::SameAs(other),
+                shape: Shape::SameAs { field, first },
                 ..
             }
             | Role::Output {
-                shape: Shape::SameAs(other),
-            } => other,
+                shape: Shape::SameAs { field, first },
+                ..
+            } => (field, first),
             _ => continue,
         };
-        let earlier = fields[..i].iter().find(|f| f.ident == *same_as);
-        match earlier.map(|f| &f.role) {
+        let problem = match earlier
+            .iter()
+            .find(|f| f.ident == *same_as)
+            .map(|f| &f.role)
+        {
             Some(Role::Input {
                 optional: false, ..
             })
-            | Some(Role::Output { .. }) => {}
-            _ => {
-                return Err(syn::Error::new(
-                    same_as.span(),
-                    format!(
-                        "field `{}`: `same_as = {same_as}` must name an earlier #[input] or \
-                         #[output] field of type Mat",
-                        field.ident
-                    ),
-                ));
+            | Some(Role::Output {
+                optional: false, ..
+            }) => continue,
+            Some(Role::Inputs { .. }) => {
+                *first = true;
+                continue;
             }
-        }
+            Some(_) => "names a field that is not a CSMat it always has",
+            None if later.iter().any(|f| f.ident == *same_as) => {
+                "names a field declared after it (CSMats are declared in field order: move it \
+                 above)"
+            }
+            None => "names no field of this struct",
+        };
+        return Err(syn::Error::new(
+            same_as.span(),
+            format!(
+                "field `{}`: `same_as = {same_as}` {problem}; it takes an earlier #[input] or \
+                 #[output] field of type Mat, or #[inputs] (its first CSMat)",
+                field.ident
+            ),
+        ));
     }
     Ok(())
 }
@@ -346,7 +377,7 @@ impl Field {
                 ),
             ));
         }
-        let key = key.unwrap_or_else(|| ident.to_string().trim_start_matches("r#").to_owned());
+        let key = key.unwrap_or_else(|| default_key(&ident));
         Ok(Self {
             span: ident.span(),
             ident,
@@ -363,6 +394,14 @@ impl Field {
     }
 }
 
+/// The key of a field without `key = "..."`: its name, without `r#` (`r#final`) or a leading
+/// `_` (`_rows`: a parameter no routine reads, used only while building).
+fn default_key(ident: &Ident) -> String {
+    let name = ident.to_string();
+    let name = name.strip_prefix("r#").unwrap_or(&name);
+    name.strip_prefix('_').unwrap_or(name).to_owned()
+}
+
 fn parse_input(
     attr: &Attribute,
     ty: &Type,
@@ -374,20 +413,28 @@ fn parse_input(
         Some(MatType::Optional) => true,
         _ => return Err(wrong_type(ty, ident, "#[input]", "Mat, or Option<Mat>")),
     };
-    let mut state = false;
+    let mut state = Reading::Execute;
     let mut shape = Shape::Any;
     if matches!(attr.meta, Meta::List(_)) {
         attr.parse_nested_meta(|meta| {
             let name = meta.path.get_ident().map(Ident::to_string);
             match name.as_deref() {
-                Some("state") => state = true,
+                Some("state") if meta.input.peek(syn::Token![=]) => {
+                    state = Reading::StateIf(meta.value()?.parse()?);
+                }
+                Some("state") => state = Reading::State,
                 Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
-                Some("same_as") => shape = Shape::SameAs(meta.value()?.parse()?),
+                Some("same_as") => {
+                    shape = Shape::SameAs {
+                        field: meta.value()?.parse()?,
+                        first: false,
+                    };
+                }
                 Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
                 _ => {
                     return Err(meta.error(
-                        "unknown #[input] option; it takes `state`, `shape = (ROWS, COLS)`, \
-                         `same_as = FIELD` and `key = \"...\"`",
+                        "unknown #[input] option; it takes `state`, `state = EXPR`, \
+                         `shape = (ROWS, COLS)`, `same_as = FIELD` and `key = \"...\"`",
                     ));
                 }
             }
@@ -435,16 +482,23 @@ fn parse_output(
     ident: &Ident,
     key: &mut Option<String>,
 ) -> syn::Result<Role> {
-    if mat_type(ty) != Some(MatType::Mat) {
-        return Err(wrong_type(ty, ident, "#[output]", "Mat"));
-    }
+    let optional = match mat_type(ty) {
+        Some(MatType::Mat) => false,
+        Some(MatType::Optional) => true,
+        _ => return Err(wrong_type(ty, ident, "#[output]", "Mat, or Option<Mat>")),
+    };
     let mut shape = Shape::Any;
     if matches!(attr.meta, Meta::List(_)) {
         attr.parse_nested_meta(|meta| {
             let name = meta.path.get_ident().map(Ident::to_string);
             match name.as_deref() {
                 Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
-                Some("same_as") => shape = Shape::SameAs(meta.value()?.parse()?),
+                Some("same_as") => {
+                    shape = Shape::SameAs {
+                        field: meta.value()?.parse()?,
+                        first: false,
+                    };
+                }
                 Some("like") => shape = Shape::Like(meta.value()?.parse()?),
                 Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
                 _ => {
@@ -457,7 +511,7 @@ fn parse_output(
             Ok(())
         })?;
     }
-    Ok(Role::Output { shape })
+    Ok(Role::Output { optional, shape })
 }
 
 fn parse_param(
@@ -467,6 +521,8 @@ fn parse_param(
     key: &mut Option<String>,
 ) -> syn::Result<Param> {
     let mut tunable = false;
+    let mut column = false;
+    let mut any_number = false;
     let mut default = None;
     let mut default_doc = None;
     let mut unit = None;
@@ -476,6 +532,11 @@ fn parse_param(
             let name = meta.path.get_ident().map(Ident::to_string);
             match name.as_deref() {
                 Some("tunable") => tunable = true,
+                Some("column") => column = true,
+                Some("finite") => {
+                    let finite = meta.value()?.parse::<syn::LitBool>()?;
+                    any_number = !finite.value;
+                }
                 Some("default") => default = Some(meta.value()?.parse::<Expr>()?),
                 Some("default_doc") => {
                     default_doc = Some(meta.value()?.parse::<LitStr>()?.value());
@@ -496,7 +557,8 @@ fn parse_param(
                     return Err(meta.error(
                         "unknown #[param] option; it takes `default = EXPR`, \
                          `default_doc = \"...\"`, `unit = \"...\"`, `min`, `max`, `above`, \
-                         `below` (number literals), `tunable` and `key = \"...\"`",
+                         `below` (number literals), `finite = false`, `tunable`, `column` \
+                         and `key = \"...\"`",
                     ));
                 }
             }
@@ -510,10 +572,10 @@ fn parse_param(
     let ty_kind = if tunable {
         match (mat_type(inner), optional) {
             (Some(MatType::Mat), false) => {
-                if default
+                let list_default = default
                     .as_ref()
-                    .is_some_and(|d| matches!(d, Expr::Array(_) | Expr::Macro(_)))
-                {
+                    .is_some_and(|d| matches!(d, Expr::Array(_) | Expr::Macro(_)));
+                if column || list_default {
                     ParamType::TunableColumn
                 } else {
                     ParamType::Tunable
@@ -532,6 +594,24 @@ fn parse_param(
     } else {
         param_type(inner).ok_or_else(|| wrong_type(ty, ident, "#[param]", PARAM_TYPES))?
     };
+    if column && !tunable {
+        return Err(syn::Error::new(
+            ident.span(),
+            format!(
+                "field `{ident}`: `column` is for a `tunable` Mat given as a list; a list that \
+                 is not tunable is a Vec<f64>"
+            ),
+        ));
+    }
+    if any_number && (ty_kind == ParamType::Whole || !ty_kind.numeric()) {
+        return Err(syn::Error::new(
+            ident.span(),
+            format!(
+                "field `{ident}`: `finite = false` applies to f64, Vec<f64>, DMatrix<f64> and \
+                 tunable Mats only"
+            ),
+        ));
+    }
     if optional && default.is_some() {
         return Err(syn::Error::new(
             ident.span(),
@@ -560,6 +640,7 @@ fn parse_param(
         default_doc,
         unit,
         range,
+        any_number,
     })
 }
 
@@ -783,6 +864,96 @@ mod tests {
         };
         assert!(n.optional && n.ty == ParamType::Whole);
         assert!(matches!(c.fields[4].role, Role::State { init: None }));
+    }
+
+    #[test]
+    fn optional_outputs_conditional_state_inputs_columns_and_underscored_keys() {
+        let c = parse(
+            r#"
+            /// x
+            #[component(name = "x")]
+            struct X {
+                /// terms
+                #[inputs] terms: Vec<Mat>,
+                /// u
+                #[input(state = !feedthrough, same_as = terms)] u: Mat,
+                /// y
+                #[output(same_as = terms)] y: Mat,
+                /// v
+                #[output(shape = (2, 1))] v: Option<Mat>,
+                /// bounds
+                #[param(tunable, column, finite = false)] lower: Mat,
+                /// rows
+                #[param(min = 1)] _rows: Option<usize>,
+                /// the value from then on
+                #[param] r#final: Vec<f64>,
+            }"#,
+        )
+        .unwrap();
+        let keys: Vec<&str> = c.fields.iter().map(|f| f.key.as_str()).collect();
+        assert_eq!(keys, ["terms", "u", "y", "v", "lower", "rows", "final"]);
+        assert!(matches!(
+            &c.fields[1].role,
+            Role::Input {
+                state: Reading::StateIf(_),
+                shape: Shape::SameAs { first: true, .. },
+                ..
+            }
+        ));
+        assert!(matches!(
+            &c.fields[2].role,
+            Role::Output {
+                optional: false,
+                shape: Shape::SameAs { first: true, .. }
+            }
+        ));
+        assert!(matches!(
+            &c.fields[3].role,
+            Role::Output { optional: true, .. }
+        ));
+        let Role::Param(lower) = &c.fields[4].role else {
+            panic!("lower is a parameter")
+        };
+        assert_eq!(lower.ty, ParamType::TunableColumn);
+        assert!(lower.any_number);
+    }
+
+    #[test]
+    fn options_that_do_not_fit_the_type_are_refused() {
+        let cases = [
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// k\n #[param(column)] k: Vec<f64> }",
+                "`column` is for a `tunable` Mat",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// n\n #[param(finite = false)] n: u32 }",
+                "`finite = false` applies to f64",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// s\n #[param(finite = false)] s: String }",
+                "`finite = false` applies to f64",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// v\n #[output] v: Option<Mat>, /// w\n #[output(same_as = v)] w: Mat }",
+                "`same_as = v` names a field that is not a CSMat it always has",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// w\n #[output(same_as = u)] w: Mat, /// u\n #[input] u: Mat }",
+                "`same_as = u` names a field declared after it",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// w\n #[output(same_as = q)] w: Mat }",
+                "`same_as = q` names no field of this struct",
+            ),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// v\n #[output] v: Vec<Mat> }",
+                "#[output] does not take `Vec<Mat>`; it takes Mat, or Option<Mat>",
+            ),
+        ];
+        for (code, expected) in cases {
+            let err = error(code);
+            assert!(err.contains(expected), "{code}: {err}");
+        }
     }
 
     #[test]

@@ -133,6 +133,30 @@ pub mod support {
         }
     }
 
+    /// A number, list or matrix read without the finite check: `#[param(finite = false)]`, for
+    /// a parameter where an infinity means something (an absent bound) and the component
+    /// checks NaN itself.
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct NonFinite<T>(pub T);
+
+    impl FromParam for NonFinite<f64> {
+        fn from_param(params: &Params, key: &str) -> Result<Self, ModuleError> {
+            Ok(Self(params.number(key)?))
+        }
+    }
+
+    impl FromParam for NonFinite<Vec<f64>> {
+        fn from_param(params: &Params, key: &str) -> Result<Self, ModuleError> {
+            Ok(Self(params.numbers(key)?))
+        }
+    }
+
+    impl FromParam for NonFinite<DMatrix<f64>> {
+        fn from_param(params: &Params, key: &str) -> Result<Self, ModuleError> {
+            Ok(Self(params.matrix(key)?))
+        }
+    }
+
     macro_rules! whole {
         ($($t:ty),*) => {$(
             impl FromParam for $t {
@@ -186,6 +210,9 @@ pub mod support {
 
     /// A number (or each number of a list or matrix) checked against a range.
     pub trait InRange {
+        /// Whether it is an integer type (a refusal then says "a whole number").
+        const WHOLE: bool = false;
+
         /// Each number the value holds.
         fn numbers(&self) -> Vec<f64>;
     }
@@ -207,6 +234,8 @@ pub mod support {
     macro_rules! in_range_int {
         ($($t:ty),*) => {$(
             impl InRange for $t {
+                const WHOLE: bool = true;
+
                 fn numbers(&self) -> Vec<f64> {
                     vec![*self as f64]
                 }
@@ -215,6 +244,8 @@ pub mod support {
     }
     in_range_int!(u8, u16, u32, u64, usize, i8, i16, i32, i64, isize);
     impl<T: InRange> InRange for Option<T> {
+        const WHOLE: bool = T::WHOLE;
+
         fn numbers(&self) -> Vec<f64> {
             self.as_ref().map(InRange::numbers).unwrap_or_default()
         }
@@ -234,21 +265,46 @@ pub mod support {
     }
 
     impl Range {
-        /// Refuses the first number of `value` outside the range, naming `key`.
+        /// Refuses the first number of `value` outside the range, naming `key`: "−1 is
+        /// negative: expected ≥ 0", "0 is not positive: expected > 0", "2 is out of range:
+        /// expected ≥ 0 and ≤ 1"; for an integer type "expected a whole number from 1 to 10, got
+        /// 0" (as its type's range is worded) or "expected a whole number ≥ 1, got 0".
+        /// (NaN is refused by every bound.)
         pub fn check<T: InRange>(&self, key: &str, value: &T) -> Result<(), ModuleError> {
             for x in value.numbers() {
-                let refused = self.min.is_some_and(|m| x < m)
-                    || self.max.is_some_and(|m| x > m)
-                    || self.above.is_some_and(|m| x <= m)
-                    || self.below.is_some_and(|m| x >= m);
-                if refused {
-                    return Err(ModuleError::param(
-                        key,
-                        format!("{x} is out of range: expected {}", self.words()),
-                    ));
+                if let Some(what) = self.refusal(x) {
+                    let words = self.words();
+                    let reason = match (T::WHOLE, self.min, self.max, self.above, self.below) {
+                        (true, Some(min), Some(max), None, None) => {
+                            format!("expected a whole number from {min} to {max}, got {x}")
+                        }
+                        (true, ..) => format!("expected a whole number {words}, got {x}"),
+                        (false, ..) => format!("{x} is {what}: expected {words}"),
+                    };
+                    return Err(ModuleError::param(key, reason));
                 }
             }
             Ok(())
+        }
+
+        /// What is wrong with `x`, if it is outside the range.
+        fn refusal(&self, x: f64) -> Option<&'static str> {
+            let nan = x.is_nan();
+            let below_min = self.min.is_some_and(|m| nan || x < m);
+            let not_above = self.above.is_some_and(|m| nan || x <= m);
+            let refused = below_min
+                || not_above
+                || self.max.is_some_and(|m| nan || x > m)
+                || self.below.is_some_and(|m| nan || x >= m);
+            if !refused {
+                None
+            } else if below_min && self.min == Some(0.0) && x < 0.0 {
+                Some("negative")
+            } else if not_above && self.above == Some(0.0) && !nan {
+                Some("not positive")
+            } else {
+                Some("out of range")
+            }
         }
 
         /// The range in words, as the spec shows it (`≥ 0`, `> 0 and ≤ 1`).
@@ -356,5 +412,95 @@ pub mod support {
     /// A value given to a `Params` in a Rust constructor of a derived component.
     pub fn value(x: impl Into<ParamValue>) -> ParamValue {
         x.into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::support::{NonFinite, Range, optional, required};
+    use crate::module::ModuleError;
+    use crate::registry::Params;
+
+    /// The refusal's key and reason.
+    fn refused(result: Result<(), ModuleError>) -> (String, String) {
+        match result {
+            Err(ModuleError::Param { name, reason }) => (name, reason),
+            other => panic!("expected a parameter refusal, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn range_refusals_say_what_is_wrong_in_words() {
+        let at_least_zero = Range {
+            min: Some(0.0),
+            ..Range::default()
+        };
+        assert_eq!(
+            refused(at_least_zero.check("std_dev", &vec![1.0, -1.0])),
+            ("std_dev".into(), "-1 is negative: expected ≥ 0".into())
+        );
+        let positive = Range {
+            above: Some(0.0),
+            ..Range::default()
+        };
+        assert_eq!(
+            refused(positive.check("duration", &0.0)).1,
+            "0 is not positive: expected > 0"
+        );
+        let unit = Range {
+            min: Some(0.0),
+            max: Some(1.0),
+            ..Range::default()
+        };
+        assert_eq!(
+            refused(unit.check("share", &2.0)).1,
+            "2 is out of range: expected ≥ 0 and ≤ 1"
+        );
+        assert_eq!(
+            refused(unit.check("share", &f64::NAN)).1,
+            "NaN is out of range: expected ≥ 0 and ≤ 1",
+            "NaN is refused by every bound"
+        );
+        assert!(unit.check("share", &Some(0.5)).is_ok());
+        assert!(unit.check("share", &None::<f64>).is_ok());
+    }
+
+    #[test]
+    fn integer_range_refusals_say_a_whole_number() {
+        let rows = Range {
+            min: Some(1.0),
+            max: Some(65536.0),
+            ..Range::default()
+        };
+        assert_eq!(
+            refused(rows.check("rows", &0usize)).1,
+            "expected a whole number from 1 to 65536, got 0"
+        );
+        let at_least_one = Range {
+            min: Some(1.0),
+            ..Range::default()
+        };
+        assert_eq!(
+            refused(at_least_one.check("rows", &Some(0u32))).1,
+            "expected a whole number ≥ 1, got 0"
+        );
+    }
+
+    #[test]
+    fn non_finite_reads_infinities_and_nan_that_the_plain_types_refuse() {
+        let params = Params::new()
+            .with("lower", f64::NEG_INFINITY)
+            .with("bounds", vec![1.0, f64::NAN]);
+        let lower: NonFinite<f64> = required(&params, "lower").unwrap();
+        assert_eq!(lower.0, f64::NEG_INFINITY);
+        let bounds: NonFinite<Vec<f64>> = required(&params, "bounds").unwrap();
+        assert!(bounds.0[1].is_nan());
+        let err = required::<f64>(&params, "lower").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "parameter `lower`: -inf is not a finite number"
+        );
+        let absent: Option<NonFinite<f64>> = optional(&params, "upper").unwrap();
+        assert!(absent.is_none());
     }
 }

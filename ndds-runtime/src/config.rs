@@ -154,29 +154,31 @@ impl Runtime {
             self.inner.request(Request::Switch(name.to_owned()));
             return Ok(());
         }
-        let _structure = self.inner.structure();
-        let active = {
-            let db = self.db();
-            let selections = db
-                .configurations
-                .get(name)
-                .ok_or_else(|| RuntimeError::Unknown {
-                    kind: ObjectKind::Configuration,
-                    name: name.to_owned(),
-                })?;
-            let mut active = db.active_groups();
-            for (category, group) in selections {
-                Self::check_group(&db, category, group)?;
-                active.insert(category.clone(), Some(group.clone()));
-            }
-            active
-        };
-        self.apply(&active)?;
         let rates = {
+            let _structure = self.inner.structure();
+            let active = {
+                let db = self.db();
+                let selections =
+                    db.configurations
+                        .get(name)
+                        .ok_or_else(|| RuntimeError::Unknown {
+                            kind: ObjectKind::Configuration,
+                            name: name.to_owned(),
+                        })?;
+                let mut active = db.active_groups();
+                for (category, group) in selections {
+                    Self::check_group(&db, category, group)?;
+                    active.insert(category.clone(), Some(group.clone()));
+                }
+                active
+            };
+            self.apply(&active)?;
             let mut db = self.db();
             db.current = Some(name.to_owned());
             db.rates.get(name).cloned().unwrap_or_default()
         };
+        // The configuration's rates, once its lists are in (`set_rate` takes the structure
+        // lock itself).
         for (habitat, hz) in rates {
             match self.find_habitat(&habitat) {
                 Some(h) => h.set_rate(hz)?,

@@ -1,13 +1,86 @@
 //! `dead_band`: zero inside tunable bounds, continuous outside.
 
-use ndds_runtime::{Binder, ModuleError, Params, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use nalgebra::DMatrix;
 
-use super::bounded::Bounded;
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-/// Dead band: `output` is 0 while `lower ≤ input ≤ upper`, `input − upper` above and
-/// `input − lower` below, so it is continuous (NaN stays NaN).
-pub struct DeadBand(Bounded);
+use super::bounded::{Buffers, Mats, check};
+use crate::mats::matrix_param;
+
+/// 0 inside [lower, upper], u − upper above it and u − lower below it (continuous). Give
+/// `width` (the band [−width, width]) or both `lower` and `upper`; the edges are the tunable
+/// CSMats `<module>.lower` and `<module>.upper`.
+///
+/// NaN stays NaN.
+#[derive(Component)]
+#[component(name = "dead_band", finish = Self::declare_edges)]
+pub struct DeadBand {
+    /// u, any shape
+    #[input]
+    input: Mat,
+    /// y, the shape of u
+    #[output(same_as = input)]
+    output: Mat,
+    /// half-width (≥ 0) of the band [−width, width]; one value or one per element
+    #[param(finite = false)]
+    _width: Option<Vec<f64>>,
+    /// lower edge of the band, with `upper` instead of `width`
+    #[param(default_doc = "−width", finite = false)]
+    _lower: Option<Vec<f64>>,
+    /// upper edge of the band (≥ lower), with `lower` instead of `width`
+    #[param(default_doc = "width", finite = false)]
+    _upper: Option<Vec<f64>>,
+    /// The edges `[lower, upper]` as given (from `width` or from `lower` and `upper`), checked.
+    #[state(init = edges(&input, _width.as_deref(), _lower.as_deref(), _upper.as_deref())?)]
+    edges: [DMatrix<f64>; 2],
+    /// The tunable `<module>.lower` and `<module>.upper`, declared once the edges are known.
+    #[state(init = Mat::placeholder("lower"))]
+    lower: Mat,
+    #[state(init = Mat::placeholder("upper"))]
+    upper: Mat,
+    buffers: Buffers,
+}
+
+/// The edges from `width`, or from `lower` and `upper` (exactly one of the two ways).
+fn edges(
+    input: &Mat,
+    width: Option<&[f64]>,
+    lower: Option<&[f64]>,
+    upper: Option<&[f64]>,
+) -> Result<[DMatrix<f64>; 2], ModuleError> {
+    let column = |values: &[f64]| DMatrix::from_column_slice(values.len(), 1, values);
+    match (width, lower, upper) {
+        (Some(width), None, None) => {
+            if let Some(bad) = width.iter().find(|w| w.is_nan() || **w < 0.0) {
+                return Err(ModuleError::param("width", format!("{bad} is not ≥ 0")));
+            }
+            let lower: Vec<f64> = width.iter().map(|w| -w).collect();
+            check(input, (&lower, width), ("width", "width"))?;
+            Ok([column(&lower), column(width)])
+        }
+        (None, Some(lower), Some(upper)) => {
+            check(input, (lower, upper), ("lower", "upper"))?;
+            Ok([column(lower), column(upper)])
+        }
+        (Some(_), _, _) => Err(ModuleError::param(
+            "width",
+            "give `width` or `lower` and `upper`, not both",
+        )),
+        (None, None, None) => Err(ModuleError::param(
+            "width",
+            "missing: give `width`, or `lower` and `upper`",
+        )),
+        (None, Some(_), None) => Err(ModuleError::param(
+            "upper",
+            "missing: `lower` needs `upper`",
+        )),
+        (None, None, Some(_)) => Err(ModuleError::param(
+            "lower",
+            "missing: `upper` needs `lower`",
+        )),
+    }
+}
 
 impl DeadBand {
     /// The dead band `[lower, upper]` (one value, or one per element; `lower ≤ upper`).
@@ -18,7 +91,12 @@ impl DeadBand {
         lower: &[f64],
         upper: &[f64],
     ) -> Result<Self, ModuleError> {
-        Bounded::new(b, input, output, (lower, upper), ("lower", "upper")).map(Self)
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("lower", lower.to_vec())
+            .with("upper", upper.to_vec());
+        Self::build(b, &params)
     }
 
     /// The symmetric dead band `[−width, width]` (`width ≥ 0`, one value or one per element).
@@ -28,17 +106,31 @@ impl DeadBand {
         output: &str,
         width: &[f64],
     ) -> Result<Self, ModuleError> {
-        if let Some(bad) = width.iter().find(|w| w.is_nan() || **w < 0.0) {
-            return Err(ModuleError::param("width", format!("{bad} is not ≥ 0")));
-        }
-        let lower: Vec<f64> = width.iter().map(|w| -w).collect();
-        Bounded::new(b, input, output, (&lower, width), ("width", "width")).map(Self)
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("width", width.to_vec());
+        Self::build(b, &params)
+    }
+
+    /// The tunable edges, created from the edges given unless they exist.
+    fn declare_edges(&mut self, b: &mut Binder<'_>) -> Result<(), ModuleError> {
+        let [lower, upper] = &self.edges;
+        self.lower = matrix_param(b, "lower", lower);
+        self.upper = matrix_param(b, "upper", upper);
+        Ok(())
     }
 }
 
 impl SampleModule for DeadBand {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        self.0.apply(|u, lo, hi| {
+        let mats = Mats {
+            input: &self.input,
+            output: &self.output,
+            lower: &self.lower,
+            upper: &self.upper,
+        };
+        self.buffers.apply(&mats, |u, lo, hi| {
             if u > hi {
                 u - hi
             } else if u < lo {
@@ -52,65 +144,9 @@ impl SampleModule for DeadBand {
     }
 }
 
-const DEAD_BAND: ComponentSpec = ComponentSpec {
-    name: "dead_band",
-    summary: "0 inside [lower, upper], u − upper above it and u − lower below it (continuous). \
-              Give `width` (the band [−width, width]) or both `lower` and `upper`; the edges \
-              are the tunable CSMats `<module>.lower` and `<module>.upper`.",
-    params: &[
-        P::required("input", K::Input, "u, any shape"),
-        P::required("output", K::Output, "y, the shape of u"),
-        P::optional(
-            "width",
-            K::Numbers,
-            "none",
-            "half-width (≥ 0) of the band [−width, width]; one value or one per element",
-        ),
-        P::optional(
-            "lower",
-            K::Numbers,
-            "−width",
-            "lower edge of the band, with `upper` instead of `width`",
-        ),
-        P::optional(
-            "upper",
-            K::Numbers,
-            "width",
-            "upper edge of the band (≥ lower), with `lower` instead of `width`",
-        ),
-    ],
-};
-
-/// A dead band from `width`, or from `lower` and `upper`.
-fn dead_band(b: &mut Binder<'_>, p: &Params) -> Result<DeadBand, ModuleError> {
-    let (input, output) = (p.text("input")?, p.text("output")?);
-    match (p.has("width"), p.has("lower"), p.has("upper")) {
-        (true, false, false) => DeadBand::symmetric(b, input, output, &p.numbers("width")?),
-        (false, true, true) => {
-            DeadBand::new(b, input, output, &p.numbers("lower")?, &p.numbers("upper")?)
-        }
-        (true, _, _) => Err(ModuleError::param(
-            "width",
-            "give `width` or `lower` and `upper`, not both",
-        )),
-        (false, false, false) => Err(ModuleError::param(
-            "width",
-            "missing: give `width`, or `lower` and `upper`",
-        )),
-        (false, true, false) => Err(ModuleError::param(
-            "upper",
-            "missing: `lower` needs `upper`",
-        )),
-        (false, false, true) => Err(ModuleError::param(
-            "lower",
-            "missing: `upper` needs `lower`",
-        )),
-    }
-}
-
 /// Registers `dead_band`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&DEAD_BAND, dead_band);
+    registry.add::<DeadBand>();
 }
 
 #[cfg(test)]

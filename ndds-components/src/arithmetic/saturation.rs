@@ -1,13 +1,28 @@
 //! `saturation`: each element clamped to tunable bounds.
 
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::bounded::Bounded;
+use super::bounded::{Buffers, Mats, check};
 
-/// Saturation: each element of `output` is `input` clamped to `[lower, upper]` (NaN stays
-/// NaN).
-pub struct Saturation(Bounded);
+/// Clamps each element to [lower, upper] (NaN stays NaN).
+#[derive(Component)]
+#[component(name = "saturation", finish = Self::check_bounds)]
+pub struct Saturation {
+    /// u, any shape
+    #[input]
+    input: Mat,
+    /// y, the shape of u
+    #[output(same_as = input)]
+    output: Mat,
+    /// lower bound, one value or one per element (CSMat `<module>.lower`, tunable)
+    #[param(tunable, column, finite = false)]
+    lower: Mat,
+    /// upper bound (≥ lower), one value or one per element (`<module>.upper`, tunable)
+    #[param(tunable, column, finite = false)]
+    upper: Mat,
+    buffers: Buffers,
+}
 
 impl Saturation {
     /// Clamps `input` into `output` (same shape). `lower` and `upper` have one value, or one
@@ -19,13 +34,31 @@ impl Saturation {
         lower: &[f64],
         upper: &[f64],
     ) -> Result<Self, ModuleError> {
-        Bounded::new(b, input, output, (lower, upper), ("lower", "upper")).map(Self)
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("lower", lower.to_vec())
+            .with("upper", upper.to_vec());
+        Self::build(b, &params)
+    }
+
+    /// Refuses bounds that are NaN, crossed, or of the wrong count for the input.
+    fn check_bounds(&mut self, _: &mut Binder<'_>) -> Result<(), ModuleError> {
+        let lower: Vec<f64> = self.lower.read().matrix().iter().copied().collect();
+        let upper: Vec<f64> = self.upper.read().matrix().iter().copied().collect();
+        check(&self.input, (&lower, &upper), ("lower", "upper"))
     }
 }
 
 impl SampleModule for Saturation {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
-        self.0.apply(|u, lo, hi| {
+        let mats = Mats {
+            input: &self.input,
+            output: &self.output,
+            lower: &self.lower,
+            upper: &self.upper,
+        };
+        self.buffers.apply(&mats, |u, lo, hi| {
             if u < lo {
                 lo
             } else if u > hi {
@@ -37,36 +70,9 @@ impl SampleModule for Saturation {
     }
 }
 
-const SATURATION: ComponentSpec = ComponentSpec {
-    name: "saturation",
-    summary: "Clamps each element to [lower, upper] (NaN stays NaN).",
-    params: &[
-        P::required("input", K::Input, "u, any shape"),
-        P::required("output", K::Output, "y, the shape of u"),
-        P::required(
-            "lower",
-            K::Numbers,
-            "lower bound, one value or one per element (CSMat `<module>.lower`, tunable)",
-        ),
-        P::required(
-            "upper",
-            K::Numbers,
-            "upper bound (≥ lower), one value or one per element (`<module>.upper`, tunable)",
-        ),
-    ],
-};
-
 /// Registers `saturation`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&SATURATION, |b, p| {
-        Saturation::new(
-            b,
-            p.text("input")?,
-            p.text("output")?,
-            &p.numbers("lower")?,
-            &p.numbers("upper")?,
-        )
-    });
+    registry.add::<Saturation>();
 }
 
 #[cfg(test)]

@@ -2,21 +2,49 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{declare_inputs, input_names, mismatch};
+use super::mismatch;
 use crate::mats::{copy_in, copy_out};
-use crate::params::all_finite;
 
 /// A weighted sum: `output = Σ signs[i]·inputs[i]`, element by element, all inputs of one
 /// shape (signs `[1, -1]` make an error signal `inputs[0] − inputs[1]`).
+#[derive(Component)]
+#[component(
+    name = "sum",
+    summary = "output = Σ signs[i]·inputs[i], element by element; all inputs of one shape."
+)]
 pub struct Sum {
+    /// the terms (at least one), all of one shape
+    #[inputs(same_shape)]
     inputs: Vec<Mat>,
-    signs: Vec<f64>,
+    /// the sum, the shape of the inputs
+    #[output(same_as = inputs)]
     output: Mat,
+    /// one weight per input, e.g. [1, -1] for an error signal
+    #[param(default_doc = "all 1")]
+    _signs: Option<Vec<f64>>,
+    /// The weights, one per input.
+    #[state(init = weights(_signs.as_deref(), inputs.len())?)]
+    signs: Vec<f64>,
     total: DMatrix<f64>,
     term: DMatrix<f64>,
+}
+
+/// `signs`, which must have one value per input; all 1 when absent.
+fn weights(signs: Option<&[f64]>, inputs: usize) -> Result<Vec<f64>, ModuleError> {
+    match signs {
+        None => Ok(vec![1.0; inputs]),
+        Some(signs) if signs.len() == inputs => Ok(signs.to_vec()),
+        Some(signs) => Err(ModuleError::param(
+            "signs",
+            format!(
+                "has {} values for {inputs} inputs; give one per input",
+                signs.len()
+            ),
+        )),
+    }
 }
 
 impl Sum {
@@ -27,25 +55,12 @@ impl Sum {
         signs: &[f64],
         output: &str,
     ) -> Result<Self, ModuleError> {
-        if signs.len() != inputs.len() {
-            return Err(ModuleError::param(
-                "signs",
-                format!(
-                    "has {} values for {} inputs; give one per input",
-                    signs.len(),
-                    inputs.len()
-                ),
-            ));
-        }
-        all_finite("signs", signs)?;
-        let inputs = declare_inputs(b, inputs, output, true)?;
-        Ok(Self {
-            output: b.output_same_as(output, &inputs[0]),
-            inputs,
-            signs: signs.to_vec(),
-            total: DMatrix::zeros(0, 0),
-            term: DMatrix::zeros(0, 0),
-        })
+        let names: Vec<String> = inputs.iter().map(|n| (*n).to_owned()).collect();
+        let params = Params::new()
+            .with("inputs", names)
+            .with("signs", signs.to_vec())
+            .with("output", output);
+        Self::build(b, &params)
     }
 }
 
@@ -70,33 +85,9 @@ impl SampleModule for Sum {
     }
 }
 
-const SUM: ComponentSpec = ComponentSpec {
-    name: "sum",
-    summary: "output = Σ signs[i]·inputs[i], element by element; all inputs of one shape.",
-    params: &[
-        P::required(
-            "inputs",
-            K::Inputs,
-            "the terms (at least one), all of one shape",
-        ),
-        P::required("output", K::Output, "the sum, the shape of the inputs"),
-        P::optional(
-            "signs",
-            K::Numbers,
-            "all 1",
-            "one weight per input, e.g. [1, -1] for an error signal",
-        ),
-    ],
-};
-
 /// Registers `sum`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&SUM, |b, p| {
-        let inputs = input_names(p)?;
-        let names: Vec<&str> = inputs.iter().map(String::as_str).collect();
-        let signs = p.numbers_or("signs", &vec![1.0; names.len()])?;
-        Sum::new(b, &names, &signs, p.text("output")?)
-    });
+    registry.add::<Sum>();
 }
 
 #[cfg(test)]

@@ -2,20 +2,34 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, scalar_param, shape_error, shape_of};
+use crate::mats::{copy_in, copy_out, shape_error};
 
-/// PD control on the measurement: `u = kp·(r − y) − kd·dy/dt`, element by element (taking
-/// the derivative of the measurement, not of the error, avoids a kick on reference steps).
-/// `kp` and `kd` are the 1 × 1 parameters `"{module}.kp"` and `"{module}.kd"`. Enabling it
-/// takes the current measurement as the previous one, so it starts without a derivative jump.
+/// PD on the measurement: u = kp·(r − y) − kd·ẏ (the derivative of the measurement, so
+/// reference steps do not kick).
+///
+/// Element by element; `kp` and `kd` are the 1 × 1 parameters `"{module}.kp"` and
+/// `"{module}.kd"`. Enabling it takes the current measurement as the previous one, so it
+/// starts without a derivative jump.
+#[derive(Component)]
+#[component(name = "pd")]
 pub struct Pd {
+    /// y (n × 1)
+    #[input]
     measured: Mat,
+    /// r (n × 1)
+    #[input(same_as = measured)]
     reference: Mat,
+    /// u (n × 1)
+    #[output(same_as = measured)]
     output: Mat,
+    /// proportional gain
+    #[param(tunable)]
     kp: Mat,
+    /// derivative gain
+    #[param(tunable, unit = "s")]
     kd: Mat,
     y: DMatrix<f64>,
     r: DMatrix<f64>,
@@ -34,24 +48,15 @@ impl Pd {
         kp: f64,
         kd: f64,
     ) -> Result<Self, ModuleError> {
-        distinct(&[measured, reference, output])?;
-        let measured_mat = b.input(measured, Shape::Any);
-        let shape = shape_of(&measured_mat, Shape::Any);
-        Ok(Self {
-            reference: b.input(reference, shape),
-            output: b.output_same_as(output, &measured_mat),
-            measured: measured_mat,
-            kp: scalar_param(b, "kp", kp),
-            kd: scalar_param(b, "kd", kd),
-            y: DMatrix::zeros(0, 0),
-            r: DMatrix::zeros(0, 0),
-            u: DMatrix::zeros(0, 0),
-            previous: DMatrix::zeros(0, 0),
-            primed: false,
-        })
+        let params = Params::new()
+            .with("measured", measured)
+            .with("reference", reference)
+            .with("output", output)
+            .with("kp", kp)
+            .with("kd", kd);
+        Self::build(b, &params)
     }
 }
-
 impl SampleModule for Pd {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let kp = self.kp.read().get(0, 0)?;
@@ -99,31 +104,9 @@ impl SampleModule for Pd {
     }
 }
 
-const PD: ComponentSpec = ComponentSpec {
-    name: "pd",
-    summary: "PD on the measurement: u = kp·(r − y) − kd·ẏ (the derivative of the \
-              measurement, so reference steps do not kick).",
-    params: &[
-        P::required("measured", K::Input, "y (n × 1)"),
-        P::required("reference", K::Input, "r (n × 1)"),
-        P::required("output", K::Output, "u (n × 1)"),
-        P::required("kp", K::Number, "proportional gain"),
-        P::required("kd", K::Number, "derivative gain (s)"),
-    ],
-};
-
 /// Registers `pd`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&PD, |b, p| {
-        Pd::new(
-            b,
-            p.text("measured")?,
-            p.text("reference")?,
-            p.text("output")?,
-            p.number("kp")?,
-            p.number("kd")?,
-        )
-    });
+    registry.add::<Pd>();
 }
 
 #[cfg(test)]

@@ -2,11 +2,11 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, Params, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry, Shape};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, scalar_param, shape_error, shape_of};
-use crate::params::{failed, finite};
+use crate::mats::{copy_in, copy_out, shape_error};
+use crate::params::failed;
 
 /// Gains, derivative filter and output limits of a [`Pid`]. `Default` is all gains 0, no
 /// filter and no limits; set what you need:
@@ -40,37 +40,13 @@ impl Default for PidTuning {
     }
 }
 
-impl PidTuning {
-    fn check(&self) -> RoutineResult {
-        for (name, x) in [
-            ("kp", self.kp),
-            ("ki", self.ki),
-            ("kd", self.kd),
-            ("tau", self.tau),
-        ] {
-            finite(name, x)?;
-        }
-        if self.tau < 0.0 {
-            return Err(ModuleError::param(
-                "tau",
-                format!("{} is negative", self.tau),
-            ));
-        }
-        if self.lower.is_nan() || self.upper.is_nan() || self.lower > self.upper {
-            return Err(ModuleError::param(
-                "lower",
-                format!("{} must be ≤ `upper` {}", self.lower, self.upper),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// PID control on the measurement, element by element (n × 1):
+/// PID on the measurement: u = clamp(kp·e + ki·∫e + kd·d(−y)/dt, lower, upper), e = r − y,
+/// element by element; the derivative optionally filtered (tau); anti-windup by conditional
+/// integration (the integrator does not move further into the limit the output is held at).
 ///
-/// `u = clamp(kp·e + I + kd·D, lower, upper)`, `e = r − y`, `I = Σ ki·e·dt`,
-/// `D = (tau·D⁻ − (y − y⁻)) / (tau + dt)` (the derivative of −y through a first-order filter
-/// with time constant `tau`; for `tau = 0`, `−(y − y⁻)/dt`).
+/// Precisely, for each element (n × 1): `u = clamp(kp·e + I + kd·D, lower, upper)`,
+/// `I = Σ ki·e·dt`, `D = (tau·D⁻ − (y − y⁻)) / (tau + dt)` (the derivative of −y through a
+/// first-order filter with time constant `tau`; for `tau = 0`, `−(y − y⁻)/dt`).
 ///
 /// The derivative acts on the measurement, so reference steps do not kick. Anti-windup is
 /// conditional integration: while the unclamped output is above `upper` the integrator does
@@ -79,16 +55,36 @@ impl PidTuning {
 /// are the 1 × 1 parameters `"{module}.kp"`, `.ki`, … (tunable while sampling; `I` holds
 /// `ki·∫e`, so changing `ki` does not bump the output). Enabling or resetting it clears the
 /// integrator and the filter and takes the current measurement as the previous one.
+#[derive(Component)]
+#[component(name = "pid", finish = Self::check_limits)]
 pub struct Pid {
+    /// y (n × 1)
+    #[input]
     measured: Mat,
+    /// r (n × 1)
+    #[input(same_as = measured)]
     reference: Mat,
+    /// u (n × 1)
+    #[output(same_as = measured)]
     output: Mat,
+    /// proportional gain (a CSMat `<module>.kp`, tunable)
+    #[param(tunable)]
     kp: Mat,
+    /// integral gain (`<module>.ki`, tunable)
+    #[param(tunable, default = 0.0, unit = "1/s")]
     ki: Mat,
+    /// derivative gain (`<module>.kd`, tunable)
+    #[param(tunable, default = 0.0, unit = "s")]
     kd: Mat,
-    tau: Mat,
+    /// lowest output (`<module>.lower`, tunable)
+    #[param(tunable, default = f64::NEG_INFINITY, default_doc = "none", finite = false)]
     lower: Mat,
+    /// highest output, ≥ lower (`<module>.upper`, tunable)
+    #[param(tunable, default = f64::INFINITY, default_doc = "none", finite = false)]
     upper: Mat,
+    /// derivative filter time constant (0 = unfiltered; `<module>.tau`, tunable)
+    #[param(tunable, default = 0.0, unit = "s", min = 0)]
+    tau: Mat,
     y: DMatrix<f64>,
     r: DMatrix<f64>,
     u: DMatrix<f64>,
@@ -112,32 +108,30 @@ impl Pid {
         output: &str,
         tuning: PidTuning,
     ) -> Result<Self, ModuleError> {
-        distinct(&[measured, reference, output])?;
-        tuning.check()?;
-        let measured_mat = b.input(measured, Shape::Any);
-        let shape = shape_of(&measured_mat, Shape::Any);
-        let empty = || DMatrix::zeros(0, 0);
-        Ok(Self {
-            reference: b.input(reference, shape),
-            output: b.output_same_as(output, &measured_mat),
-            measured: measured_mat,
-            kp: scalar_param(b, "kp", tuning.kp),
-            ki: scalar_param(b, "ki", tuning.ki),
-            kd: scalar_param(b, "kd", tuning.kd),
-            tau: scalar_param(b, "tau", tuning.tau),
-            lower: scalar_param(b, "lower", tuning.lower),
-            upper: scalar_param(b, "upper", tuning.upper),
-            y: empty(),
-            r: empty(),
-            u: empty(),
-            integral: empty(),
-            derivative: empty(),
-            previous: empty(),
-            increment: empty(),
-            next_derivative: empty(),
-            primed: false,
-            computed: false,
-        })
+        let params = Params::new()
+            .with("measured", measured)
+            .with("reference", reference)
+            .with("output", output)
+            .with("kp", tuning.kp)
+            .with("ki", tuning.ki)
+            .with("kd", tuning.kd)
+            .with("tau", tuning.tau)
+            .with("lower", tuning.lower)
+            .with("upper", tuning.upper);
+        Self::build(b, &params)
+    }
+
+    /// Refuses limits that are NaN or crossed (infinite limits are no limits).
+    fn check_limits(&mut self, _: &mut Binder<'_>) -> Result<(), ModuleError> {
+        let lower = self.lower.read().get(0, 0)?;
+        let upper = self.upper.read().get(0, 0)?;
+        if lower.is_nan() || upper.is_nan() || lower > upper {
+            return Err(ModuleError::param(
+                "lower",
+                format!("{lower} must be ≤ `upper` {upper}"),
+            ));
+        }
+        Ok(())
     }
 
     /// Fresh state shaped like the measurement (allocates only when the shape changes).
@@ -241,76 +235,9 @@ impl SampleModule for Pid {
     }
 }
 
-const PID: ComponentSpec = ComponentSpec {
-    name: "pid",
-    summary: "PID on the measurement: u = clamp(kp·e + ki·∫e + kd·d(−y)/dt, lower, upper), \
-              e = r − y, element by element; the derivative optionally filtered (tau); \
-              anti-windup by conditional integration (the integrator does not move further \
-              into the limit the output is held at).",
-    params: &[
-        P::required("measured", K::Input, "y (n × 1)"),
-        P::required("reference", K::Input, "r (n × 1)"),
-        P::required("output", K::Output, "u (n × 1)"),
-        P::required(
-            "kp",
-            K::Number,
-            "proportional gain (a CSMat `<module>.kp`, tunable)",
-        ),
-        P::optional(
-            "ki",
-            K::Number,
-            "0",
-            "integral gain (1/s; `<module>.ki`, tunable)",
-        ),
-        P::optional(
-            "kd",
-            K::Number,
-            "0",
-            "derivative gain (s; `<module>.kd`, tunable)",
-        ),
-        P::optional(
-            "lower",
-            K::Number,
-            "none",
-            "lowest output (`<module>.lower`, tunable)",
-        ),
-        P::optional(
-            "upper",
-            K::Number,
-            "none",
-            "highest output, ≥ lower (`<module>.upper`, tunable)",
-        ),
-        P::optional(
-            "tau",
-            K::Number,
-            "0",
-            "derivative filter time constant (s, 0 = unfiltered; `<module>.tau`, tunable)",
-        ),
-    ],
-};
-
-/// A PID from its parameters (no limits and no filter unless given).
-fn pid(b: &mut Binder<'_>, p: &Params) -> Result<Pid, ModuleError> {
-    let tuning = PidTuning {
-        kp: p.number("kp")?,
-        ki: p.number_or("ki", 0.0)?,
-        kd: p.number_or("kd", 0.0)?,
-        tau: p.number_or("tau", 0.0)?,
-        lower: p.number_or("lower", f64::NEG_INFINITY)?,
-        upper: p.number_or("upper", f64::INFINITY)?,
-    };
-    Pid::new(
-        b,
-        p.text("measured")?,
-        p.text("reference")?,
-        p.text("output")?,
-        tuning,
-    )
-}
-
 /// Registers `pid`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&PID, pid);
+    registry.add::<Pid>();
 }
 
 #[cfg(test)]

@@ -2,16 +2,27 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, scalar_param};
+use crate::mats::{copy_in, copy_out};
 
-/// First-order low-pass filter `y += a·(u − y)`, `a = dt / (tau + dt)`; `tau` in seconds is
-/// the 1 × 1 parameter `"{module}.tau"`. Enabling it starts from the current input (no step).
+/// First-order low-pass y += a·(u − y), a = dt/(tau + dt); starts from its input when
+/// enabled.
+///
+/// `tau` in seconds is the 1 × 1 parameter `"{module}.tau"` (a value tuned below 0 acts as 0).
+/// Enabling it starts from the current input (no step).
+#[derive(Component)]
+#[component(name = "lowpass")]
 pub struct LowPass {
+    /// u, any shape
+    #[input]
     input: Mat,
+    /// y, the shape of u
+    #[output(same_as = input)]
     output: Mat,
+    /// time constant, a CSMat `<module>.tau`
+    #[param(tunable, unit = "s", min = 0)]
     tau: Mat,
     state: DMatrix<f64>,
     value: DMatrix<f64>,
@@ -26,16 +37,11 @@ impl LowPass {
         output: &str,
         tau: f64,
     ) -> Result<Self, ModuleError> {
-        distinct(&[input, output])?;
-        let input_mat = b.input(input, Shape::Any);
-        Ok(Self {
-            output: b.output_same_as(output, &input_mat),
-            input: input_mat,
-            tau: scalar_param(b, "tau", tau),
-            state: DMatrix::zeros(0, 0),
-            value: DMatrix::zeros(0, 0),
-            primed: false,
-        })
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("tau", tau);
+        Self::build(b, &params)
     }
 
     fn prime(&mut self) {
@@ -70,26 +76,9 @@ impl SampleModule for LowPass {
     }
 }
 
-const LOWPASS: ComponentSpec = ComponentSpec {
-    name: "lowpass",
-    summary: "First-order low-pass y += a·(u − y), a = dt/(tau + dt); starts from its input \
-              when enabled.",
-    params: &[
-        P::required("input", K::Input, "u, any shape"),
-        P::required("output", K::Output, "y, the shape of u"),
-        P::required(
-            "tau",
-            K::Number,
-            "time constant (s), a CSMat `<module>.tau`",
-        ),
-    ],
-};
-
 /// Registers `lowpass`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&LOWPASS, |b, p| {
-        LowPass::new(b, p.text("input")?, p.text("output")?, p.number("tau")?)
-    });
+    registry.add::<LowPass>();
 }
 
 #[cfg(test)]

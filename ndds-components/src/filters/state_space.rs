@@ -2,10 +2,10 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, Params, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, shape_error};
+use crate::mats::{copy_in, copy_out, shape_error};
 use crate::params::all_finite;
 
 /// The matrices of a discrete linear system `x⁺ = A·x + B·u`, `y = C·x + D·u`.
@@ -26,6 +26,26 @@ impl StateSpaceModel {
     pub fn strictly_proper(a: DMatrix<f64>, b: DMatrix<f64>, c: DMatrix<f64>) -> Self {
         let d = DMatrix::zeros(c.nrows(), b.ncols());
         Self { a, b, c, d }
+    }
+
+    /// The model of the matrices given (`d` zeros when absent), its dimensions checked.
+    fn checked(
+        a: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        c: &DMatrix<f64>,
+        d: Option<&DMatrix<f64>>,
+    ) -> Result<Self, ModuleError> {
+        let model = match d {
+            Some(d) => Self {
+                a: a.clone(),
+                b: b.clone(),
+                c: c.clone(),
+                d: d.clone(),
+            },
+            None => Self::strictly_proper(a.clone(), b.clone(), c.clone()),
+        };
+        model.dimensions()?;
+        Ok(model)
     }
 
     /// `(n, m, p)`, or an error naming the first matrix that does not fit.
@@ -56,20 +76,64 @@ impl StateSpaceModel {
     }
 }
 
-/// A discrete linear system `x⁺ = A·x + B·u`, `y = C·x + D·u`, `u` = `input` (m × 1),
-/// `y` = `output` (p × 1). With `D = 0` the input is read only in `state_update` (no direct
-/// feedthrough: a plant in a loop); otherwise in `execute`. The state starts at `x0` when
-/// sampling begins and after `reset`.
+/// Discrete x⁺ = A·x + B·u, y = C·x + D·u; with D = 0 the input is a state input (usable in
+/// loops, e.g. as a simulated plant).
+///
+/// `u` = `input` (m × 1), `y` = `output` (p × 1). With `D = 0` the input is read only in
+/// `state_update` (no direct feedthrough: a plant in a loop); otherwise in `execute`. The
+/// state starts at `x0` when sampling begins and after `reset`.
+#[derive(Component)]
+#[component(name = "state_space")]
 pub struct StateSpace {
-    input: Mat,
-    output: Mat,
+    /// The model, its dimensions checked (`D` zeros when not given).
+    #[state(init = StateSpaceModel::checked(&_a, &_b, &_c, _d.as_ref())?)]
     model: StateSpaceModel,
+    #[state(init = model.d.iter().any(|x| *x != 0.0))]
     feedthrough: bool,
+    /// u (m × 1)
+    #[input(state = !feedthrough, shape = (model.b.ncols(), 1))]
+    input: Mat,
+    /// y (p × 1)
+    #[output(shape = (model.c.nrows(), 1))]
+    output: Mat,
+    /// A (n × n)
+    #[param]
+    _a: DMatrix<f64>,
+    /// B (n × m)
+    #[param]
+    _b: DMatrix<f64>,
+    /// C (p × n)
+    #[param]
+    _c: DMatrix<f64>,
+    /// D (p × m)
+    #[param(default_doc = "zeros")]
+    _d: Option<DMatrix<f64>>,
+    /// initial state (n values)
+    #[param(default_doc = "zeros")]
+    _x0: Option<Vec<f64>>,
+    #[state(init = initial_state(&model, _x0.as_deref())?)]
     x0: DMatrix<f64>,
+    #[state(init = x0.clone())]
     x: DMatrix<f64>,
+    #[state(init = x0.clone())]
     next: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(model.b.ncols(), 1))]
     u: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(model.c.nrows(), 1))]
     y: DMatrix<f64>,
+}
+
+/// `x0` as a column of n values (zeros when not given).
+fn initial_state(model: &StateSpaceModel, x0: Option<&[f64]>) -> Result<DMatrix<f64>, ModuleError> {
+    let n = model.a.nrows();
+    match x0 {
+        None => Ok(DMatrix::zeros(n, 1)),
+        Some(x0) if x0.len() == n => Ok(DMatrix::from_column_slice(n, 1, x0)),
+        Some(x0) => Err(ModuleError::param(
+            "x0",
+            format!("has {} values, expected {n} (one per state)", x0.len()),
+        )),
+    }
 }
 
 impl StateSpace {
@@ -81,33 +145,16 @@ impl StateSpace {
         model: StateSpaceModel,
         x0: &[f64],
     ) -> Result<Self, ModuleError> {
-        distinct(&[input, output])?;
-        let (n, m, p) = model.dimensions()?;
-        if x0.len() != n {
-            return Err(ModuleError::param(
-                "x0",
-                format!("has {} values, expected {n} (one per state)", x0.len()),
-            ));
-        }
-        all_finite("x0", x0)?;
-        let feedthrough = model.d.iter().any(|x| *x != 0.0);
-        let input = if feedthrough {
-            b.input(input, (m, 1))
-        } else {
-            b.state_input(input, (m, 1))
-        };
-        let x0 = DMatrix::from_column_slice(n, 1, x0);
-        Ok(Self {
-            input,
-            output: b.output(output, (p, 1)),
-            model,
-            feedthrough,
-            x: x0.clone(),
-            next: x0.clone(),
-            x0,
-            u: DMatrix::zeros(m, 1),
-            y: DMatrix::zeros(p, 1),
-        })
+        let StateSpaceModel { a, b: bm, c, d } = model;
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("a", a)
+            .with("b", bm)
+            .with("c", c)
+            .with("d", d)
+            .with("x0", x0.to_vec());
+        Self::build(b, &params)
     }
 
     /// Reads the input into `u`, which must be m × 1.
@@ -155,41 +202,9 @@ impl SampleModule for StateSpace {
     }
 }
 
-const STATE_SPACE: ComponentSpec = ComponentSpec {
-    name: "state_space",
-    summary: "Discrete x⁺ = A·x + B·u, y = C·x + D·u; with D = 0 the input is a state input \
-              (usable in loops, e.g. as a simulated plant).",
-    params: &[
-        P::required("input", K::Input, "u (m × 1)"),
-        P::required("output", K::Output, "y (p × 1)"),
-        P::required("a", K::Matrix, "A (n × n)"),
-        P::required("b", K::Matrix, "B (n × m)"),
-        P::required("c", K::Matrix, "C (p × n)"),
-        P::optional("d", K::Matrix, "zeros", "D (p × m)"),
-        P::optional("x0", K::Numbers, "zeros", "initial state (n values)"),
-    ],
-};
-
-/// A state-space system from its parameters (`d` zero when absent).
-fn state_space(b: &mut Binder<'_>, p: &Params) -> Result<StateSpace, ModuleError> {
-    let (a, bm, c) = (p.matrix("a")?, p.matrix("b")?, p.matrix("c")?);
-    let model = if p.has("d") {
-        StateSpaceModel {
-            a,
-            b: bm,
-            c,
-            d: p.matrix("d")?,
-        }
-    } else {
-        StateSpaceModel::strictly_proper(a, bm, c)
-    };
-    let x0 = p.numbers_or("x0", &vec![0.0; model.a.nrows()])?;
-    StateSpace::new(b, p.text("input")?, p.text("output")?, model, &x0)
-}
-
 /// Registers `state_space`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&STATE_SPACE, state_space);
+    registry.add::<StateSpace>();
 }
 
 #[cfg(test)]

@@ -2,31 +2,43 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule, Shape};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use crate::mats::{copy_in, copy_out, distinct, shape_error};
-use crate::params::{all_finite, failed};
+use crate::mats::{copy_in, copy_out, shape_error};
+use crate::params::failed;
 
 /// Coefficients of `num` or `den` at most.
 const MAX_COEFFICIENTS: usize = 256;
 /// State values of one transfer function at most (128 MiB).
 const MAX_STATE: usize = 1 << 24;
 
-/// A discrete SISO transfer function applied to each element of `input` on its own:
+/// Discrete H(z) = (b0 + b1·z⁻¹ + … + bm·z⁻ᵐ)/(a0 + a1·z⁻¹ + … + an·z⁻ⁿ), applied to each
+/// element on its own (direct form II transposed); with b0 = 0 the input is a state input
+/// (usable in loops).
 ///
-/// `H(z) = (b0 + b1·z⁻¹ + … + bm·z⁻ᵐ) / (a0 + a1·z⁻¹ + … + an·z⁻ⁿ)`
-///
-/// normalised by `a0` and computed in direct form II transposed. With `b0 = 0` (a delay) the
-/// input is read only in `state_update`, so the block can sit in a loop. The state (one per
-/// element, sized at the first sample) is zero when sampling begins and after `reset`.
+/// The coefficients are normalised by `a0`. With `b0 = 0` (a delay) the input is read only in
+/// `state_update`, so the block can sit in a loop. The state (one per element, sized at the
+/// first sample) is zero when sampling begins and after `reset`.
+#[derive(Component)]
+#[component(name = "transfer_function")]
 pub struct TransferFunction {
+    #[state(init = Coefficients::new(&_num, &_den)?)]
+    coefficients: Coefficients,
+    /// u, any shape
+    #[input(state = !coefficients.feedthrough())]
     input: Mat,
+    /// y, the shape of u
+    #[output(same_as = input)]
     output: Mat,
-    /// Numerator and denominator, normalised, both `order + 1` long (`den[0] = 1`).
-    num: Vec<f64>,
-    den: Vec<f64>,
+    /// numerator [b0, b1, …] in powers of z⁻¹
+    #[param]
+    _num: Vec<f64>,
+    /// denominator [a0, a1, …] in powers of z⁻¹ (a0 ≠ 0)
+    #[param]
+    _den: Vec<f64>,
     /// `state[(i, j)]`: delay `i` of element `j`.
+    #[state(init = DMatrix::zeros(coefficients.order(), 0))]
     state: DMatrix<f64>,
     /// The input, then (feedthrough) the output.
     value: DMatrix<f64>,
@@ -34,17 +46,16 @@ pub struct TransferFunction {
     y: DMatrix<f64>,
 }
 
-impl TransferFunction {
-    /// Filters `input` through `num(z⁻¹) / den(z⁻¹)` into `output` (same shape). `den[0]`
-    /// must not be 0.
-    pub fn new(
-        b: &mut Binder<'_>,
-        input: &str,
-        output: &str,
-        num: &[f64],
-        den: &[f64],
-    ) -> Result<Self, ModuleError> {
-        distinct(&[input, output])?;
+/// Numerator and denominator, normalised by `a0`, both `order + 1` long (`den[0] = 1`).
+struct Coefficients {
+    num: Vec<f64>,
+    den: Vec<f64>,
+}
+
+impl Coefficients {
+    /// `num` and `den` checked (at least one coefficient each, at most
+    /// [`MAX_COEFFICIENTS`], `a0 ≠ 0`), normalised and padded to one length.
+    fn new(num: &[f64], den: &[f64]) -> Result<Self, ModuleError> {
         if num.is_empty() {
             return Err(ModuleError::param(
                 "num",
@@ -59,8 +70,6 @@ impl TransferFunction {
                 ));
             }
         }
-        all_finite("num", num)?;
-        all_finite("den", den)?;
         let a0 = match den.first() {
             Some(&a0) if a0 != 0.0 => a0,
             _ => {
@@ -74,20 +83,9 @@ impl TransferFunction {
         let padded = |c: &[f64]| -> Vec<f64> {
             (0..len).map(|i| c.get(i).map_or(0.0, |x| x / a0)).collect()
         };
-        let (num, den) = (padded(num), padded(den));
-        let input = if num[0] == 0.0 {
-            b.state_input(input, Shape::Any)
-        } else {
-            b.input(input, Shape::Any)
-        };
         Ok(Self {
-            output: b.output_same_as(output, &input),
-            input,
-            state: DMatrix::zeros(len - 1, 0),
-            num,
-            den,
-            value: DMatrix::zeros(0, 0),
-            y: DMatrix::zeros(0, 0),
+            num: padded(num),
+            den: padded(den),
         })
     }
 
@@ -98,6 +96,33 @@ impl TransferFunction {
     /// Whether `b0 ≠ 0` (the input is read in `execute`).
     fn feedthrough(&self) -> bool {
         self.num[0] != 0.0
+    }
+}
+
+impl TransferFunction {
+    /// Filters `input` through `num(z⁻¹) / den(z⁻¹)` into `output` (same shape). `den[0]`
+    /// must not be 0.
+    pub fn new(
+        b: &mut Binder<'_>,
+        input: &str,
+        output: &str,
+        num: &[f64],
+        den: &[f64],
+    ) -> Result<Self, ModuleError> {
+        let params = Params::new()
+            .with("input", input)
+            .with("output", output)
+            .with("num", num.to_vec())
+            .with("den", den.to_vec());
+        Self::build(b, &params)
+    }
+
+    fn order(&self) -> usize {
+        self.coefficients.order()
+    }
+
+    fn feedthrough(&self) -> bool {
+        self.coefficients.feedthrough()
     }
 
     /// Zero state for `elements` elements (allocates only when the count changes; refuses
@@ -125,7 +150,8 @@ impl TransferFunction {
             } else {
                 0.0
             };
-            self.state[(i, j)] = self.num[i + 1] * u - self.den[i + 1] * y + next;
+            let Coefficients { num, den } = &self.coefficients;
+            self.state[(i, j)] = num[i + 1] * u - den[i + 1] * y + next;
         }
     }
 
@@ -145,7 +171,7 @@ impl SampleModule for TransferFunction {
             self.size_state(self.value.len())?;
             for j in 0..self.value.len() {
                 let u = self.value[j];
-                let y = self.num[0] * u + self.first_state(j);
+                let y = self.coefficients.num[0] * u + self.first_state(j);
                 self.advance(j, u, y);
                 self.value[j] = y;
             }
@@ -192,34 +218,9 @@ impl SampleModule for TransferFunction {
     }
 }
 
-const TRANSFER_FUNCTION: ComponentSpec = ComponentSpec {
-    name: "transfer_function",
-    summary: "Discrete H(z) = (b0 + b1·z⁻¹ + … + bm·z⁻ᵐ)/(a0 + a1·z⁻¹ + … + an·z⁻ⁿ), applied \
-              to each element on its own (direct form II transposed); with b0 = 0 the input \
-              is a state input (usable in loops).",
-    params: &[
-        P::required("input", K::Input, "u, any shape"),
-        P::required("output", K::Output, "y, the shape of u"),
-        P::required("num", K::Numbers, "numerator [b0, b1, …] in powers of z⁻¹"),
-        P::required(
-            "den",
-            K::Numbers,
-            "denominator [a0, a1, …] in powers of z⁻¹ (a0 ≠ 0)",
-        ),
-    ],
-};
-
 /// Registers `transfer_function`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&TRANSFER_FUNCTION, |b, p| {
-        TransferFunction::new(
-            b,
-            p.text("input")?,
-            p.text("output")?,
-            &p.numbers("num")?,
-            &p.numbers("den")?,
-        )
-    });
+    registry.add::<TransferFunction>();
 }
 
 #[cfg(test)]

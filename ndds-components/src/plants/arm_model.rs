@@ -261,7 +261,11 @@ impl ArmModel {
         name: &str,
         default: [f64; 2],
     ) -> Result<[f64; 2], ParamError> {
-        let values = p.numbers_or(name, &default)?;
+        Self::pair(name, &p.numbers_or(name, &default)?)
+    }
+
+    /// `values` as two finite joint angles, refused under the parameter `name` otherwise.
+    pub(crate) fn pair(name: &str, values: &[f64]) -> Result<[f64; 2], ParamError> {
         match values[..] {
             [a, b] if a.is_finite() && b.is_finite() => Ok([a, b]),
             _ => Err(ParamError {

@@ -2,11 +2,10 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
 use crate::design::discretize;
-use crate::mats::distinct;
 use crate::params::failed;
 
 /// Physical constants of [`MassSpringDamper`].
@@ -23,6 +22,16 @@ pub struct Physical {
 }
 
 impl Physical {
+    /// Itself, unless the mass or the length is not positive (a failure of the module, not
+    /// of one parameter: description files report it at the component).
+    fn checked(self) -> Result<Self, ModuleError> {
+        if self.mass > 0.0 && self.length > 0.0 {
+            Ok(self)
+        } else {
+            Err(failed("mass and length must be positive"))
+        }
+    }
+
     /// The continuous model `ẋ = A·x + B·u`, `x = [position, velocity]`.
     pub fn model(&self) -> (DMatrix<f64>, DMatrix<f64>) {
         let a = DMatrix::from_row_slice(
@@ -40,18 +49,52 @@ impl Physical {
     }
 }
 
-/// `m·p̈ = f − c·ṗ − k·p`, integrated exactly for a force held over each sample (zero-order
-/// hold). `execute` writes the position (m) and the lever angle (rad, position / length);
-/// `state_update` reads the force and advances the state, so a controller reading the
-/// position and writing the force closes a legal loop. `reset` puts it back at rest at 0.
+/// Simulated plant m·p̈ = f − c·ṗ − k·p, exact zero-order-hold integration; writes the
+/// position and a lever angle (position / length).
+///
+/// Integrated exactly for a force held over each sample. `execute` writes the position (m)
+/// and the lever angle (rad, position / length); `state_update` reads the force and advances
+/// the state, so a controller reading the position and writing the force closes a legal
+/// loop. `reset` puts it back at rest at 0.
+#[derive(Component)]
+#[component(name = "mass_spring_damper")]
 pub struct MassSpringDamper {
+    /// f (N, 1 × 1), read in state_update
+    #[input(state, shape = (1, 1))]
     force: Mat,
+    /// p (m, 1 × 1)
+    #[output(shape = (1, 1))]
     position: Mat,
+    /// p / length (rad, 1 × 1)
+    #[output(shape = (1, 1))]
     angle: Mat,
+    /// m
+    #[param(default = 1.0, unit = "kg")]
+    _mass: f64,
+    /// k
+    #[param(default = 4.0, unit = "N/m")]
+    _stiffness: f64,
+    /// c
+    #[param(default = 0.4, unit = "N·s/m")]
+    _damping: f64,
+    /// lever length
+    #[param(default = 0.5, unit = "m")]
+    _length: f64,
+    #[state(init = Physical {
+        mass: _mass,
+        stiffness: _stiffness,
+        damping: _damping,
+        length: _length,
+    }
+    .checked()?)]
     physical: Physical,
+    #[state(init = DMatrix::zeros(2, 1))]
     state: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(2, 1))]
     next: DMatrix<f64>,
+    #[state(init = DMatrix::identity(2, 2))]
     ad: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(2, 1))]
     bd: DMatrix<f64>,
     dt: f64,
 }
@@ -65,21 +108,15 @@ impl MassSpringDamper {
         angle: &str,
         physical: Physical,
     ) -> Result<Self, ModuleError> {
-        distinct(&[force, position, angle])?;
-        if !(physical.mass > 0.0 && physical.length > 0.0) {
-            return Err(failed("mass and length must be positive"));
-        }
-        Ok(Self {
-            force: b.state_input(force, (1, 1)),
-            position: b.output(position, (1, 1)),
-            angle: b.output(angle, (1, 1)),
-            physical,
-            state: DMatrix::zeros(2, 1),
-            next: DMatrix::zeros(2, 1),
-            ad: DMatrix::identity(2, 2),
-            bd: DMatrix::zeros(2, 1),
-            dt: 0.0,
-        })
+        let params = Params::new()
+            .with("force", force)
+            .with("position", position)
+            .with("angle", angle)
+            .with("mass", physical.mass)
+            .with("stiffness", physical.stiffness)
+            .with("damping", physical.damping)
+            .with("length", physical.length);
+        Self::build(b, &params)
     }
 
     /// Puts the mass at `position` (m), at rest.
@@ -131,37 +168,9 @@ impl SampleModule for MassSpringDamper {
     }
 }
 
-const MASS_SPRING_DAMPER: ComponentSpec = ComponentSpec {
-    name: "mass_spring_damper",
-    summary: "Simulated plant m·p̈ = f − c·ṗ − k·p, exact zero-order-hold integration; \
-              writes the position and a lever angle (position / length).",
-    params: &[
-        P::required("force", K::Input, "f (N, 1 × 1), read in state_update"),
-        P::required("position", K::Output, "p (m, 1 × 1)"),
-        P::required("angle", K::Output, "p / length (rad, 1 × 1)"),
-        P::optional("mass", K::Number, "1", "m (kg)"),
-        P::optional("stiffness", K::Number, "4", "k (N/m)"),
-        P::optional("damping", K::Number, "0.4", "c (N·s/m)"),
-        P::optional("length", K::Number, "0.5", "lever length (m)"),
-    ],
-};
-
 /// Registers `mass_spring_damper`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&MASS_SPRING_DAMPER, |b, p| {
-        MassSpringDamper::new(
-            b,
-            p.text("force")?,
-            p.text("position")?,
-            p.text("angle")?,
-            Physical {
-                mass: p.number_or("mass", 1.0)?,
-                stiffness: p.number_or("stiffness", 4.0)?,
-                damping: p.number_or("damping", 0.4)?,
-                length: p.number_or("length", 0.5)?,
-            },
-        )
-    });
+    registry.add::<MassSpringDamper>();
 }
 
 #[cfg(test)]

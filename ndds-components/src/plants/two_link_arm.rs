@@ -1,28 +1,88 @@
 //! `two_link_arm`: a simulated planar two-link arm (the model is [`ArmModel`]).
 
 use ndds_runtime::csmat::CsMat;
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
 use crate::ArmModel;
-use crate::mats::distinct;
 use crate::params::failed;
 
-/// A simulated [`ArmModel`]. `execute` writes the joint angles (rad), the endpoint (m) and,
+/// Simulated planar two-link arm of uniform rods, M(q)·q̈ + C(q,q̇)·q̇ + d·q̇ + g(q) = τ,
+/// integrated with RK4 in ≤ 1 ms substeps, the torque held over each sample; writes the joint
+/// angles, the endpoint and optionally the joint velocities.
+///
+/// The model is [`ArmModel`]. `execute` writes the joint angles (rad), the endpoint (m) and,
 /// if asked for, the joint velocities (rad/s), each 2 × 1 with field names and units;
 /// `state_update` reads the torque (N·m, 2 × 1) and integrates over the sample period with
 /// [`ArmModel::integrate`], so a controller reading the arm's outputs and writing its torque
 /// closes a legal loop. Enabling it publishes its current state at once (so controllers
 /// enabled after it start from the real measurement); `reset` puts it back at rest at `q0`.
+#[derive(Component)]
+#[component(name = "two_link_arm")]
 pub struct TwoLinkArm {
-    torque: Mat,
-    angles: Mat,
-    endpoint: Mat,
-    velocities: Option<Mat>,
+    #[state(init = arm_model([_l1, _l2, _m1, _m2], _damping, _gravity)?)]
     model: ArmModel,
+    #[state(init = ArmModel::pair("q0", &_q0)?)]
     q0: [f64; 2],
+    /// τ (N·m, 2 × 1), read in state_update
+    #[input(state, shape = (2, 1))]
+    torque: Mat,
+    /// q (rad, 2 × 1): q1 from the x axis, q2 relative to link 1
+    #[output(like = pair(q0, [("q1", "rad"), ("q2", "rad")])?)]
+    angles: Mat,
+    /// tip position [x, y] (m, 2 × 1)
+    #[output(like = pair(model.forward_kinematics(q0), [("x", "m"), ("y", "m")])?)]
+    endpoint: Mat,
+    /// q̇ (rad/s, 2 × 1)
+    #[output(like = pair([0.0; 2], [("q1dot", "rad/s"), ("q2dot", "rad/s")])?)]
+    velocities: Option<Mat>,
+    /// length of link 1
+    #[param(default = 1.0, unit = "m", above = 0)]
+    _l1: f64,
+    /// length of link 2
+    #[param(default = 0.8, unit = "m", above = 0)]
+    _l2: f64,
+    /// mass of link 1, a uniform rod
+    #[param(default = 2.0, unit = "kg", above = 0)]
+    _m1: f64,
+    /// mass of link 2, a uniform rod
+    #[param(default = 1.0, unit = "kg", above = 0)]
+    _m2: f64,
+    /// viscous damping at each joint (≥ 0)
+    #[param(default = 0.5, unit = "N·m·s/rad")]
+    _damping: f64,
+    /// gravity along the plane's −y axis; 0: a horizontal plane
+    #[param(default = 0.0, unit = "m/s²")]
+    _gravity: f64,
+    /// initial joint angles [q1, q2], at rest
+    #[param(default = vec![0.3, 0.6], default_doc = "[0.3, 0.6]", unit = "rad")]
+    _q0: Vec<f64>,
+    #[state(init = [q0[0], q0[1], 0.0, 0.0])]
     state: [f64; 4],
     active: bool,
+}
+
+/// The arm of these constants, checked.
+fn arm_model(
+    [l1, l2, m1, m2]: [f64; 4],
+    damping: f64,
+    gravity: f64,
+) -> Result<ArmModel, ModuleError> {
+    let model = ArmModel {
+        l1,
+        l2,
+        m1,
+        m2,
+        damping,
+        gravity,
+    };
+    model.check()?;
+    Ok(model)
+}
+
+/// A 2 × 1 template with field names and units (its name is the output's once bound).
+fn pair(values: [f64; 2], fields: [(&str, &str); 2]) -> Result<CsMat, ModuleError> {
+    Ok(CsMat::from_row_slice("pair", 2, 1, &values)?.with_row_fields(fields)?)
 }
 
 impl TwoLinkArm {
@@ -37,42 +97,22 @@ impl TwoLinkArm {
         model: ArmModel,
         q0: [f64; 2],
     ) -> Result<Self, ModuleError> {
-        let mut names = vec![torque, angles, endpoint];
-        names.extend(velocities);
-        distinct(&names)?;
-        model.check()?;
-        if !(q0[0].is_finite() && q0[1].is_finite()) {
-            return Err(ModuleError::param(
-                "q0",
-                format!("expected finite joint angles (rad), got {q0:?}"),
-            ));
-        }
-        let template = |name: &str, values: [f64; 2], fields: [(&str, &str); 2]| {
-            CsMat::from_row_slice(name, 2, 1, &values)?.with_row_fields(fields)
+        let params = Params::new()
+            .with("torque", torque)
+            .with("angles", angles)
+            .with("endpoint", endpoint)
+            .with("l1", model.l1)
+            .with("l2", model.l2)
+            .with("m1", model.m1)
+            .with("m2", model.m2)
+            .with("damping", model.damping)
+            .with("gravity", model.gravity)
+            .with("q0", q0.to_vec());
+        let params = match velocities {
+            Some(velocities) => params.with("velocities", velocities),
+            None => params,
         };
-        let tip = model.forward_kinematics(q0);
-        let angles_mat = template(angles, q0, [("q1", "rad"), ("q2", "rad")])?;
-        let endpoint_mat = template(endpoint, tip, [("x", "m"), ("y", "m")])?;
-        let velocities_mat = match velocities {
-            Some(name) => Some((
-                name,
-                template(name, [0.0; 2], [("q1dot", "rad/s"), ("q2dot", "rad/s")])?,
-            )),
-            None => None,
-        };
-        let torque = b.state_input(torque, (2, 1));
-        let angles = b.output_like(angles, angles_mat);
-        let endpoint = b.output_like(endpoint, endpoint_mat);
-        Ok(Self {
-            torque,
-            angles,
-            endpoint,
-            velocities: velocities_mat.map(|(name, mat)| b.output_like(name, mat)),
-            model,
-            q0,
-            state: [q0[0], q0[1], 0.0, 0.0],
-            active: false,
-        })
+        Self::build(b, &params)
     }
 
     /// The state `[q1, q2, q̇1, q̇2]` (rad, rad/s).
@@ -148,63 +188,9 @@ impl SampleModule for TwoLinkArm {
     }
 }
 
-const TWO_LINK_ARM: ComponentSpec = ComponentSpec {
-    name: "two_link_arm",
-    summary: "Simulated planar two-link arm of uniform rods, M(q)·q̈ + C(q,q̇)·q̇ + d·q̇ + g(q) = τ, \
-              integrated with RK4 in ≤ 1 ms substeps, the torque held over each sample; writes \
-              the joint angles, the endpoint and optionally the joint velocities.",
-    params: &[
-        P::required("torque", K::Input, "τ (N·m, 2 × 1), read in state_update"),
-        P::required(
-            "angles",
-            K::Output,
-            "q (rad, 2 × 1): q1 from the x axis, q2 relative to link 1",
-        ),
-        P::required("endpoint", K::Output, "tip position [x, y] (m, 2 × 1)"),
-        P::optional("velocities", K::Output, "none", "q̇ (rad/s, 2 × 1)"),
-        P::optional("l1", K::Number, "1", "length of link 1 (m)"),
-        P::optional("l2", K::Number, "0.8", "length of link 2 (m)"),
-        P::optional("m1", K::Number, "2", "mass of link 1, a uniform rod (kg)"),
-        P::optional("m2", K::Number, "1", "mass of link 2, a uniform rod (kg)"),
-        P::optional(
-            "damping",
-            K::Number,
-            "0.5",
-            "viscous damping at each joint (N·m·s/rad)",
-        ),
-        P::optional(
-            "gravity",
-            K::Number,
-            "0",
-            "gravity along the plane's −y axis (m/s²); 0: a horizontal plane",
-        ),
-        P::optional(
-            "q0",
-            K::Numbers,
-            "[0.3, 0.6]",
-            "initial joint angles [q1, q2] (rad), at rest",
-        ),
-    ],
-};
-
 /// Registers `two_link_arm`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&TWO_LINK_ARM, |b, p| {
-        let velocities = if p.has("velocities") {
-            Some(p.text("velocities")?)
-        } else {
-            None
-        };
-        TwoLinkArm::new(
-            b,
-            p.text("torque")?,
-            p.text("angles")?,
-            p.text("endpoint")?,
-            velocities,
-            ArmModel::from_params(p)?,
-            ArmModel::joint_pair(p, "q0", [0.3, 0.6])?,
-        )
-    });
+    registry.add::<TwoLinkArm>();
 }
 
 #[cfg(test)]

@@ -2,30 +2,48 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{ROWS_DEFAULT, ROWS_DOC, list, rows};
+use super::source_columns;
 use crate::mats::{copy_in, copy_out, matrix_param};
-use crate::params::columns;
 
-/// `output = value`: a tunable constant. `value` is the `n × 1` parameter CSMat
-/// `"{module}.value"`; the application may change it while sampling runs.
+/// output = value, a tunable n × 1 CSMat `<module>.value`.
+///
+/// The application may change `value` while sampling runs.
+#[derive(Component)]
+#[component(name = "constant", finish = Self::declare_value)]
 pub struct Constant {
-    output: Mat,
-    value: Mat,
+    /// The value as a column (its rows give the output's).
+    #[state(init = { let [value] = source_columns(_rows, [("value", &_value)])?; value })]
     buffer: DMatrix<f64>,
+    /// y (n × 1)
+    #[output(shape = buffer.shape())]
+    output: Mat,
+    /// the value, one per row or one for all
+    #[param]
+    _value: Vec<f64>,
+    /// output rows n (every list then has one value or n)
+    #[param(default_doc = "the length of the longest list", min = 1, max = 65536)]
+    _rows: Option<usize>,
+    /// The parameter CSMat `<module>.value`, declared once `buffer` is known.
+    #[state(init = Mat::placeholder("value"))]
+    value: Mat,
 }
 
 impl Constant {
     /// Writes `value` (a column) to `output`.
     pub fn new(b: &mut Binder<'_>, output: &str, value: &[f64]) -> Result<Self, ModuleError> {
-        let [value] = columns([("value", value)])?;
-        Ok(Self {
-            output: b.output(output, value.shape()),
-            value: matrix_param(b, "value", &value),
-            buffer: value,
-        })
+        let params = Params::new()
+            .with("output", output)
+            .with("value", value.to_vec());
+        Self::build(b, &params)
+    }
+
+    /// The tunable `<module>.value`, created from the column unless it exists.
+    fn declare_value(&mut self, b: &mut Binder<'_>) -> Result<(), ModuleError> {
+        self.value = matrix_param(b, "value", &self.buffer);
+        Ok(())
     }
 }
 
@@ -36,22 +54,9 @@ impl SampleModule for Constant {
     }
 }
 
-const CONSTANT: ComponentSpec = ComponentSpec {
-    name: "constant",
-    summary: "output = value, a tunable n × 1 CSMat `<module>.value`.",
-    params: &[
-        P::required("output", K::Output, "y (n × 1)"),
-        P::required("value", K::Numbers, "the value, one per row or one for all"),
-        P::optional("rows", K::Number, ROWS_DEFAULT, ROWS_DOC),
-    ],
-};
-
 /// Registers `constant`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&CONSTANT, |b, p| {
-        let n = rows(p)?;
-        Constant::new(b, p.text("output")?, &list(p, "value", None, n)?)
-    });
+    registry.add::<Constant>();
 }
 
 #[cfg(test)]

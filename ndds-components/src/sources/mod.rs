@@ -12,7 +12,11 @@
 //! Every value is a list with one value per element of the output, or a single value for all
 //! of them. The output is `n × 1`, where `n` is the parameter `rows` when given (every list
 //! then has one value or `rows`), else the length of the longest list (every other list has one
-//! value or that many). This file holds what the sources' registry entries share.
+//! value or that many). This file holds what the sources share: the time and the columns.
+//!
+//! Each source is a `#[derive(Component)]` struct whose list parameters (and `rows`) are
+//! fields named with a leading `_`: they are read only while building, into the columns the
+//! routines use (a state field initialised before the output, whose shape it gives).
 
 pub(crate) mod constant;
 pub(crate) mod noise;
@@ -20,51 +24,37 @@ pub(crate) mod ramp;
 pub(crate) mod sine;
 pub(crate) mod step;
 
-use ndds_runtime::{ModuleError, Params, Registry, SampleContext};
+use nalgebra::DMatrix;
 
-use crate::params::{broadcast, whole_number};
+use ndds_runtime::{ModuleError, Registry, SampleContext};
+
+use crate::params::{broadcast, columns};
 
 /// Times within this of `at` count as reaching it: nominal times are sums of whole-nanosecond
 /// periods, so `3 × (1/3 s)` is 1 ns short of 1 s.
 const TIME_TOLERANCE: f64 = 1e-6;
-
-/// Largest `rows` a source accepts.
-const MAX_ROWS: f64 = 65536.0;
-
-/// The doc of every source's `rows` parameter, and its default.
-const ROWS_DOC: &str = "output rows n (every list then has one value or n)";
-const ROWS_DEFAULT: &str = "the length of the longest list";
 
 /// The sample's nominal time (s since sampling began).
 fn seconds(ctx: &SampleContext) -> f64 {
     ctx.time.as_secs_f64()
 }
 
-/// The list parameter `name` (or `default` when absent and optional), stretched to `rows`
-/// when that is given.
-fn list(
-    p: &Params,
-    name: &str,
-    default: Option<f64>,
+/// The lists `(key, values)` as columns of one length: `rows` when given (each list then has
+/// one value or `rows`), else the longest list's (each other list has one value or as many).
+fn source_columns<const N: usize>(
     rows: Option<usize>,
-) -> Result<Vec<f64>, ModuleError> {
-    let values = match default {
-        Some(x) => p.numbers_or(name, &[x])?,
-        None => p.numbers(name)?,
+    lists: [(&str, &[f64]); N],
+) -> Result<[DMatrix<f64>; N], ModuleError> {
+    let stretched = match rows {
+        Some(n) => lists
+            .iter()
+            .map(|(key, values)| broadcast(key, values, n))
+            .collect::<Result<Vec<_>, _>>()?,
+        None => lists.iter().map(|(_, values)| values.to_vec()).collect(),
     };
-    match rows {
-        Some(n) => broadcast(name, &values, n),
-        None => Ok(values),
-    }
-}
-
-/// The `rows` parameter, if given.
-fn rows(p: &Params) -> Result<Option<usize>, ModuleError> {
-    if !p.has("rows") {
-        return Ok(None);
-    }
-    let n = whole_number("rows", p.number("rows")?, 1.0, MAX_ROWS)?;
-    Ok(Some(n as usize))
+    columns(std::array::from_fn(|i| {
+        (lists[i].0, stretched[i].as_slice())
+    }))
 }
 
 /// Registers the sources.

@@ -2,24 +2,43 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{ROWS_DEFAULT, ROWS_DOC, list, rows};
+use super::source_columns;
 use crate::mats::copy_out;
-use crate::params::{columns, whole_number};
 
-/// Gaussian white noise: each element of `output` is `mean + std_dev·N(0, 1)`, a new draw each
-/// sample. The draws come from a generator seeded with `seed` (Box–Muller on `fastrand`), so
-/// the sequence is the same every run; `reset` restarts it.
+/// Gaussian white noise, output = mean + std_dev·N(0, 1), a new draw each sample; the same
+/// sequence for the same seed, restarted by a reset.
+///
+/// The draws come from a generator seeded with `seed` (Box–Muller on `fastrand`), so the
+/// sequence is the same every run.
+#[derive(Component)]
+#[component(name = "noise")]
 pub struct Noise {
+    /// `[mean, std_dev]` as columns of one length.
+    #[state(init = source_columns(_rows, [("mean", &_mean), ("std_dev", &_std_dev)])?)]
+    values: [DMatrix<f64>; 2],
+    /// y (n × 1)
+    #[output(shape = values[0].shape())]
     output: Mat,
-    mean: DMatrix<f64>,
-    std_dev: DMatrix<f64>,
+    /// standard deviation
+    #[param(min = 0)]
+    _std_dev: Vec<f64>,
+    /// mean value
+    #[param(default = vec![0.0], default_doc = "0")]
+    _mean: Vec<f64>,
+    /// seed of the generator (a whole number ≥ 0)
+    #[param(default = 1)]
     seed: u64,
+    /// output rows n (every list then has one value or n)
+    #[param(default_doc = "the length of the longest list", min = 1, max = 65536)]
+    _rows: Option<usize>,
+    #[state(init = fastrand::Rng::with_seed(seed))]
     rng: fastrand::Rng,
     /// The second value of the last Box–Muller pair, not used yet.
     spare: Option<f64>,
+    #[state(init = values[0].clone())]
     buffer: DMatrix<f64>,
 }
 
@@ -32,19 +51,16 @@ impl Noise {
         std_dev: &[f64],
         seed: u64,
     ) -> Result<Self, ModuleError> {
-        let [mean, std_dev] = columns([("mean", mean), ("std_dev", std_dev)])?;
-        if let Some(bad) = std_dev.iter().find(|s| **s < 0.0) {
-            return Err(ModuleError::param("std_dev", format!("{bad} is negative")));
-        }
-        Ok(Self {
-            output: b.output(output, mean.shape()),
-            buffer: mean.clone(),
-            mean,
-            std_dev,
-            seed,
-            rng: fastrand::Rng::with_seed(seed),
-            spare: None,
-        })
+        // The seed is set here, not as a parameter: a description file's number holds only
+        // seeds below 2^53 exactly.
+        let params = Params::new()
+            .with("output", output)
+            .with("mean", mean.to_vec())
+            .with("std_dev", std_dev.to_vec());
+        let mut noise = Self::build(b, &params)?;
+        noise.seed = seed;
+        noise.rng = fastrand::Rng::with_seed(seed);
+        Ok(noise)
     }
 
     /// One standard normal draw.
@@ -64,7 +80,9 @@ impl Noise {
 impl SampleModule for Noise {
     fn execute(&mut self, _: &SampleContext) -> RoutineResult {
         for i in 0..self.buffer.len() {
-            self.buffer[i] = self.mean[i] + self.std_dev[i] * self.normal();
+            let [mean, std_dev] = &self.values;
+            let (mean, std_dev) = (mean[i], std_dev[i]);
+            self.buffer[i] = mean + std_dev * self.normal();
         }
         copy_out(&self.output, &self.buffer)
     }
@@ -76,37 +94,9 @@ impl SampleModule for Noise {
     }
 }
 
-const NOISE: ComponentSpec = ComponentSpec {
-    name: "noise",
-    summary: "Gaussian white noise, output = mean + std_dev·N(0, 1), a new draw each sample; \
-              the same sequence for the same seed, restarted by a reset.",
-    params: &[
-        P::required("output", K::Output, "y (n × 1)"),
-        P::required("std_dev", K::Numbers, "standard deviation (≥ 0)"),
-        P::optional("mean", K::Numbers, "0", "mean value"),
-        P::optional(
-            "seed",
-            K::Number,
-            "1",
-            "seed of the generator (a whole number ≥ 0)",
-        ),
-        P::optional("rows", K::Number, ROWS_DEFAULT, ROWS_DOC),
-    ],
-};
-
 /// Registers `noise`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&NOISE, |b, p| {
-        let n = rows(p)?;
-        let seed = whole_number("seed", p.number_or("seed", 1.0)?, 0.0, 2f64.powi(53))?;
-        Noise::new(
-            b,
-            p.text("output")?,
-            &list(p, "mean", Some(0.0), n)?,
-            &list(p, "std_dev", None, n)?,
-            seed,
-        )
-    });
+    registry.add::<Noise>();
 }
 
 #[cfg(test)]

@@ -2,19 +2,35 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{ROWS_DEFAULT, ROWS_DOC, list, rows, seconds};
+use super::{seconds, source_columns};
 use crate::mats::copy_out;
-use crate::params::{columns, finite};
 
-/// A ramp: `output = start + slope·max(t − at, 0)` (`slope` per second).
+/// output = start + slope·max(t − at, 0).
+#[derive(Component)]
+#[component(name = "ramp")]
 pub struct Ramp {
+    /// `[start, slope]` as columns of one length.
+    #[state(init = source_columns(_rows, [("start", &_start), ("slope", &_slope)])?)]
+    values: [DMatrix<f64>; 2],
+    /// y (n × 1)
+    #[output(shape = values[0].shape())]
     output: Mat,
-    start: DMatrix<f64>,
-    slope: DMatrix<f64>,
+    /// rate of change (per s)
+    #[param]
+    _slope: Vec<f64>,
+    /// the value until `at`
+    #[param(default = vec![0.0], default_doc = "0")]
+    _start: Vec<f64>,
+    /// when it starts rising
+    #[param(default = 0.0, unit = "s")]
     at: f64,
+    /// output rows n (every list then has one value or n)
+    #[param(default_doc = "the length of the longest list", min = 1, max = 65536)]
+    _rows: Option<usize>,
+    #[state(init = values[0].clone())]
     buffer: DMatrix<f64>,
 }
 
@@ -27,52 +43,29 @@ impl Ramp {
         slope: &[f64],
         at: f64,
     ) -> Result<Self, ModuleError> {
-        let [start, slope] = columns([("start", start), ("slope", slope)])?;
-        finite("at", at)?;
-        Ok(Self {
-            output: b.output(output, start.shape()),
-            buffer: start.clone(),
-            start,
-            slope,
-            at,
-        })
+        let params = Params::new()
+            .with("output", output)
+            .with("start", start.to_vec())
+            .with("slope", slope.to_vec())
+            .with("at", at);
+        Self::build(b, &params)
     }
 }
 
 impl SampleModule for Ramp {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let elapsed = (seconds(ctx) - self.at).max(0.0);
+        let [start, slope] = &self.values;
         for (i, out) in self.buffer.iter_mut().enumerate() {
-            *out = self.start[i] + self.slope[i] * elapsed;
+            *out = start[i] + slope[i] * elapsed;
         }
         copy_out(&self.output, &self.buffer)
     }
 }
 
-const RAMP: ComponentSpec = ComponentSpec {
-    name: "ramp",
-    summary: "output = start + slope·max(t − at, 0).",
-    params: &[
-        P::required("output", K::Output, "y (n × 1)"),
-        P::required("slope", K::Numbers, "rate of change (per s)"),
-        P::optional("start", K::Numbers, "0", "the value until `at`"),
-        P::optional("at", K::Number, "0", "when it starts rising (s)"),
-        P::optional("rows", K::Number, ROWS_DEFAULT, ROWS_DOC),
-    ],
-};
-
 /// Registers `ramp`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&RAMP, |b, p| {
-        let n = rows(p)?;
-        Ramp::new(
-            b,
-            p.text("output")?,
-            &list(p, "start", Some(0.0), n)?,
-            &list(p, "slope", None, n)?,
-            p.number_or("at", 0.0)?,
-        )
-    });
+    registry.add::<Ramp>();
 }
 
 #[cfg(test)]

@@ -2,26 +2,51 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{ROWS_DEFAULT, ROWS_DOC, list, rows, seconds};
+use super::{seconds, source_columns};
 use crate::mats::copy_out;
-use crate::params::columns;
 
-/// A sine wave: `output = offset + amplitude·sin(2π·frequency·t + phase)` (frequency in Hz,
-/// phase in radians).
+/// output = offset + amplitude·sin(2π·frequency·t + phase).
+#[derive(Component)]
+#[component(name = "sine")]
 pub struct Sine {
+    /// `[amplitude, frequency, phase, offset]` as columns of one length.
+    #[state(init = source_columns(
+        _rows,
+        [
+            ("amplitude", &_amplitude),
+            ("frequency", &_frequency),
+            ("phase", &_phase),
+            ("offset", &_offset),
+        ],
+    )?)]
+    values: [DMatrix<f64>; 4],
+    /// y (n × 1)
+    #[output(shape = values[0].shape())]
     output: Mat,
-    amplitude: DMatrix<f64>,
-    frequency: DMatrix<f64>,
-    phase: DMatrix<f64>,
-    offset: DMatrix<f64>,
+    /// peak deviation from `offset`
+    #[param]
+    _amplitude: Vec<f64>,
+    /// frequency
+    #[param(unit = "Hz")]
+    _frequency: Vec<f64>,
+    /// phase at t = 0
+    #[param(default = vec![0.0], default_doc = "0", unit = "rad")]
+    _phase: Vec<f64>,
+    /// mean value
+    #[param(default = vec![0.0], default_doc = "0")]
+    _offset: Vec<f64>,
+    /// output rows n (every list then has one value or n)
+    #[param(default_doc = "the length of the longest list", min = 1, max = 65536)]
+    _rows: Option<usize>,
+    #[state(init = values[3].clone())]
     buffer: DMatrix<f64>,
 }
 
 impl Sine {
-    /// Writes the sine wave to `output`.
+    /// Writes the sine wave to `output` (frequency in Hz, phase in radians).
     pub fn new(
         b: &mut Binder<'_>,
         output: &str,
@@ -30,60 +55,31 @@ impl Sine {
         phase: &[f64],
         offset: &[f64],
     ) -> Result<Self, ModuleError> {
-        let [amplitude, frequency, phase, offset] = columns([
-            ("amplitude", amplitude),
-            ("frequency", frequency),
-            ("phase", phase),
-            ("offset", offset),
-        ])?;
-        Ok(Self {
-            output: b.output(output, offset.shape()),
-            buffer: offset.clone(),
-            amplitude,
-            frequency,
-            phase,
-            offset,
-        })
+        let params = Params::new()
+            .with("output", output)
+            .with("amplitude", amplitude.to_vec())
+            .with("frequency", frequency.to_vec())
+            .with("phase", phase.to_vec())
+            .with("offset", offset.to_vec());
+        Self::build(b, &params)
     }
 }
 
 impl SampleModule for Sine {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let t = seconds(ctx);
+        let [amplitude, frequency, phase, offset] = &self.values;
         for (i, out) in self.buffer.iter_mut().enumerate() {
-            let angle = std::f64::consts::TAU * self.frequency[i] * t + self.phase[i];
-            *out = self.offset[i] + self.amplitude[i] * angle.sin();
+            let angle = std::f64::consts::TAU * frequency[i] * t + phase[i];
+            *out = offset[i] + amplitude[i] * angle.sin();
         }
         copy_out(&self.output, &self.buffer)
     }
 }
 
-const SINE: ComponentSpec = ComponentSpec {
-    name: "sine",
-    summary: "output = offset + amplitude·sin(2π·frequency·t + phase).",
-    params: &[
-        P::required("output", K::Output, "y (n × 1)"),
-        P::required("amplitude", K::Numbers, "peak deviation from `offset`"),
-        P::required("frequency", K::Numbers, "frequency (Hz)"),
-        P::optional("phase", K::Numbers, "0", "phase at t = 0 (rad)"),
-        P::optional("offset", K::Numbers, "0", "mean value"),
-        P::optional("rows", K::Number, ROWS_DEFAULT, ROWS_DOC),
-    ],
-};
-
 /// Registers `sine`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&SINE, |b, p| {
-        let n = rows(p)?;
-        Sine::new(
-            b,
-            p.text("output")?,
-            &list(p, "amplitude", None, n)?,
-            &list(p, "frequency", None, n)?,
-            &list(p, "phase", Some(0.0), n)?,
-            &list(p, "offset", Some(0.0), n)?,
-        )
-    });
+    registry.add::<Sine>();
 }
 
 #[cfg(test)]

@@ -2,19 +2,34 @@
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{ROWS_DEFAULT, ROWS_DOC, TIME_TOLERANCE, list, rows, seconds};
+use super::{TIME_TOLERANCE, seconds, source_columns};
 use crate::mats::copy_out;
-use crate::params::{columns, finite};
 
-/// A step: `output = initial` while `t < at`, `final` from the first sample with `t ≥ at` on.
+/// output = initial while t < at, final from the first sample with t ≥ at on.
+#[derive(Component)]
+#[component(name = "step")]
 pub struct Step {
+    /// `[initial, final]` as columns of one length.
+    #[state(init = source_columns(_rows, [("initial", &_initial), ("final", &_final)])?)]
+    values: [DMatrix<f64>; 2],
+    /// y (n × 1)
+    #[output(shape = values[0].shape())]
     output: Mat,
-    initial: DMatrix<f64>,
-    final_value: DMatrix<f64>,
+    /// the value from `at` on
+    #[param]
+    _final: Vec<f64>,
+    /// the value before `at`
+    #[param(default = vec![0.0], default_doc = "0")]
+    _initial: Vec<f64>,
+    /// when it steps, since sampling began
+    #[param(default = 0.0, unit = "s")]
     at: f64,
+    /// output rows n (every list then has one value or n)
+    #[param(default_doc = "the length of the longest list", min = 1, max = 65536)]
+    _rows: Option<usize>,
 }
 
 impl Step {
@@ -26,56 +41,29 @@ impl Step {
         final_value: &[f64],
         at: f64,
     ) -> Result<Self, ModuleError> {
-        let [initial, final_value] = columns([("initial", initial), ("final", final_value)])?;
-        finite("at", at)?;
-        Ok(Self {
-            output: b.output(output, initial.shape()),
-            initial,
-            final_value,
-            at,
-        })
+        let params = Params::new()
+            .with("output", output)
+            .with("initial", initial.to_vec())
+            .with("final", final_value.to_vec())
+            .with("at", at);
+        Self::build(b, &params)
     }
 }
 
 impl SampleModule for Step {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
+        let [initial, final_value] = &self.values;
         if seconds(ctx) + TIME_TOLERANCE >= self.at {
-            copy_out(&self.output, &self.final_value)
+            copy_out(&self.output, final_value)
         } else {
-            copy_out(&self.output, &self.initial)
+            copy_out(&self.output, initial)
         }
     }
 }
 
-const STEP: ComponentSpec = ComponentSpec {
-    name: "step",
-    summary: "output = initial while t < at, final from the first sample with t ≥ at on.",
-    params: &[
-        P::required("output", K::Output, "y (n × 1)"),
-        P::required("final", K::Numbers, "the value from `at` on"),
-        P::optional("initial", K::Numbers, "0", "the value before `at`"),
-        P::optional(
-            "at",
-            K::Number,
-            "0",
-            "when it steps (s since sampling began)",
-        ),
-        P::optional("rows", K::Number, ROWS_DEFAULT, ROWS_DOC),
-    ],
-};
-
 /// Registers `step`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&STEP, |b, p| {
-        let n = rows(p)?;
-        Step::new(
-            b,
-            p.text("output")?,
-            &list(p, "initial", Some(0.0), n)?,
-            &list(p, "final", None, n)?,
-            p.number_or("at", 0.0)?,
-        )
-    });
+    registry.add::<Step>();
 }
 
 #[cfg(test)]

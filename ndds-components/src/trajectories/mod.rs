@@ -10,17 +10,19 @@
 //!
 //! Each element (joint) moves on its own profile: a trapezoidal joint with a shorter distance
 //! arrives earlier; they are not synchronised. Before `at` the position is `start`, after the
-//! move `goal`, with zero velocity. This file holds what both profiles share.
+//! move `goal`, with zero velocity. This file holds what both profiles share: the move
+//! (`Motion`, a state field each profile initialises before its outputs, whose shape it
+//! gives) and the Rust constructors' `PointToPoint`.
 
 pub(crate) mod quintic;
 pub(crate) mod trapezoidal;
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, Params, Registry, RoutineResult, SampleContext};
+use ndds_runtime::{Mat, ModuleError, Params, Registry, RoutineResult, SampleContext};
 
-use crate::mats::{copy_out, distinct};
-use crate::params::{columns, finite};
+use crate::mats::copy_out;
+use crate::params::columns;
 
 /// Where a trajectory starts and ends, and when it starts.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -33,10 +35,24 @@ pub struct PointToPoint<'a> {
     pub at: f64,
 }
 
-/// The outputs and values shared by both profiles.
+impl PointToPoint<'_> {
+    /// The parameters `start`, `goal` and `at` of a trajectory component, with `position` and
+    /// (when given) `velocity`.
+    pub(super) fn params(&self, position: &str, velocity: Option<&str>) -> Params {
+        let params = Params::new()
+            .with("position", position)
+            .with("start", self.start.to_vec())
+            .with("goal", self.goal.to_vec())
+            .with("at", self.at);
+        match velocity {
+            Some(velocity) => params.with("velocity", velocity),
+            None => params,
+        }
+    }
+}
+
+/// The values both profiles share: where each joint starts, how far it goes, when.
 pub(super) struct Motion {
-    position: Mat,
-    velocity: Option<Mat>,
     start: DMatrix<f64>,
     pub(super) distance: DMatrix<f64>,
     at: f64,
@@ -47,33 +63,24 @@ pub(super) struct Motion {
 }
 
 impl Motion {
-    pub(super) fn new(
-        b: &mut Binder<'_>,
-        position: &str,
-        velocity: Option<&str>,
-        path: &PointToPoint<'_>,
-    ) -> Result<Self, ModuleError> {
-        if path.start.len() != path.goal.len() {
+    /// From `start` to `goal` (one value per joint each, as many), `at` seconds after enabling.
+    pub(super) fn new(start: &[f64], goal: &[f64], at: f64) -> Result<Self, ModuleError> {
+        if start.len() != goal.len() {
             return Err(ModuleError::param(
                 "goal",
                 format!(
                     "has {} values but `start` has {}; give one per joint",
-                    path.goal.len(),
-                    path.start.len()
+                    goal.len(),
+                    start.len()
                 ),
             ));
         }
-        let [start, goal] = columns([("start", path.start), ("goal", path.goal)])?;
-        if let Some(velocity) = velocity {
-            distinct(&[position, velocity])?;
-        }
+        let [start, goal] = columns([("start", start), ("goal", goal)])?;
         let n = start.nrows();
         Ok(Self {
-            position: b.output(position, (n, 1)),
-            velocity: velocity.map(|v| b.output(v, (n, 1))),
             distance: &goal - &start,
             start,
-            at: finite("at", path.at)?,
+            at,
             origin: 0.0,
             p: DMatrix::zeros(n, 1),
             v: DMatrix::zeros(n, 1),
@@ -90,11 +97,12 @@ impl Motion {
         Ok(())
     }
 
-    /// Writes `start + s·distance` and `ds/dt·distance`, with `profile(i, τ) = (s, ds/dt)`
-    /// for joint `i` at `τ = t − at`.
+    /// Writes `start + s·distance` to `position` and `ds/dt·distance` to `velocity` (if
+    /// given), with `profile(i, τ) = (s, ds/dt)` for joint `i` at `τ = t − at`.
     pub(super) fn write(
         &mut self,
         ctx: &SampleContext,
+        (position, velocity): (&Mat, Option<&Mat>),
         profile: impl Fn(usize, f64) -> (f64, f64),
     ) -> RoutineResult {
         let tau = ctx.time.as_secs_f64() - self.origin - self.at;
@@ -107,37 +115,12 @@ impl Motion {
             self.p[i] = self.start[i] + s * self.distance[i];
             self.v[i] = ds * self.distance[i];
         }
-        copy_out(&self.position, &self.p)?;
-        match &self.velocity {
+        copy_out(position, &self.p)?;
+        match velocity {
             Some(velocity) => copy_out(velocity, &self.v),
             None => Ok(()),
         }
     }
-}
-
-/// The docs of the parameters both profiles share.
-pub(super) const START_DOC: &str = "start position, one value per joint";
-pub(super) const GOAL_DOC: &str = "goal position, one value per joint";
-pub(super) const AT_DOC: &str = "when the move begins (s after the module is enabled)";
-pub(super) const POSITION_DOC: &str = "position (n × 1)";
-pub(super) const VELOCITY_DOC: &str = "velocity (n × 1), written only when given";
-
-/// The optional `velocity` output's name.
-pub(super) fn velocity(p: &Params) -> Result<Option<&str>, ModuleError> {
-    if p.has("velocity") {
-        Ok(Some(p.text("velocity")?))
-    } else {
-        Ok(None)
-    }
-}
-
-/// `start`, `goal` and `at`, shared by both profiles.
-pub(super) fn path_params(p: &Params) -> Result<(Vec<f64>, Vec<f64>, f64), ModuleError> {
-    Ok((
-        p.numbers("start")?,
-        p.numbers("goal")?,
-        p.number_or("at", 0.0)?,
-    ))
 }
 
 /// Registers the trajectories.

@@ -1,17 +1,37 @@
 //! `quintic`: a minimum-jerk move per joint.
 
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{AT_DOC, GOAL_DOC, Motion, POSITION_DOC, PointToPoint, START_DOC, VELOCITY_DOC};
-use super::{path_params, velocity};
+use super::{Motion, PointToPoint};
 
-/// A minimum-jerk (quintic) move per joint, lasting `duration` seconds:
-/// `p = start + (goal − start)·(10σ³ − 15σ⁴ + 6σ⁵)`, `σ = (t − at)/duration`, with zero
-/// velocity and acceleration at both ends; the peak velocity, at mid-move, is
-/// `1.875·(goal − start)/duration`.
+/// Minimum-jerk quintic move from start to goal in `duration` seconds, zero velocity and
+/// acceleration at both ends.
+///
+/// Per joint, `p = start + (goal − start)·(10σ³ − 15σ⁴ + 6σ⁵)`, `σ = (t − at)/duration`; the
+/// peak velocity, at mid-move, is `1.875·(goal − start)/duration`.
+#[derive(Component)]
+#[component(name = "quintic")]
 pub struct Quintic {
+    #[state(init = Motion::new(&_start, &_goal, _at)?)]
     motion: Motion,
+    /// position (n × 1)
+    #[output(shape = (motion.len(), 1))]
+    position: Mat,
+    /// velocity (n × 1), written only when given
+    #[output(shape = (motion.len(), 1))]
+    velocity: Option<Mat>,
+    /// start position, one value per joint
+    #[param]
+    _start: Vec<f64>,
+    /// goal position, one value per joint
+    #[param]
+    _goal: Vec<f64>,
+    /// when the move begins, after the module is enabled
+    #[param(default = 0.0, unit = "s")]
+    _at: f64,
+    /// length of the move
+    #[param(unit = "s", above = 0)]
     duration: f64,
 }
 
@@ -24,23 +44,16 @@ impl Quintic {
         path: &PointToPoint<'_>,
         duration: f64,
     ) -> Result<Self, ModuleError> {
-        if !(duration.is_finite() && duration > 0.0) {
-            return Err(ModuleError::param(
-                "duration",
-                format!("{duration} is not a positive number"),
-            ));
-        }
-        Ok(Self {
-            motion: Motion::new(b, position, velocity, path)?,
-            duration,
-        })
+        let params = path.params(position, velocity).with("duration", duration);
+        Self::build(b, &params)
     }
 }
 
 impl SampleModule for Quintic {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let duration = self.duration;
-        self.motion.write(ctx, |_, tau| {
+        let outputs = (&self.position, self.velocity.as_ref());
+        self.motion.write(ctx, outputs, |_, tau| {
             let x = (tau / duration).min(1.0);
             let s = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x);
             let ds = 30.0 * x * x * (1.0 - x) * (1.0 - x) / duration;
@@ -57,37 +70,9 @@ impl SampleModule for Quintic {
     }
 }
 
-const QUINTIC: ComponentSpec = ComponentSpec {
-    name: "quintic",
-    summary: "Minimum-jerk quintic move from start to goal in `duration` seconds, zero \
-              velocity and acceleration at both ends.",
-    params: &[
-        P::required("position", K::Output, POSITION_DOC),
-        P::optional("velocity", K::Output, "none", VELOCITY_DOC),
-        P::required("start", K::Numbers, START_DOC),
-        P::required("goal", K::Numbers, GOAL_DOC),
-        P::optional("at", K::Number, "0", AT_DOC),
-        P::required("duration", K::Number, "length of the move (s, > 0)"),
-    ],
-};
-
 /// Registers `quintic`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&QUINTIC, |b, p| {
-        let (start, goal, at) = path_params(p)?;
-        let path = PointToPoint {
-            start: &start,
-            goal: &goal,
-            at,
-        };
-        Quintic::new(
-            b,
-            p.text("position")?,
-            velocity(p)?,
-            &path,
-            p.number("duration")?,
-        )
-    });
+    registry.add::<Quintic>();
 }
 
 #[cfg(test)]

@@ -1,10 +1,9 @@
 //! `trapezoidal`: a trapezoidal velocity profile per joint.
 
-use ndds_runtime::{Binder, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
-use super::{AT_DOC, GOAL_DOC, Motion, POSITION_DOC, PointToPoint, START_DOC, VELOCITY_DOC};
-use super::{path_params, velocity};
+use super::{Motion, PointToPoint};
 
 /// Per joint, the timing of a trapezoidal profile over a unit distance.
 #[derive(Clone, Copy, Debug)]
@@ -57,13 +56,68 @@ impl Timing {
     }
 }
 
-/// A trapezoidal velocity profile per joint: accelerate at `max_acceleration` to
-/// `max_velocity`, cruise, decelerate to stop at the goal, taking `d/v + v/a` seconds for a
-/// distance `d`; when `d < v²/a` the profile is triangular (peak speed `√(a·d)`, time
-/// `2·√(d/a)`).
+/// Trapezoidal velocity profile per joint from start to goal: accelerate at
+/// max_acceleration to max_velocity, cruise, stop at the goal (triangular when the distance
+/// is short); joints are not synchronised.
+///
+/// A move over a distance `d` takes `d/v + v/a` seconds; when `d < v²/a` the profile is
+/// triangular (peak speed `√(a·d)`, time `2·√(d/a)`).
+#[derive(Component)]
+#[component(name = "trapezoidal")]
 pub struct Trapezoidal {
+    #[state(init = Motion::new(&_start, &_goal, _at)?)]
     motion: Motion,
+    /// position (n × 1)
+    #[output(shape = (motion.len(), 1))]
+    position: Mat,
+    /// velocity (n × 1), written only when given
+    #[output(shape = (motion.len(), 1))]
+    velocity: Option<Mat>,
+    /// start position, one value per joint
+    #[param]
+    _start: Vec<f64>,
+    /// goal position, one value per joint
+    #[param]
+    _goal: Vec<f64>,
+    /// when the move begins, after the module is enabled
+    #[param(default = 0.0, unit = "s")]
+    _at: f64,
+    /// speed limit, one value or one per joint
+    #[param(above = 0)]
+    _max_velocity: Vec<f64>,
+    /// acceleration limit, one value or one per joint
+    #[param(above = 0)]
+    _max_acceleration: Vec<f64>,
+    #[state(init = timing(&motion, &_max_velocity, &_max_acceleration)?)]
     timing: Vec<Timing>,
+}
+
+/// Each joint's timing, from limits with one value or one per joint (all positive).
+fn timing(
+    motion: &Motion,
+    max_velocity: &[f64],
+    max_acceleration: &[f64],
+) -> Result<Vec<Timing>, ModuleError> {
+    let n = motion.len();
+    let limits = [
+        ("max_velocity", max_velocity),
+        ("max_acceleration", max_acceleration),
+    ];
+    for (name, values) in limits {
+        if values.len() != 1 && values.len() != n {
+            return Err(ModuleError::param(
+                name,
+                format!("has {} values; expected one or {n}", values.len()),
+            ));
+        }
+    }
+    Ok((0..n)
+        .map(|i| {
+            let v = max_velocity[i % max_velocity.len()];
+            let a = max_acceleration[i % max_acceleration.len()];
+            Timing::new(motion.distance[i].abs(), v, a)
+        })
+        .collect())
 }
 
 impl Trapezoidal {
@@ -77,41 +131,19 @@ impl Trapezoidal {
         max_velocity: &[f64],
         max_acceleration: &[f64],
     ) -> Result<Self, ModuleError> {
-        let motion = Motion::new(b, position, velocity, path)?;
-        let n = motion.len();
-        let limits = [
-            ("max_velocity", max_velocity),
-            ("max_acceleration", max_acceleration),
-        ];
-        for (name, values) in limits {
-            if values.len() != 1 && values.len() != n {
-                return Err(ModuleError::param(
-                    name,
-                    format!("has {} values; expected one or {n}", values.len()),
-                ));
-            }
-            if let Some(bad) = values.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
-                return Err(ModuleError::param(
-                    name,
-                    format!("{bad} is not a positive number"),
-                ));
-            }
-        }
-        let timing = (0..n)
-            .map(|i| {
-                let v = max_velocity[i % max_velocity.len()];
-                let a = max_acceleration[i % max_acceleration.len()];
-                Timing::new(motion.distance[i].abs(), v, a)
-            })
-            .collect();
-        Ok(Self { motion, timing })
+        let params = path
+            .params(position, velocity)
+            .with("max_velocity", max_velocity.to_vec())
+            .with("max_acceleration", max_acceleration.to_vec());
+        Self::build(b, &params)
     }
 }
 
 impl SampleModule for Trapezoidal {
     fn execute(&mut self, ctx: &SampleContext) -> RoutineResult {
         let timing = &self.timing;
-        self.motion.write(ctx, |i, tau| timing[i].at(tau))
+        let outputs = (&self.position, self.velocity.as_ref());
+        self.motion.write(ctx, outputs, |i, tau| timing[i].at(tau))
     }
 
     fn enable(&mut self, ctx: &SampleContext) -> RoutineResult {
@@ -123,48 +155,9 @@ impl SampleModule for Trapezoidal {
     }
 }
 
-const TRAPEZOIDAL: ComponentSpec = ComponentSpec {
-    name: "trapezoidal",
-    summary: "Trapezoidal velocity profile per joint from start to goal: accelerate at \
-              max_acceleration to max_velocity, cruise, stop at the goal (triangular when the \
-              distance is short); joints are not synchronised.",
-    params: &[
-        P::required("position", K::Output, POSITION_DOC),
-        P::optional("velocity", K::Output, "none", VELOCITY_DOC),
-        P::required("start", K::Numbers, START_DOC),
-        P::required("goal", K::Numbers, GOAL_DOC),
-        P::optional("at", K::Number, "0", AT_DOC),
-        P::required(
-            "max_velocity",
-            K::Numbers,
-            "speed limit (> 0), one value or one per joint",
-        ),
-        P::required(
-            "max_acceleration",
-            K::Numbers,
-            "acceleration limit (> 0), one value or one per joint",
-        ),
-    ],
-};
-
 /// Registers `trapezoidal`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&TRAPEZOIDAL, |b, p| {
-        let (start, goal, at) = path_params(p)?;
-        let path = PointToPoint {
-            start: &start,
-            goal: &goal,
-            at,
-        };
-        Trapezoidal::new(
-            b,
-            p.text("position")?,
-            velocity(p)?,
-            &path,
-            &p.numbers("max_velocity")?,
-            &p.numbers("max_acceleration")?,
-        )
-    });
+    registry.add::<Trapezoidal>();
 }
 
 #[cfg(test)]

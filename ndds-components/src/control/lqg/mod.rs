@@ -25,11 +25,11 @@ pub use model::{ArmOutput, LqgModel, MassOutput};
 
 use nalgebra::DMatrix;
 
-use ndds_runtime::{Binder, Mat, ModuleError, RoutineResult, SampleContext, SampleModule};
-use ndds_runtime::{ComponentSpec, ParamKind as K, ParamSpec as P, Registry};
+use ndds_runtime::{Binder, Component, Mat, ModuleError, Params, Registry, RoutineResult};
+use ndds_runtime::{SampleContext, SampleModule};
 
 use crate::design::spectral_radius;
-use crate::mats::{copy_out, distinct, gemm, shape_error};
+use crate::mats::{copy_out, gemm, shape_error};
 use crate::params::failed;
 use crate::{LqgDesign, LqgWeights, design_lqg};
 use model::Linear;
@@ -84,32 +84,124 @@ fn read_deviation(mat: &Mat, offset: &DMatrix<f64>, buffer: &mut DMatrix<f64>) -
     Ok(())
 }
 
-/// An LQG controller with its own steady-state Kalman estimator (see the module docs for the
-/// equations). Reads `measured` and `reference` (p × 1) in `execute`, writes the command
-/// `output` (m × 1) and, if asked for, `estimate` (n × 1, the state's deviation from the
-/// operating point). The gains are designed at the habitat's period in `startup` and again in
-/// `timing_changed`. Enabling (and resetting) it starts the estimate from the minimum-norm
-/// state that explains the current measurement, `x̂⁻ = C⁺·δy` (at rest), so it can take over
-/// from another controller without a bump.
+/// LQG controller: steady-state Kalman estimator and LQR state feedback with reference
+/// feedforward, u = u0 + N·(r − y0) − K·x̂, designed at the habitat's rate on an explicit model
+/// (a, b, c) or a linearised library plant (plant).
+///
+/// See the module docs for the equations. Reads `measured` and `reference` (p × 1) in
+/// `execute`, writes the command `output` (m × 1) and, if asked for, `estimate` (n × 1, the
+/// state's deviation from the operating point). The gains are designed at the habitat's
+/// period in `startup` and again in `timing_changed`. Enabling (and resetting) it starts the
+/// estimate from the minimum-norm state that explains the current measurement, `x̂⁻ = C⁺·δy`
+/// (at rest), so it can take over from another controller without a bump.
+#[derive(Component)]
+#[component(name = "lqg")]
 pub struct Lqg {
-    measured: Mat,
-    reference: Mat,
-    output: Mat,
-    estimate: Option<Mat>,
+    #[state(init = LqgModel::from_parts(
+        _plant.as_ref(),
+        [_a.as_ref(), _b.as_ref(), _c.as_ref()],
+    )?
+    .linear()?)]
     linear: Linear,
+    #[state(init = weights(&linear, [&_q, &_r, &_process_noise, &_measurement_noise])?)]
     weights: LqgWeights,
+    /// C⁺, for the bumpless start (the design tested first).
+    #[state(init = prepare(&linear, &weights)?)]
+    c_pinv: DMatrix<f64>,
+    /// y (p × 1), in the plant's units
+    #[input(shape = (linear.c.nrows(), 1))]
+    measured: Mat,
+    /// r (p × 1): the desired y, in the same units
+    #[input(shape = (linear.c.nrows(), 1))]
+    reference: Mat,
+    /// u (m × 1), the command
+    #[output(shape = (linear.b.ncols(), 1))]
+    output: Mat,
+    /// x̂ (n × 1): the estimated state's deviation from the operating point
+    #[output(shape = (linear.a.nrows(), 1))]
+    estimate: Option<Mat>,
+    /// a library plant to linearise instead of a, b, c: { type = "mass_spring_damper", mass,
+    /// stiffness, damping, length, output = "position" | "angle" } (defaults as the component,
+    /// output position) or { type = "two_link_arm", l1, l2, m1, m2, damping, gravity, at =
+    /// [q1, q2] (required, rad), output = "angles" | "endpoint" } (defaults as the component,
+    /// output angles)
+    #[param]
+    _plant: Option<Params>,
+    /// continuous A (n × n), with b and c
+    #[param]
+    _a: Option<DMatrix<f64>>,
+    /// continuous B (n × m), with a and c
+    #[param]
+    _b: Option<DMatrix<f64>>,
+    /// C (p × n), with a and b
+    #[param]
+    _c: Option<DMatrix<f64>>,
+    /// state cost (n × n, or its diagonal as a list, or one number × I)
+    #[param]
+    _q: DMatrix<f64>,
+    /// command cost (m × m positive definite, or its diagonal, or a number)
+    #[param]
+    _r: DMatrix<f64>,
+    /// process noise covariance (n × n, or its diagonal, or a number)
+    #[param]
+    _process_noise: DMatrix<f64>,
+    /// measurement noise covariance (p × p positive definite, or its diagonal, or a number)
+    #[param]
+    _measurement_noise: DMatrix<f64>,
+    /// clamp each command element to [−limit, limit] (command units)
+    #[param(above = 0)]
     limit: Option<f64>,
     /// `None` until `startup` (or after a failed redesign).
     design: Option<LqgDesign>,
-    /// C⁺, for the bumpless start.
-    c_pinv: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.c.nrows(), 1))]
     y: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.c.nrows(), 1))]
     r: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.c.nrows(), 1))]
     innovation: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.a.nrows(), 1))]
     predicted: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.a.nrows(), 1))]
     corrected: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.b.ncols(), 1))]
     du: DMatrix<f64>,
+    #[state(init = DMatrix::zeros(linear.b.ncols(), 1))]
     u: DMatrix<f64>,
+}
+
+/// The weight parameters `[q, r, process_noise, measurement_noise]` as matrices of the
+/// model's dimensions, checked.
+fn weights(linear: &Linear, given: [&DMatrix<f64>; 4]) -> Result<LqgWeights, ModuleError> {
+    let (n, m, p) = linear.dims();
+    let [q, r, process_noise, measurement_noise] = given;
+    let weights = LqgWeights {
+        q: weight_matrix("q", q, n)?,
+        r: weight_matrix("r", r, m)?,
+        process_noise: weight_matrix("process_noise", process_noise, n)?,
+        measurement_noise: weight_matrix("measurement_noise", measurement_noise, p)?,
+    };
+    check_weights(linear, &weights)?;
+    Ok(weights)
+}
+
+/// Refuses weights of the wrong shape, asymmetric or not (semi-)definite.
+fn check_weights(linear: &Linear, weights: &LqgWeights) -> RoutineResult {
+    let (n, m, p) = linear.dims();
+    check_weight("q", &weights.q, n, false)?;
+    check_weight("r", &weights.r, m, true)?;
+    check_weight("process_noise", &weights.process_noise, n, false)?;
+    check_weight("measurement_noise", &weights.measurement_noise, p, true)
+}
+
+/// Test-designs at [`Lqg::NOMINAL_DT`], failing with the reason if that is impossible;
+/// returns C⁺.
+fn prepare(linear: &Linear, weights: &LqgWeights) -> Result<DMatrix<f64>, ModuleError> {
+    design(linear, weights, Lqg::NOMINAL_DT)?;
+    linear
+        .c
+        .clone()
+        .pseudo_inverse(1e-12)
+        .map_err(|e| failed(format!("lqg: C has no pseudo-inverse: {e}")))
 }
 
 impl Lqg {
@@ -133,50 +225,28 @@ impl Lqg {
         weights: LqgWeights,
         limit: Option<f64>,
     ) -> Result<Self, ModuleError> {
-        let mut names = vec![measured, reference, output];
-        names.extend(estimate);
-        distinct(&names)?;
-        let linear = model.linear()?;
-        let (n, m, p) = linear.dims();
-        check_weight("q", &weights.q, n, false)?;
-        check_weight("r", &weights.r, m, true)?;
-        check_weight("process_noise", &weights.process_noise, n, false)?;
-        check_weight("measurement_noise", &weights.measurement_noise, p, true)?;
-        if let Some(limit) = limit
-            && (limit.is_nan() || limit <= 0.0)
-        {
-            return Err(ModuleError::param(
-                "limit",
-                format!("expected a positive number (command units), got {limit}"),
-            ));
+        let LqgWeights {
+            q,
+            r,
+            process_noise,
+            measurement_noise,
+        } = weights;
+        let mut params = model
+            .params()
+            .with("measured", measured)
+            .with("reference", reference)
+            .with("output", output)
+            .with("q", q)
+            .with("r", r)
+            .with("process_noise", process_noise)
+            .with("measurement_noise", measurement_noise);
+        if let Some(estimate) = estimate {
+            params = params.with("estimate", estimate);
         }
-        design(&linear, &weights, Self::NOMINAL_DT)?;
-        let c_pinv = linear
-            .c
-            .clone()
-            .pseudo_inverse(1e-12)
-            .map_err(|e| failed(format!("lqg: C has no pseudo-inverse: {e}")))?;
-        let measured = b.input(measured, (p, 1));
-        let reference = b.input(reference, (p, 1));
-        let output = b.output(output, (m, 1));
-        Ok(Self {
-            measured,
-            reference,
-            output,
-            estimate: estimate.map(|name| b.output(name, (n, 1))),
-            linear,
-            weights,
-            limit,
-            design: None,
-            c_pinv,
-            y: DMatrix::zeros(p, 1),
-            r: DMatrix::zeros(p, 1),
-            innovation: DMatrix::zeros(p, 1),
-            predicted: DMatrix::zeros(n, 1),
-            corrected: DMatrix::zeros(n, 1),
-            du: DMatrix::zeros(m, 1),
-            u: DMatrix::zeros(m, 1),
-        })
+        if let Some(limit) = limit {
+            params = params.with("limit", limit);
+        }
+        Self::build(b, &params)
     }
 
     /// The current design (`None` before `startup`).
@@ -256,92 +326,9 @@ impl SampleModule for Lqg {
     }
 }
 
-const LQG: ComponentSpec = ComponentSpec {
-    name: "lqg",
-    summary: "LQG controller: steady-state Kalman estimator and LQR state feedback with \
-              reference feedforward, u = u0 + N·(r − y0) − K·x̂, designed at the habitat's rate \
-              on an explicit model (a, b, c) or a linearised library plant (plant).",
-    params: &[
-        P::required("measured", K::Input, "y (p × 1), in the plant's units"),
-        P::required(
-            "reference",
-            K::Input,
-            "r (p × 1): the desired y, in the same units",
-        ),
-        P::required("output", K::Output, "u (m × 1), the command"),
-        P::optional(
-            "estimate",
-            K::Output,
-            "none",
-            "x̂ (n × 1): the estimated state's deviation from the operating point",
-        ),
-        P::optional(
-            "plant",
-            K::Table,
-            "none",
-            "a library plant to linearise instead of a, b, c: { type = \"mass_spring_damper\", \
-             mass, stiffness, damping, length, output = \"position\" | \"angle\" } (defaults \
-             as the component, output position) or { type = \"two_link_arm\", l1, l2, m1, m2, \
-             damping, gravity, at = [q1, q2] (required, rad), output = \"angles\" | \
-             \"endpoint\" } (defaults as the component, output angles)",
-        ),
-        P::optional("a", K::Matrix, "none", "continuous A (n × n), with b and c"),
-        P::optional("b", K::Matrix, "none", "continuous B (n × m), with a and c"),
-        P::optional("c", K::Matrix, "none", "C (p × n), with a and b"),
-        P::required(
-            "q",
-            K::Matrix,
-            "state cost (n × n, or its diagonal as a list, or one number × I)",
-        ),
-        P::required(
-            "r",
-            K::Matrix,
-            "command cost (m × m positive definite, or its diagonal, or a number)",
-        ),
-        P::required(
-            "process_noise",
-            K::Matrix,
-            "process noise covariance (n × n, or its diagonal, or a number)",
-        ),
-        P::required(
-            "measurement_noise",
-            K::Matrix,
-            "measurement noise covariance (p × p positive definite, or its diagonal, or a \
-             number)",
-        ),
-        P::optional(
-            "limit",
-            K::Number,
-            "none",
-            "clamp each command element to [−limit, limit] (command units)",
-        ),
-    ],
-};
-
 /// Registers `lqg`.
 pub(crate) fn register(registry: &mut Registry) {
-    registry.add_with(&LQG, |b, p| {
-        let model = LqgModel::from_params(p)?;
-        let (n, m, outputs) = model.dimensions()?;
-        let weights = LqgWeights {
-            q: weight_matrix(p, "q", n)?,
-            r: weight_matrix(p, "r", m)?,
-            process_noise: weight_matrix(p, "process_noise", n)?,
-            measurement_noise: weight_matrix(p, "measurement_noise", outputs)?,
-        };
-        let optional = |name: &str| p.has(name).then(|| p.text(name)).transpose();
-        let limit = p.has("limit").then(|| p.number("limit")).transpose()?;
-        Lqg::new(
-            b,
-            p.text("measured")?,
-            p.text("reference")?,
-            p.text("output")?,
-            optional("estimate")?,
-            &model,
-            weights,
-            limit,
-        )
-    });
+    registry.add::<Lqg>();
 }
 
 #[cfg(test)]

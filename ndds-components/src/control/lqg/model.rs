@@ -88,28 +88,87 @@ impl LqgModel {
     /// with `type = "mass_spring_damper"` or `"two_link_arm"`; see the `lqg` component in
     /// docs/components.md).
     pub fn from_params(p: &Params) -> Result<Self, ModuleError> {
-        let given: Vec<&str> = ["a", "b", "c"].into_iter().filter(|k| p.has(k)).collect();
-        match (p.has("plant"), given.len()) {
-            (true, 0) => Self::from_plant(p.table("plant")?),
-            (false, 3) => Ok(LqgModel::Explicit {
-                a: p.matrix("a")?,
-                b: p.matrix("b")?,
-                c: p.matrix("c")?,
+        let matrix = |key: &str| p.has(key).then(|| p.matrix(key)).transpose();
+        let table = p.has("plant").then(|| p.table("plant")).transpose()?;
+        let (a, b, c) = (matrix("a")?, matrix("b")?, matrix("c")?);
+        Self::from_parts(table, [a.as_ref(), b.as_ref(), c.as_ref()])
+    }
+
+    /// The parameters of an `lqg` component that give this model (`from_params` reads it
+    /// back): `a`, `b` and `c`, or the table `plant`.
+    pub(super) fn params(&self) -> Params {
+        match self {
+            LqgModel::Explicit { a, b, c } => Params::new()
+                .with("a", a.clone())
+                .with("b", b.clone())
+                .with("c", c.clone()),
+            LqgModel::MassSpringDamper { physical, output } => {
+                let output = match output {
+                    MassOutput::Position => "position",
+                    MassOutput::Angle => "angle",
+                };
+                let plant = Params::new()
+                    .with("type", "mass_spring_damper")
+                    .with("mass", physical.mass)
+                    .with("stiffness", physical.stiffness)
+                    .with("damping", physical.damping)
+                    .with("length", physical.length)
+                    .with("output", output);
+                Params::new().with("plant", plant)
+            }
+            LqgModel::TwoLinkArm { model, at, output } => {
+                let output = match output {
+                    ArmOutput::Angles => "angles",
+                    ArmOutput::Endpoint => "endpoint",
+                };
+                let plant = Params::new()
+                    .with("type", "two_link_arm")
+                    .with("l1", model.l1)
+                    .with("l2", model.l2)
+                    .with("m1", model.m1)
+                    .with("m2", model.m2)
+                    .with("damping", model.damping)
+                    .with("gravity", model.gravity)
+                    .with("at", at.to_vec())
+                    .with("output", output);
+                Params::new().with("plant", plant)
+            }
+        }
+    }
+
+    /// The model of `plant` or of the matrices `[a, b, c]`, whichever is given (one, not
+    /// both; all three matrices or none).
+    pub(super) fn from_parts(
+        plant: Option<&Params>,
+        abc: [Option<&DMatrix<f64>>; 3],
+    ) -> Result<Self, ModuleError> {
+        let keys = ["a", "b", "c"];
+        let given: Vec<&str> = keys
+            .into_iter()
+            .zip(abc)
+            .filter_map(|(k, m)| m.map(|_| k))
+            .collect();
+        match (plant, abc) {
+            (Some(plant), [None, None, None]) => Self::from_plant(plant),
+            (None, [Some(a), Some(b), Some(c)]) => Ok(LqgModel::Explicit {
+                a: a.clone(),
+                b: b.clone(),
+                c: c.clone(),
             }),
-            (true, _) => Err(ModuleError::param(
+            (Some(_), _) => Err(ModuleError::param(
                 "plant",
                 format!(
                     "give either `plant` or `a`, `b`, `c`, not both (also given: {})",
                     given.join(", ")
                 ),
             )),
-            (false, 0) => Err(ModuleError::param(
+            (None, [None, None, None]) => Err(ModuleError::param(
                 "plant",
                 "missing: give `plant` (a table naming a library plant) or the matrices `a`, \
                  `b` and `c`",
             )),
-            (false, _) => {
-                let missing = ["a", "b", "c"].into_iter().find(|k| !p.has(k));
+            (None, _) => {
+                let missing = keys.into_iter().find(|k| !given.contains(k));
                 Err(ModuleError::param(
                     missing.unwrap_or("a"),
                     format!(

@@ -4,24 +4,20 @@
 use nalgebra::linalg::SymmetricEigen;
 use nalgebra::{DMatrix, DVector};
 
-use ndds_runtime::{ModuleError, ParamValue, Params, RoutineResult};
+use ndds_runtime::{ModuleError, RoutineResult};
 
 use crate::params::all_finite;
 
-/// A weight or covariance parameter as a `dim × dim` matrix: a matrix of that shape as it
-/// is, a list of `dim` numbers (a row or a column) as its diagonal, one number times the
-/// identity.
+/// A weight or covariance parameter `m` (read as a matrix: a list is one column, a number
+/// 1 × 1) as a `dim × dim` matrix: a matrix of that shape as it is, a list of `dim` numbers (a
+/// row or a column) as its diagonal, one number times the identity.
 pub(super) fn weight_matrix(
-    p: &Params,
     name: &str,
+    m: &DMatrix<f64>,
     dim: usize,
 ) -> Result<DMatrix<f64>, ModuleError> {
-    let m = match p.0.get(name) {
-        Some(ParamValue::Numbers(xs)) => DMatrix::from_column_slice(xs.len(), 1, xs),
-        _ => p.matrix(name)?,
-    };
     if m.shape() == (dim, dim) {
-        Ok(m)
+        Ok(m.clone())
     } else if m.len() == 1 {
         Ok(DMatrix::identity(dim, dim) * m[0])
     } else if m.len() == dim && (m.nrows() == 1 || m.ncols() == 1) {
