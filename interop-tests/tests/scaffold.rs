@@ -43,8 +43,8 @@ fn cargo(dir: &Path, args: &[&str]) -> Output {
     let mut command = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
     command
         .current_dir(dir)
-        .args(args)
         .arg("--offline")
+        .args(args)
         .env("CARGO_TARGET_DIR", checkout().join("target/scaffold"))
         // The workspace's test run sets these for its own crates, not this one.
         .env_remove("RUSTFLAGS")
