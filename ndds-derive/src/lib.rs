@@ -10,14 +10,20 @@
 //! `::ndds_runtime`.
 //!
 //! # Layout
-//! - `model.rs`: the struct as the derive understands it, checked (every compile error the
-//!   derive gives is made here and names the field);
+//! - `model.rs`: the struct as the derive understands it (the component, its fields' roles),
+//!   and the checks across fields;
+//! - `fields.rs`: one field's role attribute and options, checked against its type;
+//! - `types.rs`: what a field's Rust type is (`Mat`, `Option<Mat>`, `Vec<Mat>`, a parameter
+//!   type), and doc comments as text. Every compile error the derive gives is made in these
+//!   three and names the field;
 //! - `expand.rs`: the generated `impl ndds_runtime::Component`.
 
 use proc_macro::TokenStream;
 
 mod expand;
+mod fields;
 mod model;
+mod types;
 
 /// Derives `ndds_runtime::Component`: the component's spec and factory from its fields.
 ///
