@@ -257,9 +257,11 @@ fn distinct(fields: &[Field]) -> TokenStream {
         let name = mat_name(field);
         match &field.role {
             Role::Input { optional: true, .. } => {
-                inputs.push(quote!(if let ::core::option::Option::Some(n) = &#name {
-                    __inputs.push(n.as_str());
-                }));
+                inputs.push(
+                    quote!(if let ::core::option::Option::Some(__mat_name) = &#name {
+                        __inputs.push(__mat_name.as_str());
+                    }),
+                );
             }
             Role::Input { .. } => inputs.push(quote!(__inputs.push(#name.as_str());)),
             Role::Inputs { .. } => {
@@ -268,9 +270,11 @@ fn distinct(fields: &[Field]) -> TokenStream {
                 );
             }
             Role::Output { optional: true, .. } => {
-                outputs.push(quote!(if let ::core::option::Option::Some(n) = &#name {
-                    __outputs.push(n.as_str());
-                }));
+                outputs.push(
+                    quote!(if let ::core::option::Option::Some(__mat_name) = &#name {
+                        __outputs.push(__mat_name.as_str());
+                    }),
+                );
             }
             Role::Output { .. } => outputs.push(quote!(__outputs.push(#name.as_str());)),
             _ => {}
@@ -335,10 +339,12 @@ fn declare_phase(field: &Field) -> TokenStream {
                 },
             };
             if *optional {
-                let declare = declare(quote!(n));
+                let declare = declare(quote!(__mat_name));
                 quote! {
                     let #ident = match &#name {
-                        ::core::option::Option::Some(n) => ::core::option::Option::Some(#declare),
+                        ::core::option::Option::Some(__mat_name) => {
+                            ::core::option::Option::Some(#declare)
+                        }
                         ::core::option::Option::None => ::core::option::Option::None,
                     };
                 }
@@ -363,10 +369,12 @@ fn declare_phase(field: &Field) -> TokenStream {
                 }
             };
             if *optional {
-                let declare = declare(quote!(n));
+                let declare = declare(quote!(__mat_name));
                 quote! {
                     let #ident = match &#name {
-                        ::core::option::Option::Some(n) => ::core::option::Option::Some(#declare),
+                        ::core::option::Option::Some(__mat_name) => {
+                            ::core::option::Option::Some(#declare)
+                        }
                         ::core::option::Option::None => ::core::option::Option::None,
                     };
                 }
@@ -507,7 +515,7 @@ mod tests {
             "{build}"
         );
         assert!(
-            build.contains("__outputs . push (n . as_str ())"),
+            build.contains("__outputs . push (__mat_name . as_str ())"),
             "{build}"
         );
         assert!(

@@ -10,6 +10,15 @@ use crate::types::{MatType, doc_text, mat_type, option_inner, param_type, wrong_
 impl Field {
     pub(crate) fn parse(field: &syn::Field) -> syn::Result<Self> {
         let ident = field.ident.clone().expect("named fields have names");
+        if ident.to_string().starts_with("__") {
+            return Err(syn::Error::new(
+                ident.span(),
+                format!(
+                    "field `{ident}`: names beginning with `__` are the derive's own (its \
+                     generated code uses them); rename the field"
+                ),
+            ));
+        }
         let doc = doc_text(&field.attrs).join(" ");
         let mut role = None;
         let mut key = None;

@@ -532,6 +532,10 @@ mod tests {
     fn malformed_declarations_are_refused_with_what_to_write() {
         let cases = [
             ("struct X { }", "needs the type's name"),
+            (
+                "/// x\n#[component(name = \"x\")] struct X { /// p\n #[param] __params: f64 }",
+                "names beginning with `__` are the derive's own",
+            ),
             ("#[component(name = \"x\")] struct X {}", "needs a summary"),
             (
                 "/// x\n#[component(name = \"a b\")] struct X {}",

@@ -162,14 +162,19 @@ pub mod support {
             impl FromParam for $t {
                 fn from_param(params: &Params, key: &str) -> Result<Self, ModuleError> {
                     let x = params.number(key)?;
-                    // Every value of these types below 2^53 is exact as an f64.
-                    let (min, max) = (<$t>::MIN as f64, <$t>::MAX as f64);
-                    if x.fract() == 0.0 && (min..=max).contains(&x) {
+                    // MIN is a power of two (or 0), exact as an f64; MAX + 1 is one too, and
+                    // `MAX as f64` rounds to it for the 64-bit types, so the bound is `< MAX + 1`.
+                    let (min, past) = (<$t>::MIN as f64, <$t>::MAX as f64 + 1.0);
+                    if x.fract() == 0.0 && x >= min && x < past {
                         Ok(x as $t)
                     } else {
                         Err(ModuleError::param(
                             key,
-                            format!("expected a whole number from {min} to {max}, got {x}"),
+                            format!(
+                                "expected a whole number from {} to {}, got {x}",
+                                <$t>::MIN,
+                                <$t>::MAX
+                            ),
                         ))
                     }
                 }

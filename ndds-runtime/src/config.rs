@@ -116,8 +116,8 @@ impl Runtime {
         Ok(())
     }
 
-    /// Makes a switch to configuration `name` (declared) also set these habitats' rates, once
-    /// its lists are swapped in (each habitat's modules see the new period, with
+    /// Makes a switch to configuration `name` (declared) also set these habitats' rates
+    /// (created ones, refused otherwise), once its lists are swapped in (each habitat's modules see the new period, with
     /// `timing_changed`, at its next sample boundary). Replaces rates given before.
     pub fn configuration_rates(
         &self,
@@ -133,6 +133,12 @@ impl Runtime {
             });
         }
         for (habitat, hz) in rates {
+            if !db.habitats.get(*habitat).is_some_and(Habitat::is_created) {
+                return Err(RuntimeError::Unknown {
+                    kind: ObjectKind::Habitat,
+                    name: (*habitat).to_owned(),
+                });
+            }
             if crate::habitat::period_of(*hz).is_none() {
                 return Err(RuntimeError::Habitat(HabitatError::InvalidRate {
                     habitat: (*habitat).to_owned(),

@@ -540,8 +540,10 @@ impl HabitatLink {
         &self.name
     }
 
-    /// The habitat, while it exists.
-    pub fn upgrade(&self) -> Option<Habitat> {
+    /// The habitat, while it exists. Private: a routine holding its own habitat's `Habitat`
+    /// could ask it for what needs the list its sampler holds (`stats`, `order`) and wait for
+    /// itself; the link offers only what answers without it.
+    fn upgrade(&self) -> Option<Habitat> {
         self.shared.upgrade().map(|shared| Habitat { shared })
     }
 
@@ -555,9 +557,12 @@ impl HabitatLink {
         self.upgrade().and_then(|h| h.clock())
     }
 
-    /// Its rate in Hz (the one last set).
+    /// Its rate in Hz, the one last set (`None` if it was dropped or not created). Reads only
+    /// the habitat's options, never its list: safe from its own routines.
     pub fn rate_hz(&self) -> Option<f64> {
-        self.upgrade().map(|h| h.rate_hz())
+        let shared = self.shared.upgrade()?;
+        let period = lock(&shared.options).as_ref().map(|o| o.period)?;
+        Some(1.0 / period.as_secs_f64())
     }
 
     /// [`Habitat::set_rate`].

@@ -446,6 +446,16 @@ fn dispatch(module: &mut dyn SampleModule, routine: Routine, ctx: &SampleContext
     }
 }
 
+/// Runs `build` (a module's factory) marked as inside a routine: the factory runs while its
+/// runtime's structure and database are locked, so what it asks of its runtime or habitat
+/// (a rate, a start) must be queued or refused like a routine's request, never carried out.
+pub(crate) fn as_routine<T>(build: impl FnOnce() -> T) -> T {
+    let outer = IN_ROUTINE.with(|flag| flag.replace(true));
+    let result = build();
+    IN_ROUTINE.with(|flag| flag.set(outer));
+    result
+}
+
 /// Unloads a module (`terminate`), a panic in it caught.
 pub(crate) fn terminate(module: &mut dyn SampleModule) {
     let outer = IN_ROUTINE.with(|flag| flag.replace(true));

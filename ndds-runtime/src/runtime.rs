@@ -570,7 +570,7 @@ impl Runtime {
             };
             let mut binder = Binder::detached(module, &mut lookup);
             binder.habitat = Some(target.downgrade());
-            let result = build(&mut binder);
+            let result = super::list::as_routine(|| build(&mut binder));
             let Binder {
                 interface,
                 follows,

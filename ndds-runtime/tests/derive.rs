@@ -113,6 +113,28 @@ impl SampleModule for Holder {
     }
 }
 
+/// Optional CSMats whose shape and reading name a parameter called `n` (the generated code's
+/// own names never shadow a field's).
+#[derive(Component)]
+#[component(name = "counted", summary = "n rows, optionally read and written.")]
+#[allow(dead_code)] // built, never run
+struct Counted {
+    /// how many rows
+    #[param(default = 3)]
+    n: usize,
+    /// a big count
+    #[param(default = 0)]
+    big: u64,
+    /// read in state_update when n > 2
+    #[input(state = n > 2, shape = (n, 1))]
+    source: Option<Mat>,
+    /// n × 1
+    #[output(shape = (n, 1))]
+    sink: Option<Mat>,
+}
+
+impl SampleModule for Counted {}
+
 fn p(
     name: &'static str,
     kind: ParamKind,
@@ -198,7 +220,7 @@ fn the_spec_is_the_fields_in_order_with_their_docs_kinds_defaults_units_and_rang
 
 fn library() -> Registry {
     let mut registry = Registry::empty();
-    registry.add::<Blend>().add::<Holder>();
+    registry.add::<Blend>().add::<Holder>().add::<Counted>();
     registry
 }
 
@@ -287,6 +309,30 @@ fn a_csmat_used_as_both_input_and_output_is_refused() {
         &Params::new().with("input", "u").with("output", "y"),
     )
     .unwrap();
+}
+
+#[test]
+fn optional_csmats_may_name_a_parameter_called_n() {
+    let rt = runtime();
+    rt.install_component(
+        "h",
+        "c",
+        "counted",
+        &Params::new().with("sink", "s").with("n", 4.0),
+    )
+    .unwrap();
+    assert_eq!(rt.mat("s").shape(), (4, 1));
+    // 2^64 is one past u64::MAX: refused, with the maximum written exactly.
+    let (name, reason) = refused(refusal(
+        &rt,
+        "counted",
+        &Params::new().with("big", 18446744073709551616.0),
+    ));
+    assert_eq!(name, "big");
+    assert!(
+        reason.contains("from 0 to 18446744073709551615"),
+        "{reason}"
+    );
 }
 
 #[test]

@@ -1,9 +1,10 @@
 //! A habitat's rate changed from each place a running system is driven from: a module's own
 //! routine (through the `HabitatLink` its binder gave it), a state machine's `rate HABITAT HZ`
 //! action, and a configuration's `rates` in the description file (the command line's `ndds
-//! habitat` is tested with real processes in interop-tests). Each change is verified by the
-//! habitat's *published* statistics (`cs/RUNTIME/HABITAT/stats`), as a tool sees them, and by
-//! the modules' `timing_changed`. Bad `rate` actions and `rates` tables are refused at load,
+//! habitat` is tested with real processes in ndds-cli's tests/shell.rs). Each change is
+//! verified by the habitat's *published* statistics (`cs/RUNTIME/HABITAT/stats`), as a tool
+//! sees them, and by the modules' `timing_changed`. A factory or routine using the link never
+//! waits for itself. Bad `rate` actions and `rates` tables are refused at load,
 //! where they are written.
 
 #[path = "../../ndds-client/tests/common/mod.rs"]
@@ -260,4 +261,79 @@ fn bad_rate_actions_and_rates_tables_are_refused_where_they_are_written() -> Tes
         "{text}"
     );
     Ok(())
+}
+
+/// Runs `work` on a thread of its own and fails if it has not finished within 10 s (a
+/// deadlock would otherwise hang the test run).
+fn finishes(what: &str, work: impl FnOnce() + Send + 'static) {
+    let (done, finished) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        work();
+        let _ = done.send(());
+    });
+    assert!(
+        finished.recv_timeout(Duration::from_secs(10)).is_ok(),
+        "{what}: did not finish (deadlock)"
+    );
+}
+
+/// Asks its habitat's rate in `timing_changed`; nothing else.
+struct AsksRate {
+    habitat: HabitatLink,
+    seen: Arc<Mutex<Vec<Option<f64>>>>,
+}
+
+impl SampleModule for AsksRate {
+    fn timing_changed(&mut self, _: &SampleContext) -> RoutineResult {
+        self.seen.lock().unwrap().push(self.habitat.rate_hz());
+        Ok(())
+    }
+}
+
+#[test]
+fn a_factory_and_a_routine_using_the_link_never_wait_for_themselves() {
+    // A factory that changes its habitat's rate while it is built (its runtime's structure
+    // is locked then): the change is queued, as from a routine, and carried out after.
+    let rt = Runtime::new("factory");
+    let servo = rt
+        .create_habitat("servo", HabitatOptions::rate(100.0).clock(Clock::Manual))
+        .unwrap();
+    let installer = rt.clone();
+    finishes("install with set_rate in the factory", move || {
+        installer
+            .install("servo", "eager", |b| {
+                let link = b.habitat().expect("a habitat");
+                link.set_rate(50.0)
+                    .map_err(|e| ModuleError::Failed(e.to_string()))?;
+                link.start()
+                    .map_err(|e| ModuleError::Failed(e.to_string()))?;
+                Ok(AsksRate {
+                    habitat: link,
+                    seen: Arc::default(),
+                })
+            })
+            .unwrap();
+    });
+    assert!(
+        common::eventually(WAIT, || servo.rate_hz() == 50.0 && servo.is_running()),
+        "the queued rate and start were carried out"
+    );
+
+    // A habitat only referenced (not created): its rate change runs `timing_changed` at once,
+    // under its list's lock; the module's question must not need that lock.
+    let rt = Runtime::new("uncreated");
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let log = Arc::clone(&seen);
+    rt.install("later", "asker", move |b| {
+        Ok(AsksRate {
+            habitat: b.habitat().expect("a habitat"),
+            seen: log,
+        })
+    })
+    .unwrap();
+    let later = rt.habitat("later");
+    finishes("timing_changed asking the rate", move || {
+        later.set_rate(20.0).unwrap();
+    });
+    assert_eq!(*seen.lock().unwrap(), [None], "not created: no rate yet");
 }

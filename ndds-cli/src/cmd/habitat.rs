@@ -27,6 +27,7 @@ pub struct Args {
 #[derive(Debug, clap::Subcommand)]
 enum Action {
     /// Sample at HZ from the next sample boundary (every module's `timing_changed` runs).
+    #[command(allow_negative_numbers = true)]
     Rate {
         /// Samples per second.
         hz: f64,

@@ -83,6 +83,108 @@ fn check_name(name: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Words a component's crate cannot be named: Rust's keywords (the crate's name is a path in
+/// the generated `main.rs`) and the crates it links.
+const RESERVED_CRATES: &[&str] = &[
+    "abstract",
+    "alloc",
+    "as",
+    "async",
+    "await",
+    "become",
+    "box",
+    "break",
+    "const",
+    "continue",
+    "core",
+    "crate",
+    "do",
+    "dyn",
+    "else",
+    "enum",
+    "extern",
+    "false",
+    "final",
+    "fn",
+    "for",
+    "gen",
+    "if",
+    "impl",
+    "in",
+    "let",
+    "loop",
+    "macro",
+    "match",
+    "mod",
+    "move",
+    "mut",
+    "override",
+    "priv",
+    "proc_macro",
+    "pub",
+    "ref",
+    "return",
+    "self",
+    "static",
+    "std",
+    "struct",
+    "super",
+    "test",
+    "trait",
+    "true",
+    "try",
+    "type",
+    "typeof",
+    "unsafe",
+    "unsized",
+    "use",
+    "virtual",
+    "where",
+    "while",
+    "yield",
+];
+
+/// Names the generated `lib.rs` imports: a struct of the same name would clash.
+const IMPORTED_TYPES: &[&str] = &[
+    "Clock",
+    "Component",
+    "CsMat",
+    "DMatrix",
+    "HabitatOptions",
+    "Mat",
+    "Params",
+    "Registry",
+    "RoutineResult",
+    "Runtime",
+    "SampleContext",
+    "SampleModule",
+];
+
+/// Refuses a component name whose crate would not build or whose type would hide another.
+fn check_component_name(name: &str) -> anyhow::Result<()> {
+    check_name(name)?;
+    let ident = name.replace('-', "_");
+    anyhow::ensure!(
+        !RESERVED_CRATES.contains(&ident.as_str()) && !ident.starts_with("ndds"),
+        "`{name}` cannot name a component crate: it is a Rust keyword or the name of a crate \
+         it links; choose another (e.g. `my_{ident}`)"
+    );
+    let rust_type = type_ident(name);
+    anyhow::ensure!(
+        !IMPORTED_TYPES.contains(&rust_type.as_str()),
+        "`{name}` would make the struct `{rust_type}`, a name the component's code imports \
+         from ndds_runtime; choose another (e.g. `my_{ident}`)"
+    );
+    let library = ndds_components::library();
+    anyhow::ensure!(
+        library.spec(name).is_none(),
+        "`{name}` is a built-in component type (docs/components.md): a type of your own of that \
+         name would replace it for every description file the program runs; choose another \
+         (e.g. `my_{ident}`)"
+    );
+    Ok(())
+}
+
 /// `my_filter` → `MyFilter`.
 fn type_ident(name: &str) -> String {
     name.split(['_', '-'])
@@ -149,7 +251,7 @@ fn write_all(dir: &Path, files: &[(&str, String)]) -> anyhow::Result<()> {
 }
 
 fn component(name: &str, dir: &Path, ndds: &Path) -> anyhow::Result<()> {
-    check_name(name)?;
+    check_component_name(name)?;
     let f = |t: &str| fill(t, name, ndds);
     let mut files = vec![
         ("Cargo.toml", f(templates::CARGO_TOML)),
@@ -191,6 +293,18 @@ mod tests {
             assert!(err.contains("lowercase letters"), "{bad}: {err}");
         }
         check_name("my_filter").unwrap();
+        for (bad, says) in [
+            ("fn", "Rust keyword"),
+            ("ndds-cli", "crate it links"),
+            ("std", "crate it links"),
+            ("sample_module", "imports from ndds_runtime"),
+            ("runtime", "imports from ndds_runtime"),
+            ("sine", "built-in component type"),
+        ] {
+            let err = check_component_name(bad).unwrap_err().to_string();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
+        check_component_name("lead_lag").unwrap();
     }
 
     #[test]

@@ -6,6 +6,9 @@ use ndds_runtime::HabitatAction;
 
 use super::help::{help_of, unknown};
 
+/// The longest `watch MAT SECONDS` (a day).
+const MAX_WATCH_SECONDS: f64 = 86_400.0;
+
 /// One command, parsed.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ShellCommand {
@@ -156,11 +159,16 @@ pub fn parse(line: &str) -> Result<ShellCommand, String> {
             seconds: None,
         }),
         ("watch", [mat, seconds]) => match seconds.parse::<f64>() {
-            Ok(s) if s.is_finite() && s > 0.0 => Ok(ShellCommand::Watch {
-                mat: (*mat).to_owned(),
-                seconds: Some(s),
-            }),
-            _ => usage(&format!("`{seconds}` is not a positive number of seconds")),
+            Ok(s) if s.is_finite() && s > 0.0 && s <= MAX_WATCH_SECONDS => {
+                Ok(ShellCommand::Watch {
+                    mat: (*mat).to_owned(),
+                    seconds: Some(s),
+                })
+            }
+            _ => usage(&format!(
+                "`{seconds}` is not a positive number of seconds up to {MAX_WATCH_SECONDS} (a \
+                 day; without a number, `watch` runs until a key is pressed)"
+            )),
         },
         ("watch", _) => usage("`watch` takes a CSMat and, if you like, how many seconds"),
         ("stats", []) => Ok(ShellCommand::Stats),
@@ -383,6 +391,7 @@ mod tests {
         let action = err("habitat control rest");
         assert!(action.contains("did you mean `reset`?"), "{action}");
         assert!(err("watch tip soon").contains("`soon` is not a positive number"));
+        assert!(err("watch tip 1e20").contains("`1e20` is not a positive number"));
         assert!(err("send arm").contains("usage: send MACHINE STIMULUS[=VALUE]..."));
         assert!(err("query arm-configure").contains("usage: query PORT TEXT..."));
         let listing = err("ls matz");

@@ -148,8 +148,8 @@ pub struct Lqg {
     /// measurement noise covariance (p × p positive definite, or its diagonal, or a number)
     #[param]
     _measurement_noise: DMatrix<f64>,
-    /// clamp each command element to [−limit, limit] (command units)
-    #[param(above = 0)]
+    /// clamp each command element to [−limit, limit] (command units; `inf`: no clamp)
+    #[param(above = 0, finite = false)]
     limit: Option<f64>,
     /// `None` until `startup` (or after a failed redesign).
     design: Option<LqgDesign>,
@@ -651,15 +651,19 @@ mod tests {
             ),
             (explicit.clone().with("r", -1.0), "r", "positive definite"),
             (explicit.clone().with("limit", 0.0), "limit", "positive"),
+            (explicit.clone().with("limit", f64::NAN), "limit", "NaN"),
         ];
         for (params, name, says) in cases {
             assert_refuses(&refusal(&habitat(), "lqg", &params), name, &[says]);
         }
         let err = install_error(&explicit.clone().with("estimate", "y"));
         assert!(err.contains("`y`") && err.contains("twice"), "{err}");
-        // The explicit model itself is fine.
+        // The explicit model itself is fine, and so is an infinite limit (no clamp).
         habitat()
             .install_component("h", "lqg", "lqg", &explicit)
+            .unwrap();
+        habitat()
+            .install_component("h", "lqg", "lqg", &explicit.with("limit", f64::INFINITY))
             .unwrap();
     }
 
