@@ -50,13 +50,7 @@ fn render(spec: &ComponentSpec) -> String {
     let mut out = format!("### `{}`\n\n{}\n\n", spec.name, spec.summary);
     out.push_str("| parameter | kind | default | meaning |\n|---|---|---|---|\n");
     for p in spec.params {
-        let mut meaning = p.doc.to_owned();
-        if let Some(unit) = p.unit {
-            meaning.push_str(&format!(" [{unit}]"));
-        }
-        if let Some(range) = p.range {
-            meaning.push_str(&format!("; {range}"));
-        }
+        let meaning = p.meaning();
         out.push_str(&format!(
             "| `{}` | {} | {} | {} |\n",
             p.name,

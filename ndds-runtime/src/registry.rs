@@ -119,6 +119,19 @@ impl ParamSpec {
         }
     }
 
+    /// Its doc with its unit and range, as references and editors show it:
+    /// `time constant [s]; ≥ 0`.
+    pub fn meaning(&self) -> String {
+        let mut text = self.doc.to_owned();
+        if let Some(unit) = self.unit {
+            text.push_str(&format!(" [{unit}]"));
+        }
+        if let Some(range) = self.range {
+            text.push_str(&format!("; {range}"));
+        }
+        text
+    }
+
     /// With a unit.
     pub const fn unit(mut self, unit: &'static str) -> Self {
         self.unit = Some(unit);

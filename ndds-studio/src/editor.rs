@@ -1213,7 +1213,9 @@ pub fn palette(library: &Registry) -> Json {
                     "kind": kind(p.kind),
                     "takes": p.kind.describe(),
                     "default": p.default,
-                    "doc": p.doc,
+                    "doc": p.meaning(),
+                    "unit": p.unit,
+                    "range": p.range,
                 })).collect::<Vec<_>>(),
             })
         })

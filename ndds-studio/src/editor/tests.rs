@@ -526,6 +526,15 @@ fn the_palette_lists_the_library_with_inputs_outputs_and_parameters() {
     assert_eq!(kinds["measured"], "input");
     assert_eq!(kinds["output"], "output");
     assert_eq!(kinds["kp"], "number");
+    // A parameter's line carries its unit (and range) as the reference does.
+    let kd = pd["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "kd")
+        .expect("kd");
+    assert_eq!(kd["unit"], "s");
+    assert!(kd["doc"].as_str().unwrap().ends_with(" [s]"), "{kd}");
     assert!(
         palette["sections"]
             .as_array()
