@@ -8,7 +8,7 @@
 //!
 //! Use them as `println!`/`print!`, with `?`, in a function returning `anyhow::Result`:
 //!
-//! ```ignore
+//! ```text
 //! use crate::outln;
 //!
 //! fn print_state(state: &State) -> anyhow::Result<()> {
