@@ -315,6 +315,30 @@ fn same_as(shape: &Shape) -> TokenStream {
     }
 }
 
+/// `let IDENT = DECLARE(name)` for a CSMat field; for an optional one, only when its name
+/// was given (`None` otherwise).
+fn bind(
+    ident: &syn::Ident,
+    name: &syn::Ident,
+    optional: bool,
+    declare: impl Fn(TokenStream) -> TokenStream,
+) -> TokenStream {
+    if optional {
+        let declare = declare(quote!(__mat_name));
+        quote! {
+            let #ident = match &#name {
+                ::core::option::Option::Some(__mat_name) => {
+                    ::core::option::Option::Some(#declare)
+                }
+                ::core::option::Option::None => ::core::option::Option::None,
+            };
+        }
+    } else {
+        let declare = declare(quote!(&#name));
+        quote!(let #ident = #declare;)
+    }
+}
+
 /// Phase 2: the field itself.
 fn declare_phase(field: &Field) -> TokenStream {
     let ident = &field.ident;
@@ -338,20 +362,7 @@ fn declare_phase(field: &Field) -> TokenStream {
                     }
                 },
             };
-            if *optional {
-                let declare = declare(quote!(__mat_name));
-                quote! {
-                    let #ident = match &#name {
-                        ::core::option::Option::Some(__mat_name) => {
-                            ::core::option::Option::Some(#declare)
-                        }
-                        ::core::option::Option::None => ::core::option::Option::None,
-                    };
-                }
-            } else {
-                let declare = declare(quote!(&#name));
-                quote!(let #ident = #declare;)
-            }
+            bind(ident, &name, *optional, declare)
         }
         Role::Inputs { same_shape } => {
             quote!(let #ident = __support::inputs(__binder, #key, &#name, #same_shape)?;)
@@ -368,20 +379,7 @@ fn declare_phase(field: &Field) -> TokenStream {
                     quote!(__binder.output(#n, #shape))
                 }
             };
-            if *optional {
-                let declare = declare(quote!(__mat_name));
-                quote! {
-                    let #ident = match &#name {
-                        ::core::option::Option::Some(__mat_name) => {
-                            ::core::option::Option::Some(#declare)
-                        }
-                        ::core::option::Option::None => ::core::option::Option::None,
-                    };
-                }
-            } else {
-                let declare = declare(quote!(&#name));
-                quote!(let #ident = #declare;)
-            }
+            bind(ident, &name, *optional, declare)
         }
         Role::Param(p) => match p.ty {
             ParamType::Tunable => {
