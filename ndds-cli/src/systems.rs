@@ -156,17 +156,29 @@ pub fn choose(
                 );
             };
             let mut having = Vec::new();
+            // A system that does not answer is left out (and said), not a reason to give up.
+            let mut silent = Vec::new();
             for name in several {
                 let link = SystemLink::open(participant, name, wait)?;
-                if link.describe()?.habitats.iter().any(|h| h.name == habitat) {
-                    having.push(link);
+                match link.describe() {
+                    Ok(d) if d.habitats.iter().any(|h| h.name == habitat) => having.push(link),
+                    Ok(_) => {}
+                    Err(_) => silent.push(name.clone()),
                 }
             }
             match having.len() {
                 1 => Ok(having.remove(0)),
                 0 => anyhow::bail!(
-                    "none of the running systems has a habitat `{habitat}`; {}",
-                    listed(several)
+                    "none of the running systems has a habitat `{habitat}`; {}{}",
+                    listed(several),
+                    if silent.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            " ({} did not answer; name it with --system)",
+                            silent.join(", ")
+                        )
+                    }
                 ),
                 _ => anyhow::bail!(
                     "several systems have a habitat `{habitat}` ({}): name one with --system",

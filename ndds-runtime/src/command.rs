@@ -258,6 +258,7 @@ impl Runtime {
             let known: Vec<String> = self
                 .habitats()
                 .iter()
+                .filter(|h| h.is_created())
                 .map(|h| h.name().to_owned())
                 .collect();
             return Err(format!(

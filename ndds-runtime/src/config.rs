@@ -117,8 +117,9 @@ impl Runtime {
     }
 
     /// Makes a switch to configuration `name` (declared) also set these habitats' rates
-    /// (created ones, refused otherwise), once its lists are swapped in (each habitat's modules see the new period, with
-    /// `timing_changed`, at its next sample boundary). Replaces rates given before.
+    /// (created ones, refused otherwise), once its lists are swapped in: each habitat's
+    /// modules see the new period, with `timing_changed`, at its next sample boundary.
+    /// Replaces rates given before.
     pub fn configuration_rates(
         &self,
         name: &str,
