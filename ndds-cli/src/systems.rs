@@ -11,20 +11,26 @@ use ndds_core::suggest;
 use ndds_runtime::describe::SystemDescription;
 use ndds_runtime::{RuntimeCommand, command_port};
 
-/// The systems running in the domain, by name, from the daemon's view of the command ports.
-pub fn running(participant: &Participant) -> anyhow::Result<Vec<String>> {
+/// The names after `prefix` of the ports some process owns, sorted, from the daemon's view
+/// (`cs.` gives the running systems, `fsm.` the state machines).
+pub fn owned_ports(participant: &Participant, prefix: &str) -> anyhow::Result<Vec<String>> {
     let graph = participant.graph()?;
     let mut names: Vec<String> = graph
         .endpoints
         .iter()
         .filter(|e| e.info.qos.kind() == ndds_core::wire::EndpointKind::Producer)
-        .filter_map(|e| e.info.topic.strip_prefix("port/cs."))
+        .filter_map(|e| e.info.topic.strip_prefix("port/")?.strip_prefix(prefix))
         .filter_map(|rest| rest.strip_suffix("/owner"))
         .map(str::to_owned)
         .collect();
     names.sort();
     names.dedup();
     Ok(names)
+}
+
+/// The systems running in the domain, by name: the owners of command ports `cs.NAME`.
+pub fn running(participant: &Participant) -> anyhow::Result<Vec<String>> {
+    owned_ports(participant, "cs.")
 }
 
 /// The ports the process of system `name` owns, by name: its command port `cs.NAME`, its

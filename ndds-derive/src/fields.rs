@@ -1,6 +1,7 @@
 //! One field of a component struct: its role attribute (`#[input]`, `#[inputs]`,
 //! `#[output]`, `#[param]`, `#[state]`) and options, read and checked against its type.
 
+use syn::meta::ParseNestedMeta;
 use syn::spanned::Spanned as _;
 use syn::{Attribute, Expr, ExprLit, Ident, Lit, LitStr, Meta, Type};
 
@@ -81,45 +82,69 @@ fn default_key(ident: &Ident) -> String {
     name.strip_prefix('_').unwrap_or(name).to_owned()
 }
 
+/// Reads the options of a role attribute (none for a bare `#[input]`): `key = "..."` into
+/// `key`, every other one through `option`, which answers `false` for a name it does not
+/// take; such a name is refused with `takes` (the attribute's options, in words).
+fn options(
+    attr: &Attribute,
+    key: &mut Option<String>,
+    takes: &str,
+    mut option: impl FnMut(&str, &ParseNestedMeta<'_>) -> syn::Result<bool>,
+) -> syn::Result<()> {
+    if !matches!(attr.meta, Meta::List(_)) {
+        return Ok(());
+    }
+    attr.parse_nested_meta(|meta| {
+        let name = meta.path.get_ident().map(Ident::to_string);
+        match name.as_deref() {
+            Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
+            Some(name) if option(name, &meta)? => {}
+            _ => return Err(meta.error(takes)),
+        }
+        Ok(())
+    })
+}
+
+/// Whether a `Mat` field of `role` is optional (`Option<Mat>`); any other type is refused.
+fn single_mat(ty: &Type, ident: &Ident, role: &str) -> syn::Result<bool> {
+    match mat_type(ty) {
+        Some(MatType::Mat) => Ok(false),
+        Some(MatType::Optional) => Ok(true),
+        _ => Err(wrong_type(ty, ident, role, "Mat, or Option<Mat>")),
+    }
+}
+
+/// `same_as = FIELD`.
+fn same_as(meta: &ParseNestedMeta<'_>) -> syn::Result<Shape> {
+    Ok(Shape::SameAs {
+        field: meta.value()?.parse()?,
+        first: false,
+    })
+}
+
 fn parse_input(
     attr: &Attribute,
     ty: &Type,
     ident: &Ident,
     key: &mut Option<String>,
 ) -> syn::Result<Role> {
-    let optional = match mat_type(ty) {
-        Some(MatType::Mat) => false,
-        Some(MatType::Optional) => true,
-        _ => return Err(wrong_type(ty, ident, "#[input]", "Mat, or Option<Mat>")),
-    };
+    let optional = single_mat(ty, ident, "#[input]")?;
     let mut state = Reading::Execute;
     let mut shape = Shape::Any;
-    if matches!(attr.meta, Meta::List(_)) {
-        attr.parse_nested_meta(|meta| {
-            let name = meta.path.get_ident().map(Ident::to_string);
-            match name.as_deref() {
-                Some("state") if meta.input.peek(syn::Token![=]) => {
-                    state = Reading::StateIf(meta.value()?.parse()?);
-                }
-                Some("state") => state = Reading::State,
-                Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
-                Some("same_as") => {
-                    shape = Shape::SameAs {
-                        field: meta.value()?.parse()?,
-                        first: false,
-                    };
-                }
-                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
-                _ => {
-                    return Err(meta.error(
-                        "unknown #[input] option; it takes `state`, `state = EXPR`, \
-                         `shape = (ROWS, COLS)`, `same_as = FIELD` and `key = \"...\"`",
-                    ));
-                }
+    let takes = "unknown #[input] option; it takes `state`, `state = EXPR`, \
+                 `shape = (ROWS, COLS)`, `same_as = FIELD` and `key = \"...\"`";
+    options(attr, key, takes, |name, meta| {
+        match name {
+            "state" if meta.input.peek(syn::Token![=]) => {
+                state = Reading::StateIf(meta.value()?.parse()?);
             }
-            Ok(())
-        })?;
-    }
+            "state" => state = Reading::State,
+            "shape" => shape = Shape::Expr(meta.value()?.parse()?),
+            "same_as" => shape = same_as(meta)?,
+            _ => return Ok(false),
+        }
+        Ok(true)
+    })?;
     Ok(Role::Input {
         optional,
         state,
@@ -137,21 +162,11 @@ fn parse_inputs(
         return Err(wrong_type(ty, ident, "#[inputs]", "Vec<Mat>"));
     }
     let mut same_shape = false;
-    if matches!(attr.meta, Meta::List(_)) {
-        attr.parse_nested_meta(|meta| {
-            let name = meta.path.get_ident().map(Ident::to_string);
-            match name.as_deref() {
-                Some("same_shape") => same_shape = true,
-                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
-                _ => {
-                    return Err(meta.error(
-                        "unknown #[inputs] option; it takes `same_shape` and `key = \"...\"`",
-                    ));
-                }
-            }
-            Ok(())
-        })?;
-    }
+    let takes = "unknown #[inputs] option; it takes `same_shape` and `key = \"...\"`";
+    options(attr, key, takes, |name, _| {
+        same_shape |= name == "same_shape";
+        Ok(name == "same_shape")
+    })?;
     Ok(Role::Inputs { same_shape })
 }
 
@@ -161,35 +176,19 @@ fn parse_output(
     ident: &Ident,
     key: &mut Option<String>,
 ) -> syn::Result<Role> {
-    let optional = match mat_type(ty) {
-        Some(MatType::Mat) => false,
-        Some(MatType::Optional) => true,
-        _ => return Err(wrong_type(ty, ident, "#[output]", "Mat, or Option<Mat>")),
-    };
+    let optional = single_mat(ty, ident, "#[output]")?;
     let mut shape = Shape::Any;
-    if matches!(attr.meta, Meta::List(_)) {
-        attr.parse_nested_meta(|meta| {
-            let name = meta.path.get_ident().map(Ident::to_string);
-            match name.as_deref() {
-                Some("shape") => shape = Shape::Expr(meta.value()?.parse()?),
-                Some("same_as") => {
-                    shape = Shape::SameAs {
-                        field: meta.value()?.parse()?,
-                        first: false,
-                    };
-                }
-                Some("like") => shape = Shape::Like(meta.value()?.parse()?),
-                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
-                _ => {
-                    return Err(meta.error(
-                        "unknown #[output] option; it takes `shape = (ROWS, COLS)`, \
-                         `same_as = FIELD`, `like = TEMPLATE` and `key = \"...\"`",
-                    ));
-                }
-            }
-            Ok(())
-        })?;
-    }
+    let takes = "unknown #[output] option; it takes `shape = (ROWS, COLS)`, \
+                 `same_as = FIELD`, `like = TEMPLATE` and `key = \"...\"`";
+    options(attr, key, takes, |name, meta| {
+        match name {
+            "shape" => shape = Shape::Expr(meta.value()?.parse()?),
+            "same_as" => shape = same_as(meta)?,
+            "like" => shape = Shape::Like(meta.value()?.parse()?),
+            _ => return Ok(false),
+        }
+        Ok(true)
+    })?;
     Ok(Role::Output { optional, shape })
 }
 
@@ -206,44 +205,26 @@ fn parse_param(
     let mut default_doc = None;
     let mut unit = None;
     let mut range = Range::default();
-    if matches!(attr.meta, Meta::List(_)) {
-        attr.parse_nested_meta(|meta| {
-            let name = meta.path.get_ident().map(Ident::to_string);
-            match name.as_deref() {
-                Some("tunable") => tunable = true,
-                Some("column") => column = true,
-                Some("finite") => {
-                    let finite = meta.value()?.parse::<syn::LitBool>()?;
-                    any_number = !finite.value;
-                }
-                Some("default") => default = Some(meta.value()?.parse::<Expr>()?),
-                Some("default_doc") => {
-                    default_doc = Some(meta.value()?.parse::<LitStr>()?.value());
-                }
-                Some("unit") => unit = Some(meta.value()?.parse::<LitStr>()?.value()),
-                Some("key") => *key = Some(meta.value()?.parse::<LitStr>()?.value()),
-                Some(bound @ ("min" | "max" | "above" | "below")) => {
-                    let value = number_literal(&meta.value()?.parse::<Expr>()?)?;
-                    let slot = match bound {
-                        "min" => &mut range.min,
-                        "max" => &mut range.max,
-                        "above" => &mut range.above,
-                        _ => &mut range.below,
-                    };
-                    *slot = Some(value);
-                }
-                _ => {
-                    return Err(meta.error(
-                        "unknown #[param] option; it takes `default = EXPR`, \
-                         `default_doc = \"...\"`, `unit = \"...\"`, `min`, `max`, `above`, \
-                         `below` (number literals), `finite = false`, `tunable`, `column` \
-                         and `key = \"...\"`",
-                    ));
-                }
-            }
-            Ok(())
-        })?;
-    }
+    let takes = "unknown #[param] option; it takes `default = EXPR`, \
+                 `default_doc = \"...\"`, `unit = \"...\"`, `min`, `max`, `above`, \
+                 `below` (number literals), `finite = false`, `tunable`, `column` \
+                 and `key = \"...\"`";
+    options(attr, key, takes, |name, meta| {
+        match name {
+            "tunable" => tunable = true,
+            "column" => column = true,
+            "finite" => any_number = !meta.value()?.parse::<syn::LitBool>()?.value,
+            "default" => default = Some(meta.value()?.parse::<Expr>()?),
+            "default_doc" => default_doc = Some(meta.value()?.parse::<LitStr>()?.value()),
+            "unit" => unit = Some(meta.value()?.parse::<LitStr>()?.value()),
+            "min" => range.min = Some(number_literal(&meta.value()?.parse()?)?),
+            "max" => range.max = Some(number_literal(&meta.value()?.parse()?)?),
+            "above" => range.above = Some(number_literal(&meta.value()?.parse()?)?),
+            "below" => range.below = Some(number_literal(&meta.value()?.parse()?)?),
+            _ => return Ok(false),
+        }
+        Ok(true)
+    })?;
     let (inner, optional) = match option_inner(ty) {
         Some(inner) => (inner, true),
         None => (ty, false),

@@ -131,20 +131,7 @@ fn running(known: &[String]) -> String {
 
 /// The state machines of the domain: their command ports, from the daemon's view.
 fn machines(participant: &Participant) -> Vec<String> {
-    let Ok(graph) = participant.graph() else {
-        return Vec::new();
-    };
-    let mut names: Vec<String> = graph
-        .endpoints
-        .iter()
-        .filter(|e| e.info.qos.kind() == ndds_core::wire::EndpointKind::Producer)
-        .filter_map(|e| e.info.topic.strip_prefix("port/fsm."))
-        .filter_map(|rest| rest.strip_suffix("/owner"))
-        .map(str::to_owned)
-        .collect();
-    names.sort();
-    names.dedup();
-    names
+    crate::systems::owned_ports(participant, "fsm.").unwrap_or_default()
 }
 
 fn show(daemon: &DaemonArgs, machine: &str, json: bool, wait: Duration) -> anyhow::Result<()> {

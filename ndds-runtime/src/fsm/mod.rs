@@ -13,7 +13,7 @@ mod command;
 mod def;
 mod engine;
 mod expr;
-mod task;
+pub(crate) mod task;
 #[cfg(test)]
 mod tests;
 mod verify;

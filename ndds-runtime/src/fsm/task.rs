@@ -130,7 +130,7 @@ impl ActionSet {
 
 /// `HABITAT HZ` of a `rate` action (an error, hence the machine's error state, when it is not
 /// of that form: the file is wrong, not the moment).
-fn rate_argument(arg: Option<&str>) -> Result<(&str, f64), String> {
+pub(crate) fn rate_argument(arg: Option<&str>) -> Result<(&str, f64), String> {
     let usage = "`rate` takes a habitat and a rate in Hz: `rate servo 500`";
     let mut words = arg.ok_or(usage)?.split_whitespace();
     let (Some(habitat), Some(hz), None) = (words.next(), words.next(), words.next()) else {

@@ -36,14 +36,16 @@ fn rate_actions(d: &Description, p: &mut Diagnostics) {
                 if name != "rate" {
                     continue;
                 }
-                let argument = argument.as_deref().unwrap_or("");
-                let mut words = argument.split_whitespace();
-                let habitat = words.next().unwrap_or("");
-                let hz = words.next().and_then(|w| w.parse::<f64>().ok());
-                let usable = hz.is_some_and(|hz| crate::habitat::period_of(hz).is_some());
-                if habitats.contains(&habitat) && usable && words.next().is_none() {
+                // Read as the action itself reads it when it runs.
+                let usable =
+                    crate::fsm::task::rate_argument(argument.as_deref()).is_ok_and(|(h, hz)| {
+                        habitats.contains(&h) && crate::habitat::period_of(hz).is_some()
+                    });
+                if usable {
                     continue;
                 }
+                let argument = argument.as_deref().unwrap_or("");
+                let habitat = argument.split_whitespace().next().unwrap_or("");
                 p.expected(
                     &m.at,
                     format!(
