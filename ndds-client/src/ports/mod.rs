@@ -24,6 +24,7 @@
 mod asynch;
 mod declaration;
 mod description;
+mod encoded;
 mod error;
 mod existing;
 mod filter;
@@ -48,6 +49,7 @@ use serde::de::DeserializeOwned;
 
 pub use declaration::QUEUE_REPORT;
 pub use description::{ModuleFile, ModuleFileError};
+pub use encoded::Encoded;
 pub use error::PortError;
 pub use existing::{OwnerLocation, owners_elsewhere};
 pub use filter::{BoundedBuffer, FILTER_INBOX, FilterPort, RequestFilter, Verdict};

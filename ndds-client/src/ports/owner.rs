@@ -19,7 +19,7 @@ use super::sendall::{Broadcast, BroadcastReply};
 use super::wait::{self, Either, Notify};
 use super::wire::{Filter, OwnerInfo, Reply, Request, Restrictions, UserInfo};
 use super::{
-    check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error, topic,
+    Encoded, check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error, topic,
 };
 use crate::{Consumer, Participant, Producer, TypeDescription};
 
@@ -379,6 +379,39 @@ pub struct PortOwner<Q, R> {
     _types: PhantomData<fn(Q) -> R>,
 }
 
+impl PortOwner<Encoded, Encoded> {
+    /// Declares `task` the owner of `port` with message types described at run time (a
+    /// binding's, see [`Encoded`]): the owner announces these descriptions' fingerprints, so
+    /// users of the same shapes in any language match it. Restrictions naming a filter are
+    /// refused ([`PortError::FilterCode`]): a filter's code is Rust's.
+    pub fn declare_described(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        restrictions: Restrictions,
+        request: &TypeDescription,
+        reply: &TypeDescription,
+    ) -> Result<Self, PortError> {
+        if restrictions.filter.is_some() {
+            return Err(PortError::FilterCode {
+                port: port.to_owned(),
+            });
+        }
+        let formats = (request.fingerprint(), reply.fingerprint());
+        Self::declare_plain(participant, port, task, restrictions, 0, formats)
+    }
+}
+
+/// The fingerprints of a port's request and reply types, as owners announce them and users
+/// check them.
+pub(super) fn formats_of<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned>()
+-> (u64, u64) {
+    (
+        TypeDescription::of::<Q>().fingerprint(),
+        TypeDescription::of::<R>().fingerprint(),
+    )
+}
+
 /// Identifies one request: reply through it (once, whenever, from any thread).
 #[must_use = "a sender waits until it is replied to (or times out)"]
 pub struct ReplyHandle<R> {
@@ -462,7 +495,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         if filter_usages && !usages.is_empty() {
             restrictions.usages = usages;
         }
-        let mut owner = Self::declare_plain(participant, port, task, restrictions, claim)?;
+        let formats = formats_of::<Q, R>();
+        let mut owner = Self::declare_plain(participant, port, task, restrictions, claim, formats)?;
         let inbox = Arc::new(Mutex::new(VecDeque::new()));
         let (shared, taken) = (Arc::clone(&owner.shared), Arc::clone(&inbox));
         let name = format!("port-filter-{port}");
@@ -557,7 +591,10 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         R: Send + 'static,
     {
         match restrictions.filter {
-            None => Self::declare_plain(participant, port, task, restrictions, claim),
+            None => {
+                let formats = formats_of::<Q, R>();
+                Self::declare_plain(participant, port, task, restrictions, claim, formats)
+            }
             // `declare_filtered` brings the filter's code.
             Some(Filter::Task) => Err(PortError::FilterCode {
                 port: port.to_owned(),
@@ -587,13 +624,14 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
     }
 
     /// Declares the owner with claim `claim` and no filter thread (a filter's caller starts
-    /// it).
+    /// it), announcing message formats `formats` (request, reply fingerprints).
     fn declare_plain(
         participant: &Participant,
         port: &str,
         task: &str,
         restrictions: Restrictions,
         claim: u64,
+        formats: (u64, u64),
     ) -> Result<Self, PortError> {
         check_name(port)?;
         let users = reliable_consumer::<UserInfo>(participant, port, &topic(port, "users"))?;
@@ -605,8 +643,8 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
             task: task.to_owned(),
             pid: std::process::id(),
             incarnation,
-            request_format: TypeDescription::of::<Q>().fingerprint(),
-            reply_format: TypeDescription::of::<R>().fingerprint(),
+            request_format: formats.0,
+            reply_format: formats.1,
             restrictions: restrictions.clone(),
             admitted: Vec::new(),
             queue: 0,

@@ -73,6 +73,23 @@ struct Demux {
     held: HashMap<&'static str, VecDeque<Broadcast>>,
 }
 
+impl PortUser<super::Encoded, super::Encoded> {
+    /// Declares `task` a user of `port` with message types described at run time (a
+    /// binding's, see [`Encoded`](super::Encoded)): it matches an owner whose request and
+    /// reply types have these descriptions' fingerprints, in any language.
+    pub fn declare_described(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        usages: &[Usage],
+        request: &TypeDescription,
+        reply: &TypeDescription,
+    ) -> Result<Self, PortError> {
+        let formats = (request.fingerprint(), reply.fingerprint());
+        Self::declare_formats(participant, port, task, usages, formats)
+    }
+}
+
 /// Forgets a request's reply when its sender stops waiting (also when an async `send` is
 /// dropped).
 struct Awaiting<'a> {
@@ -121,6 +138,19 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         task: &str,
         usages: &[Usage],
     ) -> Result<Self, PortError> {
+        let formats = super::owner::formats_of::<Q, R>();
+        Self::declare_formats(participant, port, task, usages, formats)
+    }
+
+    /// [`declare_with`](Self::declare_with) checking the owner's formats against `formats`
+    /// (request, reply fingerprints).
+    fn declare_formats(
+        participant: &Participant,
+        port: &str,
+        task: &str,
+        usages: &[Usage],
+        formats: (u64, u64),
+    ) -> Result<Self, PortError> {
         check_name(port)?;
         let user = format!("{:016x}", fastrand::u64(..));
         let declaration = declaring_producer::<UserInfo>(participant, port, &topic(port, "users"))?;
@@ -165,10 +195,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
             demux: Mutex::new(Demux::default()),
             handed: Notify::default(),
             owners_noted: Notify::default(),
-            formats: (
-                TypeDescription::of::<Q>().fingerprint(),
-                TypeDescription::of::<R>().fingerprint(),
-            ),
+            formats,
             filter: None,
             _types: PhantomData,
         })

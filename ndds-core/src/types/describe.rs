@@ -55,6 +55,15 @@ pub enum DescribeError {
         /// The broken limit.
         source: LayoutError,
     },
+    /// A type declared at run time (by a binding, from another language's type declarations)
+    /// whose registry is incomplete or not representable.
+    #[error("the type {name} cannot be described: {reason}")]
+    Declared {
+        /// The declared type's name.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// Traces `T` and builds its description.
@@ -63,6 +72,28 @@ pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, De
 }
 
 /// A tracing step run before the described type, on the same tracer.
+/// Describes a type declared at run time rather than traced from Rust: its root format and
+/// the registry of its named containers, in serde-reflection's terms, as a binding builds them
+/// from another language's type declarations (`ndds-python`'s dataclasses). The result is the
+/// description, and so the fingerprint, that the Rust type of the same shape gets.
+pub fn from_registry(
+    name: &str,
+    root: &SrFormat,
+    registry: &Registry,
+) -> Result<TypeDescription, DescribeError> {
+    let declared = |reason: String| DescribeError::Declared {
+        name: name.to_owned(),
+        reason,
+    };
+    let layout = layout_of(root, registry)
+        .map_err(|what| declared(format!("incomplete declaration ({what})")))?;
+    layout.validate().map_err(|err| declared(err.to_string()))?;
+    Ok(TypeDescription {
+        name: name.to_owned(),
+        layout: Some(layout),
+    })
+}
+
 type PreTrace = fn(&mut Tracer, &'static Samples) -> serde_reflection::Result<()>;
 
 fn pre_trace<U: DeserializeOwned>(
@@ -148,6 +179,22 @@ fn build(
     root: &SrFormat,
     registry: &Registry,
 ) -> Result<TypeDescription, DescribeError> {
+    let layout = layout_of(root, registry).map_err(|what| DescribeError::Trace {
+        type_name,
+        reason: format!("incomplete trace ({what})"),
+    })?;
+    layout
+        .validate()
+        .map_err(|source| DescribeError::Layout { type_name, source })?;
+    Ok(TypeDescription {
+        name: stable_name(type_name),
+        layout: Some(layout),
+    })
+}
+
+/// Converts a root format and its registry into a layout (not yet validated); the error
+/// names the part that is incomplete (`root`, or a container's name).
+fn layout_of(root: &SrFormat, registry: &Registry) -> Result<TypeLayout, String> {
     let names: HashMap<&str, u32> = registry
         .keys()
         .enumerate()
@@ -158,40 +205,22 @@ fn build(
         formats: Vec::new(),
         dedup: HashMap::new(),
     };
-    let unsupported = |what: &str| DescribeError::Trace {
-        type_name,
-        reason: format!("incomplete trace ({what})"),
-    };
-    let root = builder.add(root).ok_or_else(|| unsupported("root"))?;
+    let root = builder.add(root).ok_or_else(|| "root".to_owned())?;
     let mut containers = Vec::with_capacity(registry.len());
     for (name, container) in registry {
-        let shape = builder
-            .container(container)
-            .ok_or_else(|| unsupported(name))?;
+        let shape = builder.container(container).ok_or_else(|| name.clone())?;
         containers.push(Container {
             name: name.clone(),
             shape,
         });
     }
-    let layout = TypeLayout {
+    Ok(TypeLayout {
         formats: builder.formats,
         root,
         containers,
-    };
-    layout
-        .validate()
-        .map_err(|source| DescribeError::Layout { type_name, source })?;
-    Ok(TypeDescription {
-        name: stable_name(type_name),
-        layout: Some(layout),
     })
 }
 
-/// Traces `T` until every variant of every enum inside it is known.
-///
-/// serde-reflection explores one level of enum variants per pass and only repeats passes for a
-/// top-level enum by itself. Nested enums are named by the `MissingVariants` error of a first
-/// attempt; later attempts repeat passes until none of the named enums is incomplete.
 fn trace<T: DeserializeOwned>(
     pre: &[PreTrace],
 ) -> Result<(SrFormat, Registry), serde_reflection::Error> {

@@ -19,7 +19,10 @@ pub mod name;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-pub use describe::{DescribeError, Describer};
+pub use describe::{DescribeError, Describer, from_registry};
+/// The serde-reflection crate [`from_registry`] takes its formats from, so that a binding
+/// builds them with the same version.
+pub use serde_reflection;
 pub use layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
@@ -120,6 +123,33 @@ mod tests {
         children: Vec<Tree>,
         table: BTreeMap<String, [u16; 3]>,
         mode: Mode,
+    }
+
+    #[test]
+    fn a_registry_built_by_hand_describes_like_the_traced_type() {
+        use serde_reflection::{ContainerFormat, Format as Sr, Named, Registry};
+        let mut registry = Registry::new();
+        let field = |name: &str, value| Named {
+            name: name.to_owned(),
+            value,
+        };
+        registry.insert(
+            "Pose".to_owned(),
+            ContainerFormat::Struct(vec![
+                field("x", Sr::F64),
+                field("y", Sr::F64),
+                field("label", Sr::Option(Box::new(Sr::Str))),
+            ]),
+        );
+        let root = Sr::TypeName("Pose".to_owned());
+        let declared = from_registry("Pose", &root, &registry).unwrap();
+        let traced = TypeDescription::try_of::<Pose>().unwrap();
+        assert_eq!(declared, traced);
+        assert_eq!(declared.fingerprint(), traced.fingerprint());
+        // A name the registry does not hold is refused, naming the type.
+        let missing = Sr::TypeName("Twist".to_owned());
+        let err = from_registry("Twist", &missing, &registry).unwrap_err();
+        assert!(err.to_string().contains("Twist"), "{err}");
     }
 
     #[test]
