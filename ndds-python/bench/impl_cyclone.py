@@ -17,9 +17,12 @@ throughput sink; ping always pulls with `Subscriber.recv`):
   which releases the GIL while it blocks.
 - callback: a Listener's on_data_available, run on Cyclone's receive thread, takes
   the samples and calls the Python function for each.
-Chosen by measurement on this machine: pull for both. Pong's p50 was 15-35% lower
-pulling, and a listener sink lost 40-57% of best-effort samples: the listener runs
-on the receive thread, which then waits for the GIL while the UDP socket overflows.
+Chosen by measurement on this machine (paired runs, order alternated): pull for
+both. For pong there was no consistent difference (medians of 9 pairs within
+noise, pull a little lower at p90), and pulling keeps Python off Cyclone's receive
+thread. For the sink it matters: a listener sink lost 40-57% of best-effort
+samples, because the listener runs on the receive thread, which then waits for
+the GIL while the UDP socket buffer overflows; pulling lost none.
 """
 
 # No `from __future__ import annotations`: cyclonedds reads the field types of
@@ -95,12 +98,6 @@ class Publisher:
         write = writer.write
         self.put = lambda payload: write(Payload(data=payload))
 
-    def matched(self) -> bool:
-        return self._writer.get_publication_matched_status().current_count > 0
-
-    def close(self) -> None:
-        pass  # entities are deleted with the participant
-
 
 class Subscriber:
     def __init__(self, reader: DataReader, participant: DomainParticipant, pull: bool):
@@ -133,9 +130,6 @@ class Subscriber:
         # data (a writer's unregistration or disposal) are left out.
         self._pending = [s.data for s in reversed(samples) if s.sample_info.valid_data]
         return self._pending.pop() if self._pending else None
-
-    def close(self) -> None:
-        pass
 
 
 class Node:

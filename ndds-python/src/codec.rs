@@ -13,7 +13,8 @@
 //! | `bytes`                | `bytes`, `bytearray`                          | `bytes`               |
 //! | `unit`                 | `None`                                        | `None`                |
 //! | option                 | `None` or the value                           | the same              |
-//! | seq, tuple, array      | any sized iterable (`list`, `tuple`, ...)     | `list`                |
+//! | seq, array             | any sized iterable (`list`, `tuple`, ...)     | `list`                |
+//! | tuple, tuple struct    | any sized iterable of the right length        | `tuple`               |
 //! | map                    | `dict`                                        | `dict`                |
 //! | struct                 | its dataclass, or any object or `dict` with the fields | the dataclass, or a `dict` |
 //! | newtype struct         | the inner value                               | the inner value       |
@@ -894,8 +895,22 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
             }
             _ => {
                 let items = self.read_list(seq)?;
-                let list = self.py_ok(PyList::new(py, items))?.into_any();
-                self.ok(list)
+                let layout = &self.dec.ctx.codec.layout;
+                // Tuples as tuples; sequences and arrays as lists.
+                let tuple = match &layout.formats[self.dec.format as usize] {
+                    Format::Tuple(_) => true,
+                    Format::Named(c) => matches!(
+                        layout.containers[*c as usize].shape,
+                        ContainerShape::TupleStruct(_)
+                    ),
+                    _ => false,
+                };
+                let value = if tuple {
+                    self.py_ok(PyTuple::new(py, items))?.into_any()
+                } else {
+                    self.py_ok(PyList::new(py, items))?.into_any()
+                };
+                self.ok(value)
             }
         }
     }

@@ -7,33 +7,33 @@ use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
 use pyo3::PyErr;
 
 create_exception!(
-    _ndds,
+    ndds,
     Error,
     PyException,
     "Base class of the errors ndds raises (besides TypeError and ValueError for bad samples)."
 );
 create_exception!(
-    _ndds,
+    ndds,
     Timeout,
     Error,
     "An operation did not finish within its timeout. Its message says what was waited for and, \
      where known, why nothing came (for example a producer of another type on the topic)."
 );
 create_exception!(
-    _ndds,
+    ndds,
     Refused,
     Error,
     "A port's owner refused this user: the message names the port, the owner, the user and the \
      restriction."
 );
 create_exception!(
-    _ndds,
+    ndds,
     Disconnected,
     Error,
     "The daemon is gone (and did not come back), or the endpoint was closed."
 );
 create_exception!(
-    _ndds,
+    ndds,
     IncompatibleType,
     Error,
     "The other side of a port uses other message types; the message names both."
