@@ -325,7 +325,9 @@ def run_child(args) -> None:
 
 
 class ChildFailed(Exception):
-    pass
+    def last_line(self) -> str:
+        lines = str(self).strip().splitlines()
+        return lines[-1] if lines else ""
 
 
 class Child:
@@ -359,17 +361,21 @@ class Child:
 
     def expect(self, tag: str, timeout: float) -> Any:
         """Wait for the control line `tag`; return its JSON payload (or None)."""
-        limit = min(time.monotonic() + timeout, self.started + self.deadline_s)
+        # The child's own watchdog fires at deadline_s; give it a moment to say so.
+        limit = min(time.monotonic() + timeout, self.started + self.deadline_s + 5)
         while True:
             remaining = limit - time.monotonic()
             try:
                 line = self.lines.get(timeout=max(0.0, remaining))
             except queue.Empty:
-                raise ChildFailed(f"{self.name}: no {tag} within {timeout:.0f} s{self._stderr_tail()}")
+                waited = time.monotonic() - self.started
+                raise ChildFailed(
+                    f"{self.name}: no {tag} after {waited:.0f} s{self.stderr_tail()}"
+                )
             if line is None:
                 self.proc.wait()
                 raise ChildFailed(
-                    f"{self.name}: exited ({self.proc.returncode}) before {tag}{self._stderr_tail()}"
+                    f"{self.name}: exited ({self.proc.returncode}) before {tag}{self.stderr_tail()}"
                 )
             word, _, rest = line.partition(" ")
             if word == tag:
@@ -396,10 +402,10 @@ class Child:
             self.proc.wait()
         self.stderr.close()
 
-    def _stderr_tail(self) -> str:
+    def stderr_tail(self, chars: int = 2000) -> str:
         self.stderr.flush()
         self.stderr.seek(0)
-        tail = self.stderr.read()[-2000:].strip()
+        tail = self.stderr.read()[-chars:].strip()
         return f"\n--- {self.name} stderr ---\n{tail}" if tail else ""
 
 
@@ -501,7 +507,7 @@ def run_parent(args) -> int:
         try:
             info = probe_impl(impl, args, env)
         except ChildFailed as e:
-            print(f"{impl}: skipped (import or setup failed)\n{e}", flush=True)
+            print(f"{impl}: skipped, it does not load: {e.last_line()}", flush=True)
             continue
         row: Dict[str, Any] = {"impl": impl, **info}
         print(f"{impl}: {info['version']} (pong echoes by {info['echo_style']}, "

@@ -28,6 +28,7 @@ the GIL while the UDP socket buffer overflows; pulling lost none.
 # No `from __future__ import annotations`: cyclonedds reads the field types of
 # IdlStruct classes at run time and cannot resolve them from strings.
 import os
+import time
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Callable, List, Optional
@@ -116,20 +117,23 @@ class Subscriber:
         """One payload, or None after `timeout` seconds (None: wait for ever)."""
         if self._waitset is None:
             raise RuntimeError("subscriber was declared with a callback")
-        if self._pending:
-            return self._pending.pop()
-        samples = self._reader.take(N=_TAKE_BATCH, condition=self._cond)
-        if not samples:
-            wait_ns = 10**15 if timeout is None else max(0, int(timeout * 1e9))
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._pending:
+            samples = self._reader.take(N=_TAKE_BATCH, condition=self._cond)
+            if samples:
+                # Kept reversed so that pop() hands them out in arrival order; samples
+                # without data (a writer's unregistration or disposal) are left out.
+                self._pending = [s.data for s in reversed(samples) if s.sample_info.valid_data]
+                continue
+            if deadline is None:
+                wait_ns = 10**15
+            else:
+                wait_ns = int((deadline - time.monotonic()) * 1e9)
+                if wait_ns <= 0:
+                    return None
             if self._waitset.wait(wait_ns) == 0:
                 return None
-            samples = self._reader.take(N=_TAKE_BATCH, condition=self._cond)
-            if not samples:
-                return None
-        # Kept reversed so that pop() hands them out in arrival order; samples without
-        # data (a writer's unregistration or disposal) are left out.
-        self._pending = [s.data for s in reversed(samples) if s.sample_info.valid_data]
-        return self._pending.pop() if self._pending else None
+        return self._pending.pop()
 
 
 class Node:
@@ -179,4 +183,6 @@ class Node:
                     child.set_listener(None)
                 except Exception:
                     pass
-            self._dp = None  # the participant and its entities are deleted with it
+            # cyclonedds-python deletes an entity when its last Python reference goes.
+            self._dp = None
+            self._topics.clear()

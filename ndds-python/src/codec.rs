@@ -577,7 +577,8 @@ impl Serialize for Enc<'_, '_> {
                 let dict = self.value.cast::<PyDict>().map_err(|_| self.expected("a dict"))?;
                 let mut out = serializer.serialize_map(Some(dict.len()))?;
                 for (k, v) in dict.iter() {
-                    self.ctx.path.borrow_mut().push(format!("[{}]", describe(&k)));
+                    let key = k.repr().map(|r| r.to_string()).unwrap_or_default();
+                    self.ctx.path.borrow_mut().push(format!("[{key}]"));
                     out.serialize_entry(&self.child(*key, k), &self.child(*value, v))?;
                     self.ctx.path.borrow_mut().pop();
                 }

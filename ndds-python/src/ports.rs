@@ -254,21 +254,29 @@ impl PyPortOwner {
         })
     }
 
-    /// `sendall`: sends `value` to every user that takes messages to all, and collects the
-    /// replies that come within `timeout` seconds: a list of `(user, reply)`, first reply
-    /// first. Raises ndds.Timeout if no user replied.
-    #[pyo3(signature = (value, timeout=5.0))]
-    fn sendall(&self, py: Python<'_>, value: &Bound<'_, PyAny>, timeout: f64) -> PyResult<Vec<(String, Py<PyAny>)>> {
+    /// `sendall`: sends `value` to every user that takes messages to all and waits up to
+    /// `timeout` seconds for the first reply; then takes the replies that come within
+    /// `collect` seconds more. Returns `[(user, reply), ...]`, first first; raises
+    /// ndds.Timeout if nobody replied.
+    #[pyo3(signature = (value, timeout=5.0, collect=0.0))]
+    fn sendall(
+        &self,
+        py: Python<'_>,
+        value: &Bound<'_, PyAny>,
+        timeout: f64,
+        collect: f64,
+    ) -> PyResult<Vec<(String, Py<PyAny>)>> {
         let message = Encoded(encode(&self.request, value)?);
         let limit = seconds("timeout", timeout)?;
+        let collect = seconds("collect", collect)?;
         let inner = self.inner.clone();
         let replies = py
             .detach(move || -> Result<Vec<(String, Encoded)>, PortError> {
-                let start = std::time::Instant::now();
                 let replies = inner.sendall(&message, limit)?;
                 let mut all = vec![replies.first().clone()];
+                let end = std::time::Instant::now() + collect;
                 loop {
-                    let left = limit.saturating_sub(start.elapsed());
+                    let left = end.saturating_duration_since(std::time::Instant::now());
                     if left.is_zero() {
                         break;
                     }
@@ -286,7 +294,33 @@ impl PyPortOwner {
             .collect()
     }
 
-    /// The tasks using the port now.
+    /// `callall`: sends `value` to every user that takes messages to all and is admitted
+    /// now, and waits up to `timeout` seconds until each answered. Returns `(replies,
+    /// missing)`: `[(user, reply), ...]` in the order they came, and the users that did not
+    /// answer in time.
+    #[pyo3(signature = (value, timeout=5.0))]
+    #[allow(clippy::type_complexity)]
+    fn callall(
+        &self,
+        py: Python<'_>,
+        value: &Bound<'_, PyAny>,
+        timeout: f64,
+    ) -> PyResult<(Vec<(String, Py<PyAny>)>, Vec<String>)> {
+        let message = Encoded(encode(&self.request, value)?);
+        let limit = seconds("timeout", timeout)?;
+        let inner = self.inner.clone();
+        let answers = py
+            .detach(move || inner.callall(&message, limit))
+            .map_err(errors::port_error)?;
+        let replies = answers
+            .replies
+            .into_iter()
+            .map(|(user, reply)| Ok((user, decode(py, &self.reply, &reply.0)?.unbind())))
+            .collect::<PyResult<_>>()?;
+        Ok((replies, answers.missing))
+    }
+
+    /// The users present now, each as `task [usages]`.
     #[getter]
     fn users(&self) -> Vec<String> {
         self.inner.present_users()

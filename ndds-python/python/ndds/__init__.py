@@ -410,7 +410,8 @@ class PortUser:
 
 
 class PortOwner:
-    """The owner of a port: ``receive`` requests and reply to each; ``sendall`` to every user.
+    """The owner of a port: ``receive`` requests and reply to each; ``sendall`` and
+    ``callall`` to every user.
 
     PortOwner(participant, port, task, request=Type, reply=Type, *, usages=(), users=(),
     max_users=None, timeout=None, priority=None)
@@ -452,14 +453,20 @@ class PortOwner:
         ``timeout`` seconds. Ctrl-C interrupts the wait."""
         return self._native.receive(timeout)
 
-    def sendall(self, value: Any, timeout: float = 5.0) -> List[Tuple[str, Any]]:
-        """Sends ``value`` to every user taking messages to all, and returns the replies that
-        came within ``timeout`` seconds as ``(user, reply)``, first first."""
-        return self._native.sendall(value, timeout)
+    def sendall(self, value: Any, timeout: float = 5.0, collect: float = 0.0) -> List[Tuple[str, Any]]:
+        """Sends ``value`` to every user taking messages to all, waits up to ``timeout``
+        seconds for the first reply, then takes the replies that come within ``collect``
+        seconds more: ``[(user, reply), ...]``, first first. ndds.Timeout if nobody replied."""
+        return self._native.sendall(value, timeout, collect)
+
+    def callall(self, value: Any, timeout: float = 5.0) -> Tuple[List[Tuple[str, Any]], List[str]]:
+        """Sends ``value`` to every admitted user taking messages to all and waits up to
+        ``timeout`` seconds until each answered: ``(replies, missing)``."""
+        return self._native.callall(value, timeout)
 
     @property
     def users(self) -> List[str]:
-        """The tasks using the port now."""
+        """The users present now, each as `task [usages]`."""
         return self._native.users
 
     @property
@@ -552,7 +559,8 @@ class System:
         return self._native.state(machine)
 
     def mat(self, name: str) -> CsMat:
-        """The current value of CSMat ``name``."""
+        """The value of CSMat ``name`` as the habitat's last completed sample left it (a sample's
+        output may be on its topic a moment, about one period, before it shows here)."""
         return self._native.mat(name)
 
     def status(self) -> dict:
