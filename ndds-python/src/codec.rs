@@ -577,8 +577,8 @@ impl Serialize for Enc<'_, '_> {
                 let dict = self.value.cast::<PyDict>().map_err(|_| self.expected("a dict"))?;
                 let mut out = serializer.serialize_map(Some(dict.len()))?;
                 for (k, v) in dict.iter() {
-                    let key = k.repr().map(|r| r.to_string()).unwrap_or_default();
-                    self.ctx.path.borrow_mut().push(format!("[{key}]"));
+                    let shown = k.repr().map(|r| r.to_string()).unwrap_or_default();
+                    self.ctx.path.borrow_mut().push(format!("[{shown}]"));
                     out.serialize_entry(&self.child(*key, k), &self.child(*value, v))?;
                     self.ctx.path.borrow_mut().pop();
                 }
