@@ -129,9 +129,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             println!("reply {reply}");
         }
         _ => {
-            return Err("usage: pose_peer fingerprint | publish TOPIC COUNT | echo IN OUT COUNT | \
+            return Err(
+                "usage: pose_peer fingerprint | publish TOPIC COUNT | echo IN OUT COUNT | \
                  owner PORT COUNT | user PORT"
-                .into());
+                    .into(),
+            );
         }
     }
     Ok(())

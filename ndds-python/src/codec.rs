@@ -35,9 +35,11 @@ use ndds_core::types::{ContainerShape, Format, TypeLayout, VariantShape};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyDict, PyList, PyString, PyTuple};
-use serde::de::{self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, SeqAccess, VariantAccess, Visitor};
-use serde::ser::{self, SerializeMap, SerializeSeq, SerializeTuple, Serializer};
 use serde::Serialize;
+use serde::de::{
+    self, DeserializeSeed, Deserializer, EnumAccess, MapAccess, SeqAccess, VariantAccess, Visitor,
+};
+use serde::ser::{self, SerializeMap, SerializeSeq, SerializeTuple, Serializer};
 
 /// How Python sees one container of the layout.
 pub(crate) enum PyShape {
@@ -101,15 +103,18 @@ impl Codec {
         };
         match postcard::to_stdvec(&root) {
             Ok(bytes) => Ok(bytes),
-            Err(err) => Err(ctx
-                .error
-                .take()
-                .unwrap_or_else(|| PyValueError::new_err(format!("cannot encode the sample: {err}")))),
+            Err(err) => Err(ctx.error.take().unwrap_or_else(|| {
+                PyValueError::new_err(format!("cannot encode the sample: {err}"))
+            })),
         }
     }
 
     /// Decodes a sample of the layout's root type.
-    pub(crate) fn decode<'py>(&self, py: Python<'py>, payload: &[u8]) -> PyResult<Bound<'py, PyAny>> {
+    pub(crate) fn decode<'py>(
+        &self,
+        py: Python<'py>,
+        payload: &[u8],
+    ) -> PyResult<Bound<'py, PyAny>> {
         let ctx = Ctx {
             codec: self,
             path: RefCell::new(Vec::new()),
@@ -148,7 +153,7 @@ impl Codec {
 /// One encoding or decoding: where it is, and the Python error that stopped it.
 struct Ctx<'a> {
     codec: &'a Codec,
-    path: RefCell<Vec<String>>,
+    path: RefCell<Vec<Seg>>,
     error: RefCell<Option<PyErr>>,
     values: Cell<usize>,
     limit: usize,
@@ -175,7 +180,8 @@ impl Ctx<'_> {
                 format!("sample field `{}`: {what}", join(&path))
             }
         };
-        self.error.replace(Some(PyTypeError::new_err(message.clone())));
+        self.error
+            .replace(Some(PyTypeError::new_err(message.clone())));
         E::custom(message)
     }
 
@@ -199,13 +205,32 @@ impl Ctx<'_> {
     }
 }
 
-fn join(path: &[String]) -> String {
+/// One step of the path to a value: a field or variant name, an index, a map key's repr.
+/// Indexes are kept as numbers, so a path costs no allocation per element.
+enum Seg {
+    Name(String),
+    Index(usize),
+    Key(String),
+}
+
+fn join(path: &[Seg]) -> String {
+    use std::fmt::Write;
     let mut out = String::new();
     for segment in path {
-        if !segment.starts_with('[') && !out.is_empty() {
-            out.push('.');
+        match segment {
+            Seg::Name(name) => {
+                if !out.is_empty() {
+                    out.push('.');
+                }
+                out.push_str(name);
+            }
+            Seg::Index(i) => {
+                let _ = write!(out, "[{i}]");
+            }
+            Seg::Key(key) => {
+                let _ = write!(out, "[{key}]");
+            }
         }
-        out.push_str(segment);
     }
     out
 }
@@ -263,7 +288,7 @@ impl<'a, 'py> Enc<'a, 'py> {
     fn element<S: SerializeTuple>(
         &self,
         out: &mut S,
-        segment: String,
+        segment: Seg,
         format: u32,
         value: Bound<'py, PyAny>,
     ) -> Result<(), S::Error> {
@@ -286,10 +311,7 @@ impl<'a, 'py> Enc<'a, 'py> {
             .value
             .extract()
             .map_err(|_| self.expected(&format!("an int ({kind})")))?;
-        T::try_from(wide).map_err(|_| {
-            self.ctx
-                .type_error(format!("{wide} does not fit {kind}"))
-        })
+        T::try_from(wide).map_err(|_| self.ctx.type_error(format!("{wide} does not fit {kind}")))
     }
 
     fn float<E: ser::Error>(&self, kind: &str) -> Result<f64, E> {
@@ -359,7 +381,10 @@ impl<'a, 'py> Enc<'a, 'py> {
                     py.None().into_bound(py)
                 }
                 None => {
-                    self.ctx.path.borrow_mut().push(field.name.clone());
+                    self.ctx
+                        .path
+                        .borrow_mut()
+                        .push(Seg::Name(field.name.clone()));
                     return Err(self.ctx.type_error(format!(
                         "missing (the {} has no field `{}`)",
                         describe(&self.value),
@@ -367,17 +392,24 @@ impl<'a, 'py> Enc<'a, 'py> {
                     )));
                 }
             };
-            self.element(&mut out, field.name.clone(), field.format, value)?;
+            self.element(&mut out, Seg::Name(field.name.clone()), field.format, value)?;
         }
         if let Some(dict) = dict
             && dict.len() > fields.len()
         {
             for key in dict.keys() {
-                if !names.iter().any(|n| PyAnyMethods::eq(n.bind(py).as_any(), &key).unwrap_or(false)) {
+                if !names
+                    .iter()
+                    .any(|n| PyAnyMethods::eq(n.bind(py).as_any(), &key).unwrap_or(false))
+                {
                     return Err(self.ctx.type_error(format!(
                         "unknown field {} (fields: {})",
                         describe(&key),
-                        fields.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(", ")
+                        fields
+                            .iter()
+                            .map(|f| f.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     )));
                 }
             }
@@ -401,7 +433,10 @@ impl<'a, 'py> Enc<'a, 'py> {
                 let (key, value) = dict.iter().next().expect("one item");
                 (key.to_string(), Some(value))
             } else if let Ok(name) = self.value.getattr(pyo3::intern!(py, "name"))
-                && let Ok(members) = self.value.get_type().getattr(pyo3::intern!(py, "__members__"))
+                && let Ok(members) = self
+                    .value
+                    .get_type()
+                    .getattr(pyo3::intern!(py, "__members__"))
                 && members.contains(&name).unwrap_or(false)
             {
                 (name.to_string(), None)
@@ -428,9 +463,13 @@ impl<'a, 'py> Enc<'a, 'py> {
                 serializer.serialize_unit_variant("", index, "")
             }
             (VariantShape::NewType(format), Some(inner)) => {
-                self.ctx.path.borrow_mut().push(name.clone());
-                let result =
-                    serializer.serialize_newtype_variant("", index, "", &self.child(*format, inner));
+                self.ctx.path.borrow_mut().push(Seg::Name(name.clone()));
+                let result = serializer.serialize_newtype_variant(
+                    "",
+                    index,
+                    "",
+                    &self.child(*format, inner),
+                );
                 self.ctx.path.borrow_mut().pop();
                 result
             }
@@ -441,7 +480,7 @@ impl<'a, 'py> Enc<'a, 'py> {
                 let mut out = serializer.serialize_tuple(1 + items.len())?;
                 out.serialize_element(&Varint(index))?;
                 for (i, (format, value)) in items.iter().zip(values).enumerate() {
-                    self.element(&mut out, format!("{name}[{i}]"), *format, value)?;
+                    self.element(&mut out, Seg::Name(format!("{name}[{i}]")), *format, value)?;
                 }
                 out.end()
             }
@@ -449,8 +488,9 @@ impl<'a, 'py> Enc<'a, 'py> {
                 let mut out = serializer.serialize_tuple(1 + fields.len())?;
                 out.serialize_element(&Varint(index))?;
                 let dict = inner.cast::<PyDict>().map_err(|_| {
-                    self.ctx
-                        .type_error::<S::Error>(format!("variant `{name}`: expected a dict of its fields"))
+                    self.ctx.type_error::<S::Error>(format!(
+                        "variant `{name}`: expected a dict of its fields"
+                    ))
                 })?;
                 for field in fields {
                     let value = dict
@@ -458,7 +498,12 @@ impl<'a, 'py> Enc<'a, 'py> {
                         .ok()
                         .flatten()
                         .unwrap_or_else(|| py.None().into_bound(py));
-                    self.element(&mut out, format!("{name}.{}", field.name), field.format, value)?;
+                    self.element(
+                        &mut out,
+                        Seg::Name(format!("{name}.{}", field.name)),
+                        field.format,
+                        value,
+                    )?;
                 }
                 out.end()
             }
@@ -523,8 +568,13 @@ impl Serialize for Enc<'_, '_> {
             Format::F32 => serializer.serialize_f32(self.float("f32")? as f32),
             Format::F64 => serializer.serialize_f64(self.float("f64")?),
             Format::Char => {
-                let text = self.value.cast::<PyString>().map_err(|_| self.expected("a str"))?;
-                let text = text.to_cow().map_err(|e| self.ctx.type_error(e.to_string()))?;
+                let text = self
+                    .value
+                    .cast::<PyString>()
+                    .map_err(|_| self.expected("a str"))?;
+                let text = text
+                    .to_cow()
+                    .map_err(|e| self.ctx.type_error(e.to_string()))?;
                 let mut chars = text.chars();
                 match (chars.next(), chars.next()) {
                     (Some(c), None) => serializer.serialize_char(c),
@@ -532,8 +582,13 @@ impl Serialize for Enc<'_, '_> {
                 }
             }
             Format::Str => {
-                let text = self.value.cast::<PyString>().map_err(|_| self.expected("a str"))?;
-                let text = text.to_cow().map_err(|e| self.ctx.type_error(e.to_string()))?;
+                let text = self
+                    .value
+                    .cast::<PyString>()
+                    .map_err(|_| self.expected("a str"))?;
+                let text = text
+                    .to_cow()
+                    .map_err(|e| self.ctx.type_error(e.to_string()))?;
                 serializer.serialize_str(&text)
             }
             Format::Bytes => {
@@ -567,18 +622,21 @@ impl Serialize for Enc<'_, '_> {
                 let items = self.items(None)?;
                 let mut out = serializer.serialize_seq(Some(items.len()))?;
                 for (i, value) in items.into_iter().enumerate() {
-                    self.ctx.path.borrow_mut().push(format!("[{i}]"));
+                    self.ctx.path.borrow_mut().push(Seg::Index(i));
                     out.serialize_element(&self.child(*item, value))?;
                     self.ctx.path.borrow_mut().pop();
                 }
                 out.end()
             }
             Format::Map { key, value } => {
-                let dict = self.value.cast::<PyDict>().map_err(|_| self.expected("a dict"))?;
+                let dict = self
+                    .value
+                    .cast::<PyDict>()
+                    .map_err(|_| self.expected("a dict"))?;
                 let mut out = serializer.serialize_map(Some(dict.len()))?;
                 for (k, v) in dict.iter() {
                     let shown = k.repr().map(|r| r.to_string()).unwrap_or_default();
-                    self.ctx.path.borrow_mut().push(format!("[{shown}]"));
+                    self.ctx.path.borrow_mut().push(Seg::Key(shown));
                     out.serialize_entry(&self.child(*key, k), &self.child(*value, v))?;
                     self.ctx.path.borrow_mut().pop();
                 }
@@ -588,7 +646,7 @@ impl Serialize for Enc<'_, '_> {
                 let values = self.items(Some(items.len()))?;
                 let mut out = serializer.serialize_tuple(items.len())?;
                 for (i, (format, value)) in items.iter().zip(values).enumerate() {
-                    self.element(&mut out, format!("[{i}]"), *format, value)?;
+                    self.element(&mut out, Seg::Index(i), *format, value)?;
                 }
                 out.end()
             }
@@ -596,7 +654,7 @@ impl Serialize for Enc<'_, '_> {
                 let values = self.items(Some(*len as usize))?;
                 let mut out = serializer.serialize_tuple(*len as usize)?;
                 for (i, value) in values.into_iter().enumerate() {
-                    self.element(&mut out, format!("[{i}]"), *item, value)?;
+                    self.element(&mut out, Seg::Index(i), *item, value)?;
                 }
                 out.end()
             }
@@ -610,7 +668,7 @@ impl Serialize for Enc<'_, '_> {
                         let values = self.items(Some(items.len()))?;
                         let mut out = serializer.serialize_tuple(items.len())?;
                         for (i, (format, value)) in items.iter().zip(values).enumerate() {
-                            self.element(&mut out, format!("[{i}]"), *format, value)?;
+                            self.element(&mut out, Seg::Index(i), *format, value)?;
                         }
                         out.end()
                     }
@@ -697,14 +755,14 @@ impl<'a, 'py> Value<'a, 'py> {
         }
     }
 
-    fn read_list<'de, A: SeqAccess<'de>>(&self, mut seq: A) -> Result<Vec<Bound<'py, PyAny>>, A::Error> {
+    fn read_list<'de, A: SeqAccess<'de>>(
+        &self,
+        mut seq: A,
+    ) -> Result<Vec<Bound<'py, PyAny>>, A::Error> {
         let mut items = Vec::new();
         let mut i = 0usize;
-        loop {
-            let Some(format) = self.item_format(i) else {
-                break;
-            };
-            self.dec.ctx.path.borrow_mut().push(format!("[{i}]"));
+        while let Some(format) = self.item_format(i) {
+            self.dec.ctx.path.borrow_mut().push(Seg::Index(i));
             let item = seq.next_element_seed(self.dec.child(format))?;
             self.dec.ctx.path.borrow_mut().pop();
             match item {
@@ -751,7 +809,9 @@ impl<'de, 'py> DeserializeSeed<'de> for Dec<'_, 'py> {
             Format::Seq(_) => d.deserialize_seq(self.visitor(Want::List)),
             Format::Map { .. } => d.deserialize_map(self.visitor(Want::Map)),
             Format::Tuple(items) => d.deserialize_tuple(items.len(), self.visitor(Want::List)),
-            Format::Array { len, .. } => d.deserialize_tuple(*len as usize, self.visitor(Want::List)),
+            Format::Array { len, .. } => {
+                d.deserialize_tuple(*len as usize, self.visitor(Want::List))
+            }
             Format::Named(container) => {
                 let c = *container as usize;
                 match &layout.containers[c].shape {
@@ -763,7 +823,9 @@ impl<'de, 'py> DeserializeSeed<'de> for Dec<'_, 'py> {
                     ContainerShape::Struct(fields) => {
                         d.deserialize_tuple(fields.len(), self.visitor(Want::Fields(c)))
                     }
-                    ContainerShape::Enum(_) => d.deserialize_enum("", &[], self.visitor(Want::Variant(c))),
+                    ContainerShape::Enum(_) => {
+                        d.deserialize_enum("", &[], self.visitor(Want::Variant(c)))
+                    }
                 }
             }
         }
@@ -782,7 +844,9 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     }
 
     fn visit_bool<E: de::Error>(self, v: bool) -> Result<Self::Value, E> {
-        let value = pyo3::types::PyBool::new(self.dec.py, v).to_owned().into_any();
+        let value = pyo3::types::PyBool::new(self.dec.py, v)
+            .to_owned()
+            .into_any();
         self.ok(value)
     }
 
@@ -844,7 +908,8 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     }
 
     fn visit_some<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
-        let Format::Option(inner) = self.dec.ctx.codec.layout.formats[self.dec.format as usize] else {
+        let Format::Option(inner) = self.dec.ctx.codec.layout.formats[self.dec.format as usize]
+        else {
             return Err(de::Error::custom("unexpected option"));
         };
         self.dec.child(inner).deserialize(d)
@@ -872,7 +937,11 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
                 let mut seq = seq;
                 let mut values = Vec::with_capacity(fields.len());
                 for field in fields {
-                    self.dec.ctx.path.borrow_mut().push(field.name.clone());
+                    self.dec
+                        .ctx
+                        .path
+                        .borrow_mut()
+                        .push(Seg::Name(field.name.clone()));
                     let value = seq
                         .next_element_seed(self.dec.child(field.format))?
                         .ok_or_else(|| de::Error::custom("the struct ends early"))?;
@@ -918,14 +987,15 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
         let py = self.dec.py;
-        let Format::Map { key, value } = self.dec.ctx.codec.layout.formats[self.dec.format as usize]
+        let Format::Map { key, value } =
+            self.dec.ctx.codec.layout.formats[self.dec.format as usize]
         else {
             return Err(de::Error::custom("unexpected map"));
         };
         let dict = PyDict::new(py);
         let mut i = 0usize;
         loop {
-            self.dec.ctx.path.borrow_mut().push(format!("[{i}]"));
+            self.dec.ctx.path.borrow_mut().push(Seg::Index(i));
             let Some(k) = map.next_key_seed(self.dec.child(key))? else {
                 self.dec.ctx.path.borrow_mut().pop();
                 break;
@@ -966,7 +1036,9 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
                 };
                 return self.ok(value);
             }
-            VariantShape::NewType(format) => access.newtype_variant_seed(self.dec.child(*format))?,
+            VariantShape::NewType(format) => {
+                access.newtype_variant_seed(self.dec.child(*format))?
+            }
             VariantShape::Tuple(items) => access.tuple_variant(
                 items.len(),
                 TupleItems {

@@ -46,7 +46,9 @@ where
     let deadline = timeout.map(|t| Instant::now() + t);
     loop {
         let slice = match deadline {
-            Some(deadline) => deadline.saturating_duration_since(Instant::now()).min(SLICE),
+            Some(deadline) => deadline
+                .saturating_duration_since(Instant::now())
+                .min(SLICE),
             None => SLICE,
         };
         match py.detach(|| attempt(slice)) {
@@ -241,7 +243,12 @@ impl PyParticipant {
 
     /// The type announced on `topic` by its endpoints (producers first), as an untyped
     /// DataType (structs as dicts), or None while no endpoint of the topic is known.
-    fn _topic_type(&self, py: Python<'_>, topic: &str, csmat: Py<PyAny>) -> PyResult<Option<DataType>> {
+    fn _topic_type(
+        &self,
+        py: Python<'_>,
+        topic: &str,
+        csmat: Py<PyAny>,
+    ) -> PyResult<Option<DataType>> {
         let participant = self.get()?;
         let graph = py
             .detach(move || participant.graph())
@@ -252,7 +259,8 @@ impl PyParticipant {
             .filter(|e| e.info.topic == topic)
             .collect();
         // Producers first: theirs is the type the samples have.
-        endpoints.sort_by_key(|e| !matches!(e.info.kind(), ndds_core::wire::EndpointKind::Producer));
+        endpoints
+            .sort_by_key(|e| !matches!(e.info.kind(), ndds_core::wire::EndpointKind::Producer));
         let Some(endpoint) = endpoints.first() else {
             return Ok(None);
         };
@@ -316,7 +324,11 @@ pub(crate) fn encode(kind: &Kind, value: &Bound<'_, PyAny>) -> PyResult<Vec<u8>>
 }
 
 /// Decodes a sample of `kind`.
-pub(crate) fn decode<'py>(py: Python<'py>, kind: &Kind, payload: &[u8]) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn decode<'py>(
+    py: Python<'py>,
+    kind: &Kind,
+    payload: &[u8],
+) -> PyResult<Bound<'py, PyAny>> {
     match kind {
         Kind::Dynamic(codec) => codec.decode(py, payload),
         Kind::CsMat(factory) => decode_csmat(py, factory, payload),
@@ -326,11 +338,22 @@ pub(crate) fn decode<'py>(py: Python<'py>, kind: &Kind, payload: &[u8]) -> PyRes
 /// `ndds.CsMat` → the runtime's CSMat encoding. The object gives its parts with `_wire()`:
 /// `(name, rows, cols, data, row_fields, col_fields)`, data as row-major float64 bytes.
 fn encode_csmat(value: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
-    type Wire = (String, usize, usize, Vec<u8>, Vec<(String, String)>, Vec<(String, String)>);
+    type Wire = (
+        String,
+        usize,
+        usize,
+        Vec<u8>,
+        Vec<(String, String)>,
+        Vec<(String, String)>,
+    );
     let wire = value.call_method0("_wire").map_err(|_| {
         PyTypeError::new_err(format!(
             "sample: expected an ndds.CsMat, got {}",
-            value.get_type().name().map(|n| n.to_string()).unwrap_or_default()
+            value
+                .get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default()
         ))
     })?;
     let (name, rows, cols, bytes, row_fields, col_fields): Wire = wire.extract()?;
@@ -383,7 +406,9 @@ pub(crate) fn csmat_object<'py>(
         }
     }
     let fields = |list: &[ndds_runtime::Field]| -> Vec<(String, String)> {
-        list.iter().map(|f| (f.name.clone(), f.unit.clone())).collect()
+        list.iter()
+            .map(|f| (f.name.clone(), f.unit.clone()))
+            .collect()
     };
     let args = (
         mat.name().to_owned(),
@@ -520,7 +545,10 @@ impl PySample {
             .repr()
             .map(|r| r.to_string())
             .unwrap_or_default();
-        format!("Sample(value={value}, writer={}, seq={})", self.writer, self.seq)
+        format!(
+            "Sample(value={value}, writer={}, seq={})",
+            self.writer, self.seq
+        )
     }
 }
 
@@ -605,7 +633,11 @@ fn notification(n: Notification) -> PyNotification {
         } => (
             format!(
                 "producer {writer} lost{}",
-                if *was_current { " (it was in charge)" } else { "" }
+                if *was_current {
+                    " (it was in charge)"
+                } else {
+                    ""
+                }
             ),
             Some(writer.to_string()),
             None,
@@ -747,11 +779,9 @@ impl PyConsumer {
             errors::recv_error,
         )?;
         match got {
-            Some(RawEvent::Sample(raw_sample)) => Ok(Py::new(
-                py,
-                sample(py, &self.data_type.get().kind, raw_sample)?,
-            )?
-            .into_any()),
+            Some(RawEvent::Sample(raw_sample)) => {
+                Ok(Py::new(py, sample(py, &self.data_type.get().kind, raw_sample)?)?.into_any())
+            }
             Some(RawEvent::Notification(n)) => Ok(Py::new(py, notification(n))?.into_any()),
             None => Err(crate::errors::Timeout::new_err(format!(
                 "no sample or notification on `{}` within {:.3} s",
@@ -848,4 +878,3 @@ impl PyConsumer {
         self.raw.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 }
-

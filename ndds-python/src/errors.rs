@@ -2,9 +2,9 @@
 
 use ndds_client::ports::PortError;
 use ndds_client::{ConnectError, DeclareError, QueryError, RecvError, WriteError};
+use pyo3::PyErr;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
-use pyo3::PyErr;
 
 create_exception!(
     ndds,

@@ -42,6 +42,9 @@ fn _ndds(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Timeout", py.get_type::<errors::Timeout>())?;
     m.add("Refused", py.get_type::<errors::Refused>())?;
     m.add("Disconnected", py.get_type::<errors::Disconnected>())?;
-    m.add("IncompatibleType", py.get_type::<errors::IncompatibleType>())?;
+    m.add(
+        "IncompatibleType",
+        py.get_type::<errors::IncompatibleType>(),
+    )?;
     Ok(())
 }

@@ -4,7 +4,9 @@
 
 use std::sync::{Arc, Mutex};
 
-use ndds_client::ports::{Encoded, PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage};
+use ndds_client::ports::{
+    Encoded, PortError, PortOwner, PortUser, ReplyHandle, Restrictions, Usage,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -146,7 +148,13 @@ impl PyPortUser {
 }
 
 impl PyPortUser {
-    fn call(&self, py: Python<'_>, value: &Bound<'_, PyAny>, timeout: f64, query: bool) -> PyResult<Py<PyAny>> {
+    fn call(
+        &self,
+        py: Python<'_>,
+        value: &Bound<'_, PyAny>,
+        timeout: f64,
+        query: bool,
+    ) -> PyResult<Py<PyAny>> {
         let message = Encoded(encode(&self.request, value)?);
         let timeout = seconds("timeout", timeout)?;
         let inner = self.inner.clone();
@@ -367,8 +375,12 @@ impl PyRequest {
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {
-        let value = self.value.bind(py).repr().map(|r| r.to_string()).unwrap_or_default();
+        let value = self
+            .value
+            .bind(py)
+            .repr()
+            .map(|r| r.to_string())
+            .unwrap_or_default();
         format!("Request(value={value}, sender={:?})", self.sender)
     }
 }
-

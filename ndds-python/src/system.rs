@@ -123,7 +123,9 @@ impl PySystem {
     fn mat(&self, py: Python<'_>, name: &str) -> PyResult<Py<PyAny>> {
         let mat = self.inner.runtime().mat(name);
         if !mat.is_bound() {
-            return Err(errors::Error::new_err(format!("the system has no CSMat `{name}`")));
+            return Err(errors::Error::new_err(format!(
+                "the system has no CSMat `{name}`"
+            )));
         }
         let value = mat.snapshot();
         crate::endpoints::csmat_object(py, &self.csmat, &value).map(Bound::unbind)
@@ -156,7 +158,10 @@ impl PySystem {
         out.set_item("machines", machines)?;
         let display = PyDict::new(py);
         for (name, value) in &status.display {
-            display.set_item(name, crate::endpoints::csmat_object(py, &self.csmat, value)?)?;
+            display.set_item(
+                name,
+                crate::endpoints::csmat_object(py, &self.csmat, value)?,
+            )?;
         }
         out.set_item("display", display)?;
         Ok(out)

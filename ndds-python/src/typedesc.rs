@@ -76,7 +76,9 @@ impl DataType {
     /// The untyped view of a topic's announced type: structs as dicts, variants by name.
     pub(crate) fn plain(py: Python<'_>, desc: TypeDescription) -> PyResult<Self> {
         if desc.name == builtin::CSMAT {
-            return Err(PyTypeError::new_err("internal: CSMat types come from csmat_type"));
+            return Err(PyTypeError::new_err(
+                "internal: CSMat types come from csmat_type",
+            ));
         }
         let Some(layout) = desc.layout.clone() else {
             return Err(PyTypeError::new_err(format!(
@@ -103,7 +105,9 @@ pub(crate) fn declare_type(
     let mut registry: Registry = BTreeMap::new();
     let mut classes: BTreeMap<String, (Py<PyAny>, bool)> = BTreeMap::new();
     for item in containers.iter() {
-        let item = item.cast::<PyTuple>().map_err(|_| bad_spec("container", &item))?;
+        let item = item
+            .cast::<PyTuple>()
+            .map_err(|_| bad_spec("container", &item))?;
         let (cname, kind, items, class): (String, String, Bound<'_, PyList>, Bound<'_, PyAny>) =
             item.extract()?;
         let container = match kind.as_str() {
@@ -132,7 +136,11 @@ pub(crate) fn declare_type(
                 }
                 ContainerFormat::Enum(variants)
             }
-            other => return Err(PyValueError::new_err(format!("unknown container kind {other}"))),
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "unknown container kind {other}"
+                )));
+            }
         };
         if registry.insert(cname.clone(), container).is_some() {
             return Err(PyTypeError::new_err(format!(
@@ -182,7 +190,9 @@ fn enum_members(
     shape: &ndds_core::types::ContainerShape,
 ) -> PyResult<Vec<Py<PyAny>>> {
     let ndds_core::types::ContainerShape::Enum(variants) = shape else {
-        return Err(PyTypeError::new_err("internal: an enum's container is not an enum"));
+        return Err(PyTypeError::new_err(
+            "internal: an enum's container is not an enum",
+        ));
     };
     variants
         .iter()
@@ -218,7 +228,9 @@ fn format(spec: &Bound<'_, PyAny>) -> PyResult<Sr> {
             _ => return Err(bad_spec("scalar", spec)),
         });
     }
-    let tuple = spec.cast::<PyTuple>().map_err(|_| bad_spec("format", spec))?;
+    let tuple = spec
+        .cast::<PyTuple>()
+        .map_err(|_| bad_spec("format", spec))?;
     let head: String = tuple.get_item(0)?.extract()?;
     let arg = |i: usize| tuple.get_item(i);
     Ok(match head.as_str() {
@@ -230,7 +242,9 @@ fn format(spec: &Bound<'_, PyAny>) -> PyResult<Sr> {
         },
         "tuple" => {
             let items = arg(1)?;
-            let items = items.cast::<PyList>().map_err(|_| bad_spec("tuple", spec))?;
+            let items = items
+                .cast::<PyList>()
+                .map_err(|_| bad_spec("tuple", spec))?;
             Sr::Tuple(items.iter().map(|i| format(&i)).collect::<PyResult<_>>()?)
         }
         "array" => Sr::TupleArray {

@@ -79,7 +79,10 @@ mod tests {
         assert_eq!(read.0, bytes);
         assert_eq!(postcard::from_bytes::<Pose>(&read.0).unwrap(), pose);
         // An empty message (a unit reply) is empty both ways.
-        assert_eq!(postcard::from_bytes::<Encoded>(&[]).unwrap(), Encoded::default());
+        assert_eq!(
+            postcard::from_bytes::<Encoded>(&[]).unwrap(),
+            Encoded::default()
+        );
         assert!(postcard::to_stdvec(&Encoded::default()).unwrap().is_empty());
     }
 }

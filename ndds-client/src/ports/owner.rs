@@ -19,7 +19,8 @@ use super::sendall::{Broadcast, BroadcastReply};
 use super::wait::{self, Either, Notify};
 use super::wire::{Filter, OwnerInfo, Reply, Request, Restrictions, UserInfo};
 use super::{
-    Encoded, check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error, topic,
+    Encoded, check_name, declaring_producer, reliable_consumer, reliable_producer, spawn_error,
+    topic,
 };
 use crate::{Consumer, Participant, Producer, TypeDescription};
 

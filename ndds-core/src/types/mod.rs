@@ -20,13 +20,13 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 pub use describe::{DescribeError, Describer, from_registry};
-/// The serde-reflection crate [`from_registry`] takes its formats from, so that a binding
-/// builds them with the same version.
-pub use serde_reflection;
 pub use layout::{
     Container, ContainerShape, Field, Format, LayoutError, TypeLayout, Variant, VariantShape,
 };
 pub use name::{builtin, stable_name};
+/// The serde-reflection crate [`from_registry`] takes its formats from, so that a binding
+/// builds them with the same version.
+pub use serde_reflection;
 
 /// The description of a topic's sample type.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
