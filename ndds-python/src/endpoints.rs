@@ -9,8 +9,10 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use ndds_client::{
     Batching, ConsumerMode, ConsumerQos, EmbeddedPolicy, Notification, Participant, PollStatus,
-    ProducerQos, RawConsumer, RawEvent, RawProducer, RawSample, RecvError, Reliability, WhenFull,
+    ProducerQos, RawConsumer, RawEvent, RawProducer, RawSample, RecvError, Reliability,
+    SampleStatus, WhenFull,
 };
+use ndds_core::wire::Guid;
 use ndds_core::types::{builtin, fingerprint_hex};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -518,26 +520,74 @@ impl PyProducer {
 }
 
 /// A sample as a consumer receives it.
-#[pyclass(module = "ndds._ndds", name = "Sample", frozen, get_all)]
+#[pyclass(module = "ndds._ndds", name = "Sample", frozen)]
 pub(crate) struct PySample {
-    /// The value: an instance of the consumer's type, a dict (untyped) or an ndds.CsMat.
     value: Py<PyAny>,
-    /// The producer, `participant.entity` in hex.
-    writer: String,
-    /// The producer's sequence number.
+    writer: Guid,
     seq: u64,
-    /// When it was written (seconds since the epoch, the producer's clock).
     source_time: f64,
-    /// When it arrived (seconds since the epoch).
     reception_time: f64,
-    /// The producer's strength.
     strength: i32,
-    /// `new`, `took_over` or similar: the arbitration's status, as text.
-    status: String,
+    status: SampleStatus,
 }
 
 #[pymethods]
 impl PySample {
+    /// The value: an instance of the consumer's type, a dict (untyped) or an ndds.CsMat.
+    #[getter]
+    fn value(&self, py: Python<'_>) -> Py<PyAny> {
+        self.value.clone_ref(py)
+    }
+
+    /// The producer, `participant.entity` (the participant in hex), as tools show it.
+    #[getter]
+    fn writer(&self) -> String {
+        self.writer.to_string()
+    }
+
+    /// The producer's sequence number.
+    #[getter]
+    fn seq(&self) -> u64 {
+        self.seq
+    }
+
+    /// When it was written: seconds since the epoch, by the producer's clock.
+    #[getter]
+    fn source_time(&self) -> f64 {
+        self.source_time
+    }
+
+    /// When it arrived: seconds since the epoch.
+    #[getter]
+    fn reception_time(&self) -> f64 {
+        self.reception_time
+    }
+
+    /// The producer's strength.
+    #[getter]
+    fn strength(&self) -> i32 {
+        self.strength
+    }
+
+    /// `fresh`, or `took_over` for the first sample of a producer that took over the topic
+    /// from another (see `previous_writer`).
+    #[getter]
+    fn status(&self) -> &'static str {
+        match self.status {
+            SampleStatus::Fresh => "fresh",
+            SampleStatus::TookOver { .. } => "took_over",
+        }
+    }
+
+    /// The producer in charge before this one took over, if it did.
+    #[getter]
+    fn previous_writer(&self) -> Option<String> {
+        match self.status {
+            SampleStatus::Fresh => None,
+            SampleStatus::TookOver { previous } => Some(previous.to_string()),
+        }
+    }
+
     fn __repr__(&self, py: Python<'_>) -> String {
         let value = self
             .value
@@ -545,10 +595,7 @@ impl PySample {
             .repr()
             .map(|r| r.to_string())
             .unwrap_or_default();
-        format!(
-            "Sample(value={value}, writer={}, seq={})",
-            self.writer, self.seq
-        )
+        format!("Sample(value={value}, writer={}, seq={})", self.writer, self.seq)
     }
 }
 
@@ -557,12 +604,12 @@ fn sample(py: Python<'_>, kind: &Kind, raw: RawSample) -> PyResult<PySample> {
     let info = raw.info;
     Ok(PySample {
         value,
-        writer: info.writer.to_string(),
+        writer: info.writer,
         seq: info.seq,
         source_time: epoch_seconds(info.source_timestamp),
         reception_time: epoch_seconds(info.reception_timestamp),
         strength: info.strength,
-        status: snake(&format!("{:?}", info.status)),
+        status: info.status,
     })
 }
 
@@ -724,6 +771,13 @@ impl PyConsumer {
     fn recv(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<PySample> {
         let raw = self.raw()?;
         let timeout = timeout_arg(timeout)?;
+        // A sample already queued is taken without giving up the GIL (which costs more than
+        // the take itself when samples stream in).
+        match raw.try_recv_raw() {
+            Ok(raw_sample) => return sample(py, &self.data_type.get().kind, raw_sample),
+            Err(RecvError::Empty | RecvError::Timeout) => {}
+            Err(err) => return Err(errors::recv_error(err)),
+        }
         let got = wait_sliced(
             py,
             timeout,
