@@ -558,6 +558,19 @@ class System:
         """The current state of state machine ``machine``."""
         return self._native.state(machine)
 
+    def wait_for_state(self, machine: str, state: str, timeout: float = 5.0) -> bool:
+        """Waits up to ``timeout`` seconds until state machine ``machine`` is in ``state``;
+        False if it is not by then."""
+        import time
+
+        end = time.monotonic() + timeout
+        while True:
+            if self._native.state(machine) == state:
+                return True
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.01)
+
     def mat(self, name: str) -> CsMat:
         """The value of CSMat ``name`` as the habitat's last completed sample left it (a sample's
         output may be on its topic a moment, about one period, before it shows here)."""

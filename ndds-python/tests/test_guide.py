@@ -1,0 +1,39 @@
+"""The Python section of the user guide (docs/user-guide.md, "From Python") runs as written:
+its ```python blocks, in order, in one namespace, from the repository's root, against this
+test's daemon."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import pathlib
+import re
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+
+
+def guide_blocks() -> list:
+    text = (REPO / "docs" / "user-guide.md").read_text()
+    section = text[text.index("## 9. From Python") :]
+    return re.findall(r"```python\n(.*?)```", section, re.S)
+
+
+def test_the_guides_python_examples_run(domain, monkeypatch):
+    blocks = guide_blocks()
+    assert len(blocks) >= 6, "the guide's Python section lost its examples"
+    monkeypatch.chdir(REPO)
+    for key, value in domain.env().items():
+        if key.startswith("NDDS_"):
+            monkeypatch.setenv(key, value)
+    namespace: dict = {"__name__": "guide"}
+    out = io.StringIO()
+    for i, block in enumerate(blocks):
+        with contextlib.redirect_stdout(out):
+            exec(compile(block, f"user-guide.md python block {i + 1}", "exec"), namespace)
+    printed = out.getvalue()
+    # What the guide's comments say is printed.
+    assert "{'x': 5.0, 'y': 6.0, 'theta': 0.0, 'frame': 'odom'}" in printed
+    assert "0.2 ['rad', 'rad']" in printed
+    assert "closed to 12.5 mm for planner" in printed
+    assert re.search(r"^Home -?0\.0", printed, re.M), printed
