@@ -9,6 +9,8 @@ import io
 import os
 import pathlib
 import re
+import sys
+import types
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
 
@@ -26,7 +28,10 @@ def test_the_guides_python_examples_run(domain, monkeypatch):
     for key, value in domain.env().items():
         if key.startswith("NDDS_"):
             monkeypatch.setenv(key, value)
-    namespace: dict = {"__name__": "guide"}
+    # A module of its own: dataclasses look their module up in sys.modules.
+    module = types.ModuleType("ndds_user_guide")
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    namespace = module.__dict__
     out = io.StringIO()
     for i, block in enumerate(blocks):
         with contextlib.redirect_stdout(out):

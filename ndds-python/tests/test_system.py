@@ -152,12 +152,15 @@ def test_a_state_machine_sequence_in_simulated_time():
     try:
         assert system.state("task") == "MovingToA"
         assert system.configuration == "ToA"
-        # The triggers drive the machine through A, B and home: 10 simulated seconds.
-        system.simulate(10.0)
-        deadline = time.monotonic() + 10
-        while system.state("task") != "Done" and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert system.state("task") == "Done"
+        # The triggers drive the machine through A, B and home within 10 simulated seconds.
+        # The machine reacts in real time on its own thread: simulate in steps, giving it a
+        # moment between them.
+        simulated = 0.0
+        while simulated < 10.0 and not system.wait_for_state("task", "Done", timeout=0.02):
+            system.simulate(0.1)
+            simulated += 0.1
+        assert system.state("task") == "Done", f"after {simulated:.1f} simulated seconds"
+        assert simulated > 4.0  # the three moves take 1.5 + 2 + 1 s
         assert system.configuration == "Home"
         assert abs(system.mat("position")[0, 0]) < 0.01
         assert set(system.status()["display"]) == {"position", "setpoint"}
