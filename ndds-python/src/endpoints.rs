@@ -12,8 +12,8 @@ use ndds_client::{
     ProducerQos, RawConsumer, RawEvent, RawProducer, RawSample, RecvError, Reliability,
     SampleStatus, WhenFull,
 };
-use ndds_core::wire::Guid;
 use ndds_core::types::{builtin, fingerprint_hex};
+use ndds_core::wire::Guid;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
@@ -595,7 +595,10 @@ impl PySample {
             .repr()
             .map(|r| r.to_string())
             .unwrap_or_default();
-        format!("Sample(value={value}, writer={}, seq={})", self.writer, self.seq)
+        format!(
+            "Sample(value={value}, writer={}, seq={})",
+            self.writer, self.seq
+        )
     }
 }
 
