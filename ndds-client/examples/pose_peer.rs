@@ -40,6 +40,7 @@ struct Pose {
 }
 
 fn pose(i: u32) -> Pose {
+    let even = i.is_multiple_of(2);
     Pose {
         x: f64::from(i),
         y: -f64::from(i),
@@ -47,8 +48,8 @@ fn pose(i: u32) -> Pose {
         frame: "map".to_owned(),
         seq: i,
         tags: vec!["rust".to_owned()],
-        covariance: (i % 2 == 0).then_some([0.1, 0.2, 0.3]),
-        mode: if i % 2 == 0 { Mode::Moving } else { Mode::Idle },
+        covariance: even.then_some([0.1, 0.2, 0.3]),
+        mode: if even { Mode::Moving } else { Mode::Idle },
     }
 }
 
