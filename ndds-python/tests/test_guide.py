@@ -42,3 +42,16 @@ def test_the_guides_python_examples_run(domain, monkeypatch):
     assert "0.2 ['rad', 'rad']" in printed
     assert "closed to 12.5 mm for planner" in printed
     assert re.search(r"^Home -?0\.0", printed, re.M), printed
+
+
+def test_the_readmes_python_example_runs(domain, monkeypatch, capsys):
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("## From Python") :]
+    block = re.findall(r"```python\n(.*?)```", section, re.S)[0]
+    for key, value in domain.env().items():
+        if key.startswith("NDDS_"):
+            monkeypatch.setenv(key, value)
+    module = types.ModuleType("ndds_readme")
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    exec(compile(block, "README.md", "exec"), module.__dict__)
+    assert "Pose(x=1.0, y=2.0)" in capsys.readouterr().out
