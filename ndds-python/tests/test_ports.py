@@ -143,3 +143,14 @@ def test_sendall_returns_the_first_reply_and_collects_more(participant):
         t.join(timeout=20)
     assert got == ["go", "go"]
     assert sorted(replies) == [("u0", 2), ("u1", 3)]
+
+
+def test_query_is_answered_by_the_owner(participant):
+    owner = ndds.PortOwner(participant, "lookup", "server", str, int)
+    user = ndds.PortUser(participant, "lookup", "client", str, int, usages=["query"])
+    thread = serve(owner, 1, lambda r: len(r.value))
+    assert user.query("seven", timeout=10) == 5
+    thread.join(timeout=10)
+    # A usage the user did not declare is refused where it is made.
+    with pytest.raises(ndds.Error):
+        user.send("x", timeout=1)
