@@ -740,6 +740,12 @@ impl<'a, 'py> Value<'a, 'py> {
         value.map_err(|err| self.dec.ctx.py_error(err))
     }
 
+    /// A Python int or float.
+    fn number<E: de::Error, T: IntoPyObject<'py>>(&self, v: T) -> Result<Bound<'py, PyAny>, E> {
+        let value = self.py_ok(pyo3::IntoPyObjectExt::into_bound_py_any(v, self.dec.py))?;
+        self.ok(value)
+    }
+
     /// The format of item `i` of the list being read.
     fn item_format(&self, i: usize) -> Option<u32> {
         let layout = &self.dec.ctx.codec.layout;
@@ -851,27 +857,19 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     }
 
     fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
-        let Ok(value) = v.into_pyobject(self.dec.py);
-        let value = value.into_any();
-        self.ok(value)
+        self.number(v)
     }
 
     fn visit_i128<E: de::Error>(self, v: i128) -> Result<Self::Value, E> {
-        let Ok(value) = v.into_pyobject(self.dec.py);
-        let value = value.into_any();
-        self.ok(value)
+        self.number(v)
     }
 
     fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
-        let Ok(value) = v.into_pyobject(self.dec.py);
-        let value = value.into_any();
-        self.ok(value)
+        self.number(v)
     }
 
     fn visit_u128<E: de::Error>(self, v: u128) -> Result<Self::Value, E> {
-        let Ok(value) = v.into_pyobject(self.dec.py);
-        let value = value.into_any();
-        self.ok(value)
+        self.number(v)
     }
 
     fn visit_f32<E: de::Error>(self, v: f32) -> Result<Self::Value, E> {
@@ -881,9 +879,7 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     }
 
     fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
-        let Ok(value) = v.into_pyobject(self.dec.py);
-        let value = value.into_any();
-        self.ok(value)
+        self.number(v)
     }
 
     fn visit_char<E: de::Error>(self, v: char) -> Result<Self::Value, E> {

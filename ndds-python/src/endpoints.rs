@@ -65,6 +65,22 @@ where
     }
 }
 
+/// Waits up to `timeout` seconds, in slices (see [`wait_sliced`]), until `ready(slice)` says
+/// yes; false at the timeout.
+fn wait_for(
+    py: Python<'_>,
+    timeout: f64,
+    ready: impl Fn(Duration) -> bool + Sync,
+) -> PyResult<bool> {
+    let found = wait_sliced(
+        py,
+        Some(seconds("timeout", timeout)?),
+        |slice| Ok::<_, ()>(ready(slice).then_some(())),
+        |()| unreachable!("the wait cannot fail"),
+    )?;
+    Ok(found.is_some())
+}
+
 fn epoch_seconds(time: SystemTime) -> f64 {
     time.duration_since(UNIX_EPOCH)
         .map_or(0.0, |d| d.as_secs_f64())
@@ -466,13 +482,7 @@ impl PyProducer {
     #[pyo3(signature = (count=1, timeout=5.0))]
     fn wait_for_consumers(&self, py: Python<'_>, count: usize, timeout: f64) -> PyResult<bool> {
         let raw = self.raw()?;
-        let found = wait_sliced(
-            py,
-            Some(seconds("timeout", timeout)?),
-            |slice| Ok::<_, ()>(raw.wait_for_consumers(count, slice).then_some(())),
-            |()| unreachable!(),
-        )?;
-        Ok(found.is_some())
+        wait_for(py, timeout, |slice| raw.wait_for_consumers(count, slice))
     }
 
     /// Reliable: waits until every matched consumer acknowledged everything written; False
@@ -480,13 +490,7 @@ impl PyProducer {
     #[pyo3(signature = (timeout=5.0))]
     fn wait_for_acknowledgments(&self, py: Python<'_>, timeout: f64) -> PyResult<bool> {
         let raw = self.raw()?;
-        let found = wait_sliced(
-            py,
-            Some(seconds("timeout", timeout)?),
-            |slice| Ok::<_, ()>(raw.wait_for_acknowledgments(slice).then_some(())),
-            |()| unreachable!(),
-        )?;
-        Ok(found.is_some())
+        wait_for(py, timeout, |slice| raw.wait_for_acknowledgments(slice))
     }
 
     /// The number of consumers matched now.
@@ -880,13 +884,7 @@ impl PyConsumer {
     #[pyo3(signature = (count=1, timeout=5.0))]
     fn wait_for_producers(&self, py: Python<'_>, count: usize, timeout: f64) -> PyResult<bool> {
         let raw = self.raw()?;
-        let found = wait_sliced(
-            py,
-            Some(seconds("timeout", timeout)?),
-            |slice| Ok::<_, ()>(raw.wait_for_producers(count, slice).then_some(())),
-            |()| unreachable!(),
-        )?;
-        Ok(found.is_some())
+        wait_for(py, timeout, |slice| raw.wait_for_producers(count, slice))
     }
 
     /// The number of producers matched now.
