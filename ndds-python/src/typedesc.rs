@@ -80,6 +80,14 @@ impl DataType {
                 "internal: CSMat types come from csmat_type",
             ));
         }
+        // The description came from another endpoint: the codec trusts only a valid layout.
+        desc.validate().map_err(|err| {
+            PyTypeError::new_err(format!(
+                "the type {} announced on this topic has an invalid layout ({err}): it cannot \
+                 be decoded",
+                desc.name
+            ))
+        })?;
         let Some(layout) = desc.layout.clone() else {
             return Err(PyTypeError::new_err(format!(
                 "the type {} of this topic is opaque (its producer's type could not be traced): \

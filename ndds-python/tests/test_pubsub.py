@@ -255,3 +255,29 @@ def test_fingerprint_and_shape(participant):
     assert t.shape == "Point{x: f64, y: f64}"
     assert len(t.fingerprint) == 16
     assert ndds.data_type(Point) is t  # cached
+
+
+LINGERING = """
+import dataclasses, time, ndds
+@dataclasses.dataclass
+class Point:
+    x: float
+    y: float
+p = ndds.Participant()
+producer = p.producer("py/lost", Point)
+print("ready", flush=True)
+assert producer.wait_for_consumers(1, timeout=20)
+producer.write(Point(1.0, 2.0))
+time.sleep(60)
+"""
+
+
+def test_a_producer_that_goes_is_reported(domain, participant):
+    consumer = participant.consumer("py/lost", Point)
+    publisher = domain.python(LINGERING)
+    assert read_line(publisher) == "ready"
+    assert consumer.recv(timeout=20).value == Point(1.0, 2.0)
+    publisher.kill()  # no goodbye: its daemon notices the client gone
+    event = consumer.recv_event(timeout=20)
+    assert isinstance(event, ndds.Notification) and event.kind == "producer_lost", event
+    assert event.writer is not None and "lost" in event.message
