@@ -192,6 +192,45 @@ fn different_message_formats_are_refused_naming_both_sides() {
 }
 
 #[test]
+fn described_messages_match_the_typed_side_and_need_their_descriptions() {
+    use ndds_client::TypeDescription;
+    use ndds_client::ports::Encoded;
+    let dir = tempfile::tempdir().unwrap();
+    let p = participant(dir.path(), "described");
+    // A user whose types are described at run time (as ndds-python's are) talks to a typed
+    // owner: the same fingerprints, the same bytes.
+    let owner = PortOwner::<(u32, String), f64>::declare(&p, "scale", "typed_owner").unwrap();
+    let user = PortUser::<Encoded, Encoded>::declare_described(
+        &p,
+        "scale",
+        "described_user",
+        &[Usage::Send],
+        &TypeDescription::of::<(u32, String)>(),
+        &TypeDescription::of::<f64>(),
+    )
+    .unwrap();
+    let server = std::thread::spawn(move || {
+        let (request, reply) = owner.receive(WAIT).unwrap();
+        reply.reply(&(f64::from(request.0) * 2.0)).unwrap();
+        request
+    });
+    let request = postcard::to_stdvec(&(21u32, "x".to_owned())).unwrap();
+    let answer = user.send(&Encoded(request), WAIT).unwrap();
+    assert_eq!(postcard::from_bytes::<f64>(&answer.0).unwrap(), 42.0);
+    assert_eq!(server.join().unwrap(), (21, "x".to_owned()));
+    // The typed constructors refuse `Encoded` (it has no Rust type to trace), naming the port.
+    let err = PortUser::<Encoded, Encoded>::declare(&p, "raw", "x")
+        .err()
+        .unwrap();
+    assert!(matches!(err, PortError::Undescribed { .. }), "{err}");
+    assert!(err.to_string().contains("declare_described"), "{err}");
+    let err = PortOwner::<Encoded, Encoded>::declare(&p, "raw", "x")
+        .err()
+        .unwrap();
+    assert!(matches!(err, PortError::Undescribed { .. }), "{err}");
+}
+
+#[test]
 fn an_urgent_query_is_answered_before_less_urgent_ones_that_arrived_earlier() {
     use ndds_client::ports::Responder;
     use std::sync::Mutex;

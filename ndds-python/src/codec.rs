@@ -47,6 +47,9 @@ pub(crate) enum PyShape {
     Plain,
     /// A struct as instances of this class, built with its fields as positional arguments.
     Class(Py<PyAny>),
+    /// The same, built with its fields as keyword arguments (a dataclass with keyword-only
+    /// fields).
+    KeywordClass(Py<PyAny>),
     /// An enum of unit variants as this `enum.Enum`'s members, in variant order.
     Members(Vec<Py<PyAny>>),
 }
@@ -192,11 +195,23 @@ impl Ctx<'_> {
         E::custom(message)
     }
 
+    /// Records why a payload does not decode (postcard's custom errors keep no text), and
+    /// returns the serde error that unwinds.
+    fn fail<E: de::Error>(&self, reason: impl Into<String>) -> E {
+        let reason = reason.into();
+        let message = format!(
+            "the sample does not decode as its type{}: {reason}",
+            self.at()
+        );
+        self.error.replace(Some(PyValueError::new_err(message)));
+        E::custom(reason)
+    }
+
     fn count<E: de::Error>(&self) -> Result<(), E> {
         let n = self.values.get() + 1;
         self.values.set(n);
         if n > self.limit {
-            return Err(E::custom(format!(
+            return Err(self.fail(format!(
                 "the payload decodes to more than {} values",
                 self.limit
             )));
@@ -210,7 +225,8 @@ impl Ctx<'_> {
 enum Seg {
     Name(String),
     Index(usize),
-    Key(String),
+    /// A map's key, shown by its repr only when an error is reported.
+    Key(Py<PyAny>),
 }
 
 fn join(path: &[Seg]) -> String {
@@ -228,7 +244,13 @@ fn join(path: &[Seg]) -> String {
                 let _ = write!(out, "[{i}]");
             }
             Seg::Key(key) => {
-                let _ = write!(out, "[{key}]");
+                let shown = Python::attach(|py| {
+                    key.bind(py)
+                        .repr()
+                        .map(|r| r.to_string())
+                        .unwrap_or_default()
+                });
+                let _ = write!(out, "[{shown}]");
             }
         }
     }
@@ -352,7 +374,8 @@ impl<'a, 'py> Enc<'a, 'py> {
         else {
             unreachable!("fields of a struct")
         };
-        if let PyShape::Class(class) = &self.ctx.codec.shapes[container]
+        if let PyShape::Class(class) | PyShape::KeywordClass(class) =
+            &self.ctx.codec.shapes[container]
             && dict.is_none()
             && !self.value.is_instance(class.bind(py)).unwrap_or(false)
         {
@@ -362,6 +385,26 @@ impl<'a, 'py> Enc<'a, 'py> {
                 .map(|n| n.to_string())
                 .unwrap_or_default();
             return Err(self.expected(&format!("a {wanted} (or a dict of its fields)")));
+        }
+        // A dict's keys are checked first: a misspelled optional field would otherwise pass
+        // as a missing one.
+        if let Some(dict) = dict {
+            for key in dict.keys() {
+                if !names
+                    .iter()
+                    .any(|n| PyAnyMethods::eq(n.bind(py).as_any(), &key).unwrap_or(false))
+                {
+                    return Err(self.ctx.type_error(format!(
+                        "unknown field {} (fields: {})",
+                        describe(&key),
+                        fields
+                            .iter()
+                            .map(|f| f.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )));
+                }
+            }
         }
         let mut out = serializer.serialize_tuple(fields.len())?;
         for (field, name) in fields.iter().zip(names) {
@@ -394,26 +437,6 @@ impl<'a, 'py> Enc<'a, 'py> {
             };
             self.element(&mut out, Seg::Name(field.name.clone()), field.format, value)?;
         }
-        if let Some(dict) = dict
-            && dict.len() > fields.len()
-        {
-            for key in dict.keys() {
-                if !names
-                    .iter()
-                    .any(|n| PyAnyMethods::eq(n.bind(py).as_any(), &key).unwrap_or(false))
-                {
-                    return Err(self.ctx.type_error(format!(
-                        "unknown field {} (fields: {})",
-                        describe(&key),
-                        fields
-                            .iter()
-                            .map(|f| f.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )));
-                }
-            }
-        }
         out.end()
     }
 
@@ -424,30 +447,31 @@ impl<'a, 'py> Enc<'a, 'py> {
         };
         let py = self.value.py();
         // A member of an `enum.Enum`, a name, or `{"Variant": value}`.
-        let (name, inner): (String, Option<Bound<'py, PyAny>>) =
-            if let Ok(name) = self.value.cast::<PyString>() {
-                (name.to_string(), None)
-            } else if let Ok(dict) = self.value.cast::<PyDict>()
-                && dict.len() == 1
-            {
-                let (key, value) = dict.iter().next().expect("one item");
-                (key.to_string(), Some(value))
-            } else if let Ok(name) = self.value.getattr(pyo3::intern!(py, "name"))
-                && let Ok(members) = self
-                    .value
-                    .get_type()
-                    .getattr(pyo3::intern!(py, "__members__"))
-                && members.contains(&name).unwrap_or(false)
-            {
-                (name.to_string(), None)
-            } else {
-                let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
-                return Err(self.expected(&format!(
-                    "a member of {} ({})",
-                    self.ctx.codec.layout.containers[container].name,
-                    names.join(", ")
-                )));
-            };
+        // A member first: a `StrEnum` member is also a `str`, whose value is not the name.
+        let (name, inner): (String, Option<Bound<'py, PyAny>>) = if let Ok(name) =
+            self.value.getattr(pyo3::intern!(py, "name"))
+            && let Ok(members) = self
+                .value
+                .get_type()
+                .getattr(pyo3::intern!(py, "__members__"))
+            && members.contains(&name).unwrap_or(false)
+        {
+            (name.to_string(), None)
+        } else if let Ok(name) = self.value.cast::<PyString>() {
+            (name.to_string(), None)
+        } else if let Ok(dict) = self.value.cast::<PyDict>()
+            && dict.len() == 1
+        {
+            let (key, value) = dict.iter().next().expect("one item");
+            (key.to_string(), Some(value))
+        } else {
+            let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
+            return Err(self.expected(&format!(
+                "a member of {} ({})",
+                self.ctx.codec.layout.containers[container].name,
+                names.join(", ")
+            )));
+        };
         let Some(variant) = variants.iter().find(|v| v.name == name) else {
             let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
             return Err(self.ctx.type_error(format!(
@@ -492,12 +516,31 @@ impl<'a, 'py> Enc<'a, 'py> {
                         "variant `{name}`: expected a dict of its fields"
                     ))
                 })?;
+                if let Some(unknown) = dict.keys().iter().find(|key| {
+                    !fields
+                        .iter()
+                        .any(|f| key.extract::<String>().is_ok_and(|k| k == f.name))
+                }) {
+                    return Err(self.ctx.type_error(format!(
+                        "variant `{name}`: unknown field {}",
+                        describe(&unknown)
+                    )));
+                }
                 for field in fields {
-                    let value = dict
-                        .get_item(&field.name)
-                        .ok()
-                        .flatten()
-                        .unwrap_or_else(|| py.None().into_bound(py));
+                    let optional = matches!(
+                        self.ctx.codec.layout.formats[field.format as usize],
+                        Format::Option(_) | Format::Unit
+                    );
+                    let value = match dict.get_item(&field.name).ok().flatten() {
+                        Some(value) => value,
+                        None if optional => py.None().into_bound(py),
+                        None => {
+                            return Err(self.ctx.type_error(format!(
+                                "variant `{name}`: field `{}` missing",
+                                field.name
+                            )));
+                        }
+                    };
                     self.element(
                         &mut out,
                         Seg::Name(format!("{name}.{}", field.name)),
@@ -633,10 +676,15 @@ impl Serialize for Enc<'_, '_> {
                     .value
                     .cast::<PyDict>()
                     .map_err(|_| self.expected("a dict"))?;
-                let mut out = serializer.serialize_map(Some(dict.len()))?;
-                for (k, v) in dict.iter() {
-                    let shown = k.repr().map(|r| r.to_string()).unwrap_or_default();
-                    self.ctx.path.borrow_mut().push(Seg::Key(shown));
+                // A snapshot of the entries: encoding a value may run Python code (`__float__`,
+                // `__iter__`, another thread) that changes the dict.
+                let entries: Vec<(Bound<'_, PyAny>, Bound<'_, PyAny>)> = dict.iter().collect();
+                let mut out = serializer.serialize_map(Some(entries.len()))?;
+                for (k, v) in entries {
+                    self.ctx
+                        .path
+                        .borrow_mut()
+                        .push(Seg::Key(k.clone().unbind()));
                     out.serialize_entry(&self.child(*key, k), &self.child(*value, v))?;
                     self.ctx.path.borrow_mut().pop();
                 }
@@ -701,9 +749,15 @@ impl<'a, 'py> Dec<'a, 'py> {
         }
     }
 
+    /// A visitor for this value (the same level: only children add one).
     fn visitor(&self, want: Want) -> Value<'a, 'py> {
         Value {
-            dec: self.child(self.format),
+            dec: Dec {
+                ctx: self.ctx,
+                py: self.py,
+                format: self.format,
+                depth: self.depth,
+            },
             want,
         }
     }
@@ -785,11 +839,10 @@ impl<'de, 'py> DeserializeSeed<'de> for Dec<'_, 'py> {
     type Value = Bound<'py, PyAny>;
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
-        use de::Error;
         if self.depth > MAX_DEPTH {
-            return Err(D::Error::custom(format!(
-                "values nest deeper than {MAX_DEPTH} levels"
-            )));
+            return Err(self
+                .ctx
+                .fail(format!("values nest deeper than {MAX_DEPTH} levels")));
         }
         let layout = &self.ctx.codec.layout;
         let plain = self.visitor(Want::Plain);
@@ -906,7 +959,7 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     fn visit_some<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
         let Format::Option(inner) = self.dec.ctx.codec.layout.formats[self.dec.format as usize]
         else {
-            return Err(de::Error::custom("unexpected option"));
+            return Err(self.dec.ctx.fail("unexpected option"));
         };
         self.dec.child(inner).deserialize(d)
     }
@@ -914,10 +967,10 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
     fn visit_newtype_struct<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
         let layout = &self.dec.ctx.codec.layout;
         let Format::Named(c) = layout.formats[self.dec.format as usize] else {
-            return Err(de::Error::custom("unexpected newtype"));
+            return Err(self.dec.ctx.fail("unexpected newtype"));
         };
         let ContainerShape::NewType(inner) = layout.containers[c as usize].shape else {
-            return Err(de::Error::custom("unexpected newtype"));
+            return Err(self.dec.ctx.fail("unexpected newtype"));
         };
         self.dec.child(inner).deserialize(d)
     }
@@ -928,7 +981,7 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
             Want::Fields(c) => {
                 let codec = self.dec.ctx.codec;
                 let ContainerShape::Struct(fields) = &codec.layout.containers[c].shape else {
-                    return Err(de::Error::custom("unexpected struct"));
+                    return Err(self.dec.ctx.fail("unexpected struct"));
                 };
                 let mut seq = seq;
                 let mut values = Vec::with_capacity(fields.len());
@@ -940,7 +993,7 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
                         .push(Seg::Name(field.name.clone()));
                     let value = seq
                         .next_element_seed(self.dec.child(field.format))?
-                        .ok_or_else(|| de::Error::custom("the struct ends early"))?;
+                        .ok_or_else(|| self.dec.ctx.fail("the struct ends early"))?;
                     self.dec.ctx.path.borrow_mut().pop();
                     values.push(value);
                 }
@@ -948,6 +1001,13 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
                     PyShape::Class(class) => {
                         let args = self.py_ok(PyTuple::new(py, values))?;
                         self.py_ok(class.bind(py).call1(args))?
+                    }
+                    PyShape::KeywordClass(class) => {
+                        let kwargs = PyDict::new(py);
+                        for (name, value) in codec.names[c].iter().zip(values) {
+                            self.py_ok(kwargs.set_item(name.bind(py), value))?;
+                        }
+                        self.py_ok(class.bind(py).call((), Some(&kwargs)))?
                     }
                     _ => {
                         let dict = PyDict::new(py);
@@ -986,7 +1046,7 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
         let Format::Map { key, value } =
             self.dec.ctx.codec.layout.formats[self.dec.format as usize]
         else {
-            return Err(de::Error::custom("unexpected map"));
+            return Err(self.dec.ctx.fail("unexpected map"));
         };
         let dict = PyDict::new(py);
         let mut i = 0usize;
@@ -998,6 +1058,12 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
             };
             let v = map.next_value_seed(self.dec.child(value))?;
             self.dec.ctx.path.borrow_mut().pop();
+            // A sequence or array key (Rust `[i32; 2]`, `Vec<u8>`) as a tuple: a list cannot
+            // be a dict key.
+            let k = match k.cast::<PyList>() {
+                Ok(list) => list.to_tuple().into_any(),
+                Err(_) => k,
+            };
             self.py_ok(dict.set_item(k, v))?;
             i += 1;
         }
@@ -1006,20 +1072,20 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
 
     fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Self::Value, A::Error> {
         let Want::Variant(c) = self.want else {
-            return Err(de::Error::custom("unexpected enum"));
+            return Err(self.dec.ctx.fail("unexpected enum"));
         };
         let py = self.dec.py;
         let codec = self.dec.ctx.codec;
         let container = &codec.layout.containers[c];
         let ContainerShape::Enum(variants) = &container.shape else {
-            return Err(de::Error::custom("unexpected enum"));
+            return Err(self.dec.ctx.fail("unexpected enum"));
         };
         let (index, access): (u32, A::Variant) = data.variant()?;
         let Some(position) = variants.iter().position(|v| v.index == index) else {
-            return Err(de::Error::custom(format!(
-                "{} has no variant {index}",
-                container.name
-            )));
+            return Err(self
+                .dec
+                .ctx
+                .fail(format!("{} has no variant {index}", container.name)));
         };
         let variant = &variants[position];
         let name = codec.names[c][position].bind(py).clone();
@@ -1038,14 +1104,14 @@ impl<'de, 'py> Visitor<'de> for Value<'_, 'py> {
             VariantShape::Tuple(items) => access.tuple_variant(
                 items.len(),
                 TupleItems {
-                    dec: self.dec.child(self.dec.format),
+                    dec: self.dec.visitor(Want::List).dec,
                     items,
                 },
             )?,
             VariantShape::Struct(fields) => access.tuple_variant(
                 fields.len(),
                 VariantFields {
-                    dec: self.dec.child(self.dec.format),
+                    dec: self.dec.visitor(Want::List).dec,
                     fields,
                 },
             )?,
@@ -1074,7 +1140,7 @@ impl<'de, 'py> Visitor<'de> for TupleItems<'_, 'py> {
         for format in self.items {
             let value = seq
                 .next_element_seed(self.dec.child(*format))?
-                .ok_or_else(|| de::Error::custom("the tuple ends early"))?;
+                .ok_or_else(|| self.dec.ctx.fail("the tuple ends early"))?;
             values.push(value);
         }
         PyList::new(self.dec.py, values)
@@ -1101,7 +1167,7 @@ impl<'de, 'py> Visitor<'de> for VariantFields<'_, 'py> {
         for field in self.fields {
             let value = seq
                 .next_element_seed(self.dec.child(field.format))?
-                .ok_or_else(|| de::Error::custom("the variant ends early"))?;
+                .ok_or_else(|| self.dec.ctx.fail("the variant ends early"))?;
             dict.set_item(&field.name, value)
                 .map_err(|err| self.dec.ctx.py_error::<A::Error>(err))?;
         }

@@ -276,9 +276,14 @@ impl PyParticipant {
             .iter()
             .filter(|e| e.info.topic == topic)
             .collect();
-        // Producers first: theirs is the type the samples have.
-        endpoints
-            .sort_by_key(|e| !matches!(e.info.kind(), ndds_core::wire::EndpointKind::Producer));
+        // Producers first (theirs is the type the samples have), and among them those whose
+        // type has a layout (an opaque one cannot be decoded).
+        endpoints.sort_by_key(|e| {
+            (
+                !matches!(e.info.kind(), ndds_core::wire::EndpointKind::Producer),
+                e.info.type_desc.layout.is_none(),
+            )
+        });
         let Some(endpoint) = endpoints.first() else {
             return Ok(None);
         };

@@ -93,51 +93,39 @@ impl PyPortUser {
     }
 
     /// Takes the next message the owner sent to all users (`sendall`), waiting up to
-    /// `timeout` seconds, answers it with `answer(message)` and returns the message.
+    /// `timeout` seconds, answers it with `answer(message)` and returns the message. If
+    /// `answer` raises, the owner gets no reply from this user and the exception is raised
+    /// here. The wait is not sliced (the SDK's own timing of the reply depends on it): Ctrl-C
+    /// takes effect when it ends.
     #[pyo3(signature = (answer, timeout=5.0))]
     fn receive_all(&self, py: Python<'_>, answer: Py<PyAny>, timeout: f64) -> PyResult<Py<PyAny>> {
         let inner = self.inner.clone();
+        let limit = seconds("timeout", timeout)?;
         let (request, reply) = (self.request.clone(), self.reply.clone());
-        // The answer runs on this thread with the GIL taken back; its error, if any, is kept
-        // and raised once the call returns.
-        let failure: Arc<Mutex<Option<PyErr>>> = Arc::default();
-        let got = wait_sliced(
-            py,
-            Some(seconds("timeout", timeout)?),
-            |slice| {
-                let failure = failure.clone();
-                let answer = |message: &Encoded| -> Encoded {
-                    Python::attach(|py| {
-                        let result = decode(py, &request, &message.0)
-                            .and_then(|m| answer.bind(py).call1((m,)))
-                            .and_then(|r| encode(&reply, &r));
-                        match result {
-                            Ok(bytes) => Encoded(bytes),
-                            Err(err) => {
-                                *failure.lock().unwrap_or_else(|p| p.into_inner()) = Some(err);
-                                Encoded::default()
-                            }
+        // The answer runs on this thread with the GIL taken back; its error is kept and
+        // raised once the call returns.
+        let mut failure: Option<PyErr> = None;
+        let got = py.detach(|| {
+            inner.receive_all_or_decline(limit, |message: &Encoded| {
+                Python::attach(|py| {
+                    let result = decode(py, &request, &message.0)
+                        .and_then(|m| answer.bind(py).call1((m,)))
+                        .and_then(|r| encode(&reply, &r));
+                    match result {
+                        Ok(bytes) => Some(Encoded(bytes)),
+                        Err(err) => {
+                            failure = Some(err);
+                            None
                         }
-                    })
-                };
-                match inner.receive_all(slice, answer) {
-                    Ok(message) => Ok(Some(message)),
-                    Err(PortError::Timeout { .. }) => Ok(None),
-                    Err(err) => Err(err),
-                }
-            },
-            errors::port_error,
-        )?;
-        if let Some(err) = failure.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                    }
+                })
+            })
+        });
+        if let Some(err) = failure {
             return Err(err);
         }
-        match got {
-            Some(message) => Ok(decode(py, &self.request, &message.0)?.unbind()),
-            None => Err(errors::Timeout::new_err(format!(
-                "port `{}`: no message to all users within {timeout} s",
-                self.inner.port()
-            ))),
-        }
+        let message = got.map_err(errors::port_error)?;
+        Ok(decode(py, &self.request, &message.0)?.unbind())
     }
 
     /// The port's name.
@@ -334,6 +322,12 @@ impl PyPortOwner {
         self.inner.present_users()
     }
 
+    /// Users a `sendall` reaches now (matched on the port's broadcast topic).
+    #[getter]
+    fn reached(&self) -> usize {
+        self.inner.users()
+    }
+
     /// Users refused so far, with the restriction each broke.
     #[getter]
     fn refusals(&self) -> Vec<String> {
@@ -362,8 +356,9 @@ pub(crate) struct PyRequest {
 
 #[pymethods]
 impl PyRequest {
-    /// Replies to the sender (once; never blocks).
-    fn reply(&self, value: &Bound<'_, PyAny>) -> PyResult<()> {
+    /// Replies to the sender (once). The first reply to a user may wait briefly (at most
+    /// 2 s) for the reply stream to that user to match; the GIL is free meanwhile.
+    fn reply(&self, py: Python<'_>, value: &Bound<'_, PyAny>) -> PyResult<()> {
         let bytes = encode(&self.reply, value)?;
         let handle = self
             .handle
@@ -371,7 +366,8 @@ impl PyRequest {
             .unwrap_or_else(|p| p.into_inner())
             .take()
             .ok_or_else(|| errors::Error::new_err("this request was replied to already"))?;
-        handle.reply(&Encoded(bytes)).map_err(errors::port_error)
+        py.detach(|| handle.reply(&Encoded(bytes)))
+            .map_err(errors::port_error)
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

@@ -5,7 +5,8 @@
 //! naming a scalar (`"f64"`, `"str"`, `"bytes"`, ...) or a tuple (`("option", f)`,
 //! `("seq", f)`, `("map", k, v)`, `("tuple", [f, ...])`, `("array", f, n)`,
 //! `("named", "Pose")`), and every named type is a container: `(name, "struct", [(field, f),
-//! ...], class)` or `(name, "enum", [variant, ...], class)`. These are serde-reflection's
+//! ...], class)` (`"struct_kw"` for a dataclass with keyword-only fields, built with keyword
+//! arguments) or `(name, "enum", [variant, ...], class)`. These are serde-reflection's
 //! terms, so [`ndds_core::types::from_registry`] describes them exactly as tracing the Rust
 //! type does.
 
@@ -18,7 +19,7 @@ use ndds_core::types::serde_reflection::{
 use ndds_core::types::{TypeDescription, builtin, fingerprint_hex, from_registry};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyString, PyTuple};
+use pyo3::types::{PyBytes, PyList, PyString, PyTuple};
 
 use crate::codec::{Codec, PyShape};
 
@@ -61,6 +62,24 @@ impl DataType {
     #[getter]
     fn shape(&self) -> String {
         self.desc.shape()
+    }
+
+    /// Encodes `value` as a sample of this type: the bytes a producer writes (and the Rust
+    /// type of the same shape writes, with postcard). TypeError naming the field if it does
+    /// not fit.
+    fn encode<'py>(
+        &self,
+        py: Python<'py>,
+        value: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let bytes = crate::endpoints::encode(&self.kind, value)?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// Decodes a sample of this type from its bytes; ValueError saying where if they do not
+    /// decode.
+    fn decode<'py>(&self, py: Python<'py>, payload: &[u8]) -> PyResult<Bound<'py, PyAny>> {
+        crate::endpoints::decode(py, &self.kind, payload)
     }
 
     fn __repr__(&self) -> String {
@@ -111,7 +130,7 @@ pub(crate) fn declare_type(
     containers: &Bound<'_, PyList>,
 ) -> PyResult<DataType> {
     let mut registry: Registry = BTreeMap::new();
-    let mut classes: BTreeMap<String, (Py<PyAny>, bool)> = BTreeMap::new();
+    let mut classes: BTreeMap<String, (Py<PyAny>, String)> = BTreeMap::new();
     for item in containers.iter() {
         let item = item
             .cast::<PyTuple>()
@@ -119,7 +138,7 @@ pub(crate) fn declare_type(
         let (cname, kind, items, class): (String, String, Bound<'_, PyList>, Bound<'_, PyAny>) =
             item.extract()?;
         let container = match kind.as_str() {
-            "struct" => {
+            "struct" | "struct_kw" => {
                 let mut fields = Vec::new();
                 for field in items.iter() {
                     let (fname, spec): (String, Bound<'_, PyAny>) = field.extract()?;
@@ -156,7 +175,7 @@ pub(crate) fn declare_type(
                  type once (rename one of them)"
             )));
         }
-        classes.insert(cname, (class.unbind(), kind == "enum"));
+        classes.insert(cname, (class.unbind(), kind));
     }
     let root = format(root)?;
     let desc = from_registry(name, &root, &registry)
@@ -166,11 +185,13 @@ pub(crate) fn declare_type(
     let mut shapes = Vec::with_capacity(layout.containers.len());
     for container in &layout.containers {
         let shape = match classes.get(&container.name) {
-            Some((class, false)) => PyShape::Class(class.clone_ref(py)),
-            Some((class, true)) => {
-                let members = enum_members(py, class.bind(py), &container.shape)?;
-                PyShape::Members(members)
+            Some((class, kind)) if kind == "enum" => {
+                PyShape::Members(enum_members(py, class.bind(py), &container.shape)?)
             }
+            Some((class, kind)) if kind == "struct_kw" => {
+                PyShape::KeywordClass(class.clone_ref(py))
+            }
+            Some((class, _)) => PyShape::Class(class.clone_ref(py)),
             None => PyShape::Plain,
         };
         shapes.push(shape);

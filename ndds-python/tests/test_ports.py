@@ -121,9 +121,10 @@ def broadcast_port(participant, port):
         t.start()
     import time
 
-    deadline = time.monotonic() + 10
-    while len(owner.users) < 2 and time.monotonic() < deadline:
+    deadline = time.monotonic() + 20
+    while owner.reached < 2 and time.monotonic() < deadline:
         time.sleep(0.05)
+    assert owner.reached == 2, owner.users
     return owner, threads, got
 
 
@@ -138,7 +139,7 @@ def test_callall_waits_for_every_user(participant):
 
 def test_sendall_returns_the_first_reply_and_collects_more(participant):
     owner, threads, got = broadcast_port(participant, "sendall")
-    replies = owner.sendall("go", timeout=10, collect=2.0)
+    replies = owner.sendall("go", timeout=10, collect=5.0)
     for t in threads:
         t.join(timeout=20)
     assert got == ["go", "go"]
@@ -152,5 +153,6 @@ def test_query_is_answered_by_the_owner(participant):
     assert user.query("seven", timeout=10) == 5
     thread.join(timeout=10)
     # A usage the user did not declare is refused where it is made.
-    with pytest.raises(ndds.Error):
+    with pytest.raises(ndds.Error, match="Send was not declared") as err:
         user.send("x", timeout=1)
+    assert not isinstance(err.value, ndds.Timeout), err.value

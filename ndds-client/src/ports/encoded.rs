@@ -10,6 +10,11 @@ use serde::{Deserialize, Serialize};
 /// and [`PortOwner::declare_described`](super::PortOwner::declare_described) announce and
 /// check the types' fingerprints; the bytes go out as they are and come back as they arrived.
 ///
+/// Only the `declare_described` constructors take it: the others trace their message types,
+/// which `Encoded` has none of, and refuse it ([`PortError::Undescribed`](super::PortError::Undescribed)).
+/// It is not a topic sample type either (a producer or consumer of `Encoded` would be traced
+/// the same way): topics of types described at run time use raw producers and consumers.
+///
 /// It serializes as its bytes with nothing around them (postcard writes a tuple of `u8`s as
 /// the bytes themselves) and deserializes as every byte that is left, so a request's payload
 /// is exactly the encoded message. It is meant for postcard only, which is what the ports use:

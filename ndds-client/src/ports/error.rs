@@ -208,6 +208,16 @@ pub enum PortError {
         /// The tasks it names.
         tasks: Vec<String>,
     },
+    /// A port of [`Encoded`](super::Encoded) messages declared without their descriptions
+    /// (they carry no Rust type to trace).
+    #[error(
+        "port `{port}`: `Encoded` messages carry no Rust type: declare the port with \
+         `declare_described` and the messages' type descriptions"
+    )]
+    Undescribed {
+        /// The port.
+        port: String,
+    },
     /// A port name that cannot be part of topic names.
     #[error("bad port name `{0}`: it must be non-empty, without `/` or control characters")]
     BadName(String),

@@ -404,13 +404,21 @@ impl PortOwner<Encoded, Encoded> {
 }
 
 /// The fingerprints of a port's request and reply types, as owners announce them and users
-/// check them.
-pub(super) fn formats_of<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned>()
--> (u64, u64) {
-    (
+/// check them; refused for [`Encoded`] messages, which carry no Rust type to trace (they are
+/// declared with `declare_described`).
+pub(super) fn formats_of<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned>(
+    port: &str,
+) -> Result<(u64, u64), PortError> {
+    let encoded = std::any::type_name::<Encoded>();
+    if std::any::type_name::<Q>() == encoded || std::any::type_name::<R>() == encoded {
+        return Err(PortError::Undescribed {
+            port: port.to_owned(),
+        });
+    }
+    Ok((
         TypeDescription::of::<Q>().fingerprint(),
         TypeDescription::of::<R>().fingerprint(),
-    )
+    ))
 }
 
 /// Identifies one request: reply through it (once, whenever, from any thread).
@@ -496,7 +504,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         if filter_usages && !usages.is_empty() {
             restrictions.usages = usages;
         }
-        let formats = formats_of::<Q, R>();
+        let formats = formats_of::<Q, R>(port)?;
         let mut owner = Self::declare_plain(participant, port, task, restrictions, claim, formats)?;
         let inbox = Arc::new(Mutex::new(VecDeque::new()));
         let (shared, taken) = (Arc::clone(&owner.shared), Arc::clone(&inbox));
@@ -591,11 +599,11 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortOwner
         Q: Send + 'static,
         R: Send + 'static,
     {
+        // Checked first: `Encoded` messages must not reach a trace (the bounded buffer's
+        // reply check below traces `R`).
+        let formats = formats_of::<Q, R>(port)?;
         match restrictions.filter {
-            None => {
-                let formats = formats_of::<Q, R>();
-                Self::declare_plain(participant, port, task, restrictions, claim, formats)
-            }
+            None => Self::declare_plain(participant, port, task, restrictions, claim, formats),
             // `declare_filtered` brings the filter's code.
             Some(Filter::Task) => Err(PortError::FilterCode {
                 port: port.to_owned(),

@@ -138,7 +138,7 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         task: &str,
         usages: &[Usage],
     ) -> Result<Self, PortError> {
-        let formats = super::owner::formats_of::<Q, R>();
+        let formats = super::owner::formats_of::<Q, R>(port)?;
         Self::declare_formats(participant, port, task, usages, formats)
     }
 
@@ -601,8 +601,26 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         answer: impl FnOnce(&Q) -> R,
     ) -> Result<Q, PortError> {
         self.require(Usage::ReceiveAll)?;
-        self.answer_owner(&self.broadcasts, "receive_all", timeout, answer)
-            .await
+        self.answer_owner(&self.broadcasts, "receive_all", timeout, |q| {
+            Some(answer(q))
+        })
+        .await
+    }
+
+    /// [`receive_all`](Self::receive_all) whose `answer` may decline (return `None`): the
+    /// message is taken and returned all the same, and the owner gets no reply from this
+    /// user (its `callall` lists the user as missing). For answers that can fail, such as a
+    /// binding's call into another language: no reply is better than a wrong one.
+    pub fn receive_all_or_decline(
+        &self,
+        timeout: Duration,
+        answer: impl FnOnce(&Q) -> Option<R>,
+    ) -> Result<Q, PortError> {
+        wait::block_on(async {
+            self.require(Usage::ReceiveAll)?;
+            self.answer_owner(&self.broadcasts, "receive_all", timeout, answer)
+                .await
+        })
     }
 
     /// Takes the next message the owner sent to this user alone (`send_to`), waiting at most
@@ -622,20 +640,24 @@ impl<Q: Serialize + DeserializeOwned, R: Serialize + DeserializeOwned> PortUser<
         let Some(to_me) = &self.to_me else {
             return Err(self.undeclared(Usage::Receive));
         };
-        self.answer_owner(to_me, "receive", timeout, answer).await
+        self.answer_owner(to_me, "receive", timeout, |q| Some(answer(q)))
+            .await
     }
 
-    /// Takes the next message from the owner on `source` and answers it with `answer`.
+    /// Takes the next message from the owner on `source` and answers it with `answer` (or
+    /// not, if `answer` declines).
     async fn answer_owner(
         &self,
         source: &Consumer<Broadcast>,
         operation: &'static str,
         timeout: Duration,
-        answer: impl FnOnce(&Q) -> R,
+        answer: impl FnOnce(&Q) -> Option<R>,
     ) -> Result<Q, PortError> {
         let (message, value) = self.take_from_owner(source, operation, timeout).await?;
-        let payload = self.encode_reply(&answer(&value))?;
-        self.answer_message(&message, payload, timeout).await?;
+        if let Some(reply) = answer(&value) {
+            let payload = self.encode_reply(&reply)?;
+            self.answer_message(&message, payload, timeout).await?;
+        }
         Ok(value)
     }
 

@@ -71,7 +71,6 @@ pub fn describe<T: Serialize + DeserializeOwned>() -> Result<TypeDescription, De
     Describer::new().describe::<T>()
 }
 
-/// A tracing step run before the described type, on the same tracer.
 /// Describes a type declared at run time rather than traced from Rust: its root format and
 /// the registry of its named containers, in serde-reflection's terms, as a binding builds them
 /// from another language's type declarations (`ndds-python`'s dataclasses). The result is the
@@ -94,6 +93,7 @@ pub fn from_registry(
     })
 }
 
+/// A tracing step run before the described type, on the same tracer.
 type PreTrace = fn(&mut Tracer, &'static Samples) -> serde_reflection::Result<()>;
 
 fn pre_trace<U: DeserializeOwned>(
@@ -221,6 +221,11 @@ fn layout_of(root: &SrFormat, registry: &Registry) -> Result<TypeLayout, String>
     })
 }
 
+/// Traces `T` until every variant of every enum inside it is known.
+///
+/// serde-reflection explores one level of enum variants per pass and only repeats passes for a
+/// top-level enum by itself. Nested enums are named by the `MissingVariants` error of a first
+/// attempt; later attempts repeat passes until none of the named enums is incomplete.
 fn trace<T: DeserializeOwned>(
     pre: &[PreTrace],
 ) -> Result<(SrFormat, Registry), serde_reflection::Error> {

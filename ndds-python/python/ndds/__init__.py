@@ -320,7 +320,9 @@ class Consumer:
             raise StopAsyncIteration from None
 
     async def recv_async(self, timeout: Optional[float] = None) -> Sample:
-        """``recv`` for asyncio: waits on a worker thread, the event loop keeps running."""
+        """``recv`` for asyncio: waits on a worker thread (in steps of 0.1 s), the event loop
+        keeps running. If the awaiting task is cancelled, a sample the worker takes in that
+        last step is lost to it."""
         sample = self._native.try_recv()
         if sample is not None:
             return sample
@@ -332,11 +334,12 @@ class Consumer:
                 return await loop.run_in_executor(None, self._native.recv, step)
             except Timeout:
                 if deadline is not None and loop.time() >= deadline:
-                    raise
+                    raise Timeout(f"no sample on {self.topic!r} within {timeout} s") from None
 
     # Callbacks.
     def on_sample(self, callback: Callable[[Sample], None]) -> None:
-        """Calls ``callback(sample)`` for each sample, on a thread of its own, until closed."""
+        """Calls ``callback(sample)`` for each sample, on a thread of its own, until the
+        consumer is closed (the thread holds the consumer: close it, or use ``with``)."""
         self._start(callback, samples_only=True)
 
     def on_event(self, callback: Callable[[Any], None]) -> None:
@@ -357,6 +360,10 @@ class Consumer:
                     continue
                 except Disconnected:
                     return
+                except Exception:  # a sample that does not decode: said, and skipped
+                    print(f"ndds: a sample on {native.topic!r} was dropped:", file=sys.stderr)
+                    traceback.print_exc()
+                    continue
                 try:
                     callback(event)
                 except Exception:
@@ -468,6 +475,12 @@ class PortOwner:
     def users(self) -> List[str]:
         """The users present now, each as `task [usages]`."""
         return self._native.users
+
+    @property
+    def reached(self) -> int:
+        """Users a ``sendall`` or ``callall`` reaches now (matched on the port's broadcast
+        topic)."""
+        return self._native.reached
 
     @property
     def refusals(self) -> List[str]:

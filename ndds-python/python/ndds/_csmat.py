@@ -110,6 +110,8 @@ class CsMat:
         return self.array[row]
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        if copy:
+            return np.array(self.array, dtype=dtype, copy=True)
         return self.array if dtype is None else self.array.astype(dtype)
 
     def __eq__(self, other: object) -> bool:

@@ -24,6 +24,7 @@ an ``enum.Enum``                       an enum of unit variants, same names, sam
 
 from __future__ import annotations
 
+import collections.abc
 import dataclasses
 import enum
 import sys
@@ -117,7 +118,7 @@ class _Describer:
                 f"{where}: {hint!r} is a union; only Optional[T] (T | None) has a Rust "
                 "counterpart (use an enum.Enum or a dataclass per case)"
             )
-        if origin in (list, List, typing.Sequence) or hint is list:
+        if origin in (list, List, collections.abc.Sequence) or hint is list:
             if not args:
                 raise TypeError(f"{where}: list needs an item type (list[float])")
             return ("seq", self.format(args[0], where + "[]"))
@@ -127,7 +128,7 @@ class _Describer:
             if not args:
                 raise TypeError(f"{where}: tuple needs item types (tuple[float, int])")
             return ("tuple", [self.format(a, f"{where}[{i}]") for i, a in enumerate(args)])
-        if origin in (dict, Dict, typing.Mapping):
+        if origin in (dict, Dict, collections.abc.Mapping):
             if len(args) != 2:
                 raise TypeError(f"{where}: dict needs key and value types (dict[str, float])")
             return ("map", self.format(args[0], where + "{key}"), self.format(args[1], where + "{}"))
@@ -159,7 +160,7 @@ class _Describer:
     def enum(self, cls: Any) -> str:
         name = cls.__name__
         if self._claim(name, cls):
-            members = list(cls.__members__)
+            members = [member.name for member in cls]  # aliases are not variants
             if not members:
                 raise TypeError(f"enum {name} has no members")
             self.containers[name] = (name, "enum", members, cls)
@@ -176,14 +177,16 @@ class _Describer:
         except Exception as err:  # NameError for unresolvable forward references
             raise TypeError(f"cannot read the type hints of {name}: {err}") from err
         fields = []
+        keyword = False
         for field in dataclasses.fields(cls):
+            keyword = keyword or bool(getattr(field, "kw_only", False))
             if not field.init:
                 raise TypeError(
                     f"{name}.{field.name}: fields with init=False cannot be received "
                     "(samples are built with every field)"
                 )
             fields.append((field.name, self.format(hints[field.name], f"{name}.{field.name}")))
-        self.containers[name] = (name, "struct", fields, cls)
+        self.containers[name] = (name, "struct_kw" if keyword else "struct", fields, cls)
         return name
 
 
