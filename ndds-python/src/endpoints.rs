@@ -812,6 +812,11 @@ impl PyConsumer {
                     raw.topic(),
                     timeout.unwrap_or_default().as_secs_f64()
                 ))),
+                // The explanation of the last look: it waited the whole timeout, not zero.
+                Err(RecvError::TimeoutUnmatched(mut unmatched)) => {
+                    unmatched.waited = timeout.unwrap_or_default();
+                    Err(errors::recv_error(RecvError::TimeoutUnmatched(unmatched)))
+                }
                 Err(err) => Err(errors::recv_error(err)),
             },
         }

@@ -86,6 +86,12 @@ def test_types_without_an_ndds_counterpart_are_refused_with_advice(participant):
     with pytest.raises(TypeError, match="list needs an item type"):
         ndds.data_type(list)
 
+    class Plain:
+        x: float
+
+    with pytest.raises(TypeError, match="Plain is a class but not a dataclass: add @dataclasses.dataclass"):
+        participant.producer("err/plain", Plain)
+
     A1 = type("Same", (), {})
     first = dataclasses.make_dataclass("Same", [("x", float)])
     second = dataclasses.make_dataclass("Same", [("y", int)])
@@ -108,6 +114,12 @@ def test_bad_qos_values_say_what_is_allowed(participant):
         ndds.Participant(embedded="sometimes")
     with pytest.raises(ValueError, match="timeout must be a finite number"):
         participant.consumer("err/qos", Inner).recv(timeout=float("nan"))
+    with pytest.raises(ValueError, match="depth must be between 1 and"):
+        participant.consumer("err/qos", Inner, depth=-1)
+    with pytest.raises(TypeError, match="strength must be an int, got 'high'"):
+        participant.producer("err/qos", Inner, strength="high")
+    with pytest.raises(ValueError, match="domain must be between 0 and 232, got 100000"):
+        ndds.Participant(domain=100000)
 
 
 def test_no_daemon_and_no_embedding_is_a_clear_error(tmp_path):

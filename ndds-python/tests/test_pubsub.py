@@ -251,6 +251,15 @@ def test_strength_decides_which_producer_is_heard(participant):
     assert consumer.recv(timeout=5).value == Point(9, 8)
 
 
+def test_help_shows_the_methods_and_the_version_is_known():
+    import pydoc
+
+    text = pydoc.render_doc(ndds.Consumer, renderer=pydoc.plaintext)
+    assert "recv(self, timeout" in text and "ndds.Timeout" in text
+    assert "write(self, value" in pydoc.render_doc(ndds.Producer, renderer=pydoc.plaintext)
+    assert ndds.__version__
+
+
 def test_fingerprint_and_shape(participant):
     t = ndds.data_type(Point)
     assert t.name == "Point"

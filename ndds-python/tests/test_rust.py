@@ -124,5 +124,6 @@ def test_a_type_mismatch_names_both_sides(domain, participant):
         consumer.recv(timeout=1)
     message = str(err.value)
     assert "Pose2D" in message and "Pose" in message.replace("Pose2D", ""), message
+    assert "after 0 ms" not in message and "1" in message.split("waiting")[0], message
     assert len(consumer.incompatible) == 1
     peer.kill()

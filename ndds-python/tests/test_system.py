@@ -143,11 +143,15 @@ def test_a_live_system_driven_and_switched_from_python(tmp_path, participant):
             system.switch("Medium")
         with pytest.raises(ndds.Error, match="no CSMat `nope`"):
             system.mat("nope")
+        with pytest.raises(ndds.Error, match="simulated=True"):
+            system.simulate(1.0)
 
 
 def test_a_state_machine_sequence_in_simulated_time():
     system = ndds.System.load(REPO / "examples" / "sequence.toml", simulated=True)
     assert system.machines == ["task"]
+    with pytest.raises(ndds.Error, match="not running: start"):
+        system.simulate(1.0)
     system.start()
     try:
         assert system.state("task") == "MovingToA"

@@ -46,11 +46,26 @@ from ._ndds import (
 from ._types import array, data_type, f32, f64, i8, i16, i32, i64, u8, u16, u32, u64
 
 __all__ = [
-    "Participant", "Producer", "Consumer", "Sample", "Notification", "DataType", "data_type",
+    "__version__", "Participant", "Producer", "Consumer", "Sample", "Notification", "DataType", "data_type",
     "CsMat", "PortUser", "PortOwner", "Request", "System",
     "Error", "Timeout", "Refused", "Disconnected", "IncompatibleType",
     "i8", "i16", "i32", "i64", "u8", "u16", "u32", "u64", "f32", "f64", "array",
 ]
+
+
+def _check_int(name: str, value: Any, low: int, high: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{name} must be an int, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"{name} must be between {low} and {high}, got {value}")
+
+
+try:
+    from importlib.metadata import version as _version
+
+    __version__ = _version("ndds")
+except Exception:  # running from a source tree
+    __version__ = "0.0.0+source"
 
 
 class Participant(_ndds.Participant):
@@ -95,6 +110,8 @@ class Participant(_ndds.Participant):
         consumers that join later. ``batching=(max_delay_s, max_bytes)`` packs small samples
         into one datagram.
         """
+        _check_int("strength", strength, -(2**31), 2**31 - 1)
+        _check_int("late_joiners", late_joiners, 0, 2**32)
         native = self._producer(
             topic,
             data_type(type),
@@ -135,6 +152,9 @@ class Participant(_ndds.Participant):
         of every producer, not only the strongest. ``callback``: called with each sample (and
         notification) on a thread of its own; see ``Consumer.on_event``.
         """
+        _check_int("depth", depth, 1, 2**32)
+        if history is not None:
+            _check_int("history", history, 1, 2**32 - 1)
         if type is None:
             dtype = self._wait_for_type(topic, wait)
         else:
@@ -170,6 +190,11 @@ class Participant(_ndds.Participant):
                 )
             time.sleep(0.05)
 
+    def __new__(cls, *, domain: Optional[int] = None, **kwargs: Any) -> "Participant":
+        if domain is not None:
+            _check_int("domain", domain, 0, 232)
+        return super().__new__(cls, domain=domain, **kwargs)
+
     def __enter__(self) -> "Participant":
         return self
 
@@ -180,14 +205,20 @@ class Participant(_ndds.Participant):
 class Producer:
     """A producer of one topic (``Participant.producer``)."""
 
-    __slots__ = ("_native", "write")
+    __slots__ = ("_native",)
 
     def __init__(self, native: Any) -> None:
+        """Made by ``Participant.producer``, not directly."""
         self._native = native
-        #: write(value): writes one sample. A value that does not fit the type raises
-        #: TypeError naming the field; a reliable producer whose consumers lag blocks up to
-        #: its write_timeout, then raises ndds.Timeout.
-        self.write = native.write
+
+    def write(self, value: Any) -> None:
+        """Writes one sample. A value that does not fit the type raises TypeError naming the
+        field; a reliable producer whose consumers lag blocks up to its ``write_timeout``,
+        then raises ndds.Timeout."""
+        self._native.write(value)
+
+    def __repr__(self) -> str:
+        return f"<ndds.Producer {self._native.topic!r} {self._native.data_type.shape}>"
 
     def flush(self) -> None:
         """Sends what batching holds now."""
@@ -237,17 +268,27 @@ class Consumer:
     asyncio; ``on_sample``/``on_event`` call a function on a thread of their own.
     """
 
-    __slots__ = ("_native", "_thread", "recv", "try_recv")
+    __slots__ = ("_native", "_thread")
 
     def __init__(self, native: Any) -> None:
+        """Made by ``Participant.consumer``, not directly."""
         self._native = native
         self._thread: Optional[threading.Thread] = None
-        #: recv(timeout=None): the next sample, waiting up to ``timeout`` seconds (None: no
-        #: limit); raises ndds.Timeout naming unmatched producers of the topic and why.
-        #: Ctrl-C interrupts the wait.
-        self.recv = native.recv
-        #: try_recv(): the next queued sample, or None.
-        self.try_recv = native.try_recv
+
+    def recv(self, timeout: Optional[float] = None) -> Sample:
+        """The next sample, waiting up to ``timeout`` seconds (None: no limit), without
+        holding the GIL; Ctrl-C interrupts the wait. Raises ndds.Timeout, whose message names
+        producers of the topic this consumer is not matched with and why (another type, for
+        instance). Notifications that arrive meanwhile are skipped (``recv_event`` returns
+        them)."""
+        return self._native.recv(timeout)
+
+    def try_recv(self) -> Optional[Sample]:
+        """The next queued sample, or None, without waiting."""
+        return self._native.try_recv()
+
+    def __repr__(self) -> str:
+        return f"<ndds.Consumer {self._native.topic!r} {self._native.data_type.shape}>"
 
     def recv_event(self, timeout: Optional[float] = None) -> Any:
         """The next sample or notification (ndds.Sample or ndds.Notification)."""
@@ -500,8 +541,14 @@ class System:
     >>> system.start(); system.switch("track"); system.status()["configuration"]
     """
 
-    def __init__(self, native: Any) -> None:
+    def __init__(self, native: Any, simulated: bool = False) -> None:
+        """Made by ``System.load``."""
         self._native = native
+        self._simulated = simulated
+        self._started = False
+
+    def __repr__(self) -> str:
+        return f"<ndds.System {self._native.name!r}>"
 
     @classmethod
     def load(
@@ -525,7 +572,8 @@ class System:
                 simulated=simulated,
                 name=name,
                 check=check,
-            )
+            ),
+            simulated,
         )
 
     @property
@@ -548,15 +596,25 @@ class System:
         return self._native.configuration
 
     def start(self) -> None:
-        """Starts its habitats, state machines and ports."""
+        """Starts its habitats, state machines and ports (once: to run it again, load it
+        again)."""
         self._native.start()
+        self._started = True
 
     def stop(self) -> None:
         """Stops it (also done when collected)."""
         self._native.stop()
+        self._started = False
 
     def simulate(self, seconds: float) -> int:
-        """Runs ``seconds`` of simulated time (``simulated=True``); returns samples run."""
+        """Runs ``seconds`` of simulated time (loaded with ``simulated=True``, and started);
+        returns the samples run."""
+        if not self._simulated:
+            raise Error(
+                f"system {self.name!r} runs in real time: load it with simulated=True to simulate"
+            )
+        if not self._started:
+            raise Error(f"system {self.name!r} is not running: start() it first")
         return self._native.simulate(seconds)
 
     def switch(self, configuration: str) -> None:

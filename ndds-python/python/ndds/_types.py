@@ -138,8 +138,15 @@ class _Describer:
             return ("named", self.struct(hint))
         if isinstance(hint, str) or isinstance(hint, typing.ForwardRef):
             raise TypeError(f"{where}: unresolved type name {hint!r}")
+        shown = getattr(hint, "__qualname__", None) or repr(hint)
+        prefix = "" if where in (shown, repr(hint)) else f"{where}: "
+        if isinstance(hint, type) and hint.__module__ != "builtins":
+            raise TypeError(
+                f"{prefix}{shown} is a class but not a dataclass: add @dataclasses.dataclass "
+                "(its fields, with their type hints, are the sample's)"
+            )
         raise TypeError(
-            f"{where}: {hint!r} has no ndds type; use bool, int, float, str, bytes, ndds.u8 "
+            f"{prefix}{shown} has no ndds type; use bool, int, float, str, bytes, ndds.u8 "
             "and the other widths, list, tuple, dict, Optional, dataclasses or enum.Enum"
         )
 
