@@ -202,23 +202,55 @@ class Participant(_ndds.Participant):
         self.close()
 
 
-class Producer:
-    """A producer of one topic (``Participant.producer``)."""
+class _Endpoint:
+    """What producers and consumers share: the native endpoint, its topic and type, what it is
+    matched with, closing."""
 
     __slots__ = ("_native",)
 
     def __init__(self, native: Any) -> None:
-        """Made by ``Participant.producer``, not directly."""
+        """Made by ``Participant.producer`` / ``Participant.consumer``, not directly."""
         self._native = native
+
+    def __repr__(self) -> str:
+        kind = type(self).__name__
+        return f"<ndds.{kind} {self._native.topic!r} {self._native.data_type.shape}>"
+
+    @property
+    def matched(self) -> int:
+        """Endpoints of the other kind matched now (consumers of a producer, producers of a
+        consumer)."""
+        return self._native.matched
+
+    @property
+    def topic(self) -> str:
+        return self._native.topic
+
+    @property
+    def data_type(self) -> DataType:
+        return self._native.data_type
+
+    def close(self) -> None:
+        """Withdraws the endpoint; later calls raise ndds.Disconnected."""
+        self._native.close()
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+class Producer(_Endpoint):
+    """A producer of one topic (``Participant.producer``)."""
+
+    __slots__ = ()
 
     def write(self, value: Any) -> None:
         """Writes one sample. A value that does not fit the type raises TypeError naming the
         field; a reliable producer whose consumers lag blocks up to its ``write_timeout``,
         then raises ndds.Timeout."""
         self._native.write(value)
-
-    def __repr__(self) -> str:
-        return f"<ndds.Producer {self._native.topic!r} {self._native.data_type.shape}>"
 
     def flush(self) -> None:
         """Sends what batching holds now."""
@@ -233,46 +265,24 @@ class Producer:
         return self._native.wait_for_acknowledgments(timeout)
 
     @property
-    def matched(self) -> int:
-        """Consumers matched now."""
-        return self._native.matched
-
-    @property
     def written(self) -> int:
         """Samples written so far."""
         return self._native.written
 
-    @property
-    def topic(self) -> str:
-        return self._native.topic
-
-    @property
-    def data_type(self) -> DataType:
-        return self._native.data_type
-
-    def close(self) -> None:
-        """Withdraws the producer; later writes raise ndds.Disconnected."""
-        self._native.close()
-
-    def __enter__(self) -> "Producer":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
 
-class Consumer:
+class Consumer(_Endpoint):
     """A consumer of one topic (``Participant.consumer``).
 
     Iterating yields samples until the consumer is closed; ``async for`` does the same in
     asyncio; ``on_sample``/``on_event`` call a function on a thread of their own.
     """
 
-    __slots__ = ("_native", "_thread")
+    __slots__ = ("_thread",)
 
     def __init__(self, native: Any) -> None:
         """Made by ``Participant.consumer``, not directly."""
-        self._native = native
+        super().__init__(native)
         self._thread: Optional[threading.Thread] = None
 
     def recv(self, timeout: Optional[float] = None) -> Sample:
@@ -286,9 +296,6 @@ class Consumer:
     def try_recv(self) -> Optional[Sample]:
         """The next queued sample, or None, without waiting."""
         return self._native.try_recv()
-
-    def __repr__(self) -> str:
-        return f"<ndds.Consumer {self._native.topic!r} {self._native.data_type.shape}>"
 
     def recv_event(self, timeout: Optional[float] = None) -> Any:
         """The next sample or notification (ndds.Sample or ndds.Notification)."""
@@ -308,22 +315,9 @@ class Consumer:
         return self._native.wait_for_producers(count, timeout)
 
     @property
-    def matched(self) -> int:
-        """Producers matched now."""
-        return self._native.matched
-
-    @property
     def incompatible(self) -> List[Tuple[str, str, str]]:
         """Producers of the topic not matched with this consumer: (writer, type, fingerprint)."""
         return self._native.incompatible
-
-    @property
-    def topic(self) -> str:
-        return self._native.topic
-
-    @property
-    def data_type(self) -> DataType:
-        return self._native.data_type
 
     @property
     def closed(self) -> bool:
@@ -335,12 +329,6 @@ class Consumer:
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=1.0)
-
-    def __enter__(self) -> "Consumer":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
     # Iteration.
     def __iter__(self) -> Iterator[Sample]:
