@@ -336,6 +336,31 @@ impl<'a, 'py> Enc<'a, 'py> {
         T::try_from(wide).map_err(|_| self.ctx.type_error(format!("{wide} does not fit {kind}")))
     }
 
+    /// The value's text (`str` and `char`).
+    fn text<E: ser::Error>(&self) -> Result<std::borrow::Cow<'_, str>, E> {
+        let text = self
+            .value
+            .cast::<PyString>()
+            .map_err(|_| self.expected("a str"))?;
+        text.to_cow()
+            .map_err(|e| self.ctx.type_error(e.to_string()))
+    }
+
+    /// A tuple, tuple struct or array: exactly one item per format, written in order.
+    fn tuple<S: Serializer>(
+        &self,
+        serializer: S,
+        formats: impl ExactSizeIterator<Item = u32>,
+    ) -> Result<S::Ok, S::Error> {
+        let len = formats.len();
+        let values = self.items(Some(len))?;
+        let mut out = serializer.serialize_tuple(len)?;
+        for (i, (format, value)) in formats.zip(values).enumerate() {
+            self.element(&mut out, Seg::Index(i), format, value)?;
+        }
+        out.end()
+    }
+
     fn float<E: ser::Error>(&self, kind: &str) -> Result<f64, E> {
         self.value
             .extract::<f64>()
@@ -611,29 +636,14 @@ impl Serialize for Enc<'_, '_> {
             Format::F32 => serializer.serialize_f32(self.float("f32")? as f32),
             Format::F64 => serializer.serialize_f64(self.float("f64")?),
             Format::Char => {
-                let text = self
-                    .value
-                    .cast::<PyString>()
-                    .map_err(|_| self.expected("a str"))?;
-                let text = text
-                    .to_cow()
-                    .map_err(|e| self.ctx.type_error(e.to_string()))?;
+                let text = self.text()?;
                 let mut chars = text.chars();
                 match (chars.next(), chars.next()) {
                     (Some(c), None) => serializer.serialize_char(c),
                     _ => Err(self.expected("one character")),
                 }
             }
-            Format::Str => {
-                let text = self
-                    .value
-                    .cast::<PyString>()
-                    .map_err(|_| self.expected("a str"))?;
-                let text = text
-                    .to_cow()
-                    .map_err(|e| self.ctx.type_error(e.to_string()))?;
-                serializer.serialize_str(&text)
-            }
+            Format::Str => serializer.serialize_str(&self.text()?),
             Format::Bytes => {
                 if let Ok(bytes) = self.value.cast::<PyBytes>() {
                     serializer.serialize_bytes(bytes.as_bytes())
@@ -690,21 +700,9 @@ impl Serialize for Enc<'_, '_> {
                 }
                 out.end()
             }
-            Format::Tuple(items) => {
-                let values = self.items(Some(items.len()))?;
-                let mut out = serializer.serialize_tuple(items.len())?;
-                for (i, (format, value)) in items.iter().zip(values).enumerate() {
-                    self.element(&mut out, Seg::Index(i), *format, value)?;
-                }
-                out.end()
-            }
+            Format::Tuple(items) => self.tuple(serializer, items.iter().copied()),
             Format::Array { item, len } => {
-                let values = self.items(Some(*len as usize))?;
-                let mut out = serializer.serialize_tuple(*len as usize)?;
-                for (i, value) in values.into_iter().enumerate() {
-                    self.element(&mut out, Seg::Index(i), *item, value)?;
-                }
-                out.end()
+                self.tuple(serializer, std::iter::repeat_n(*item, *len as usize))
             }
             Format::Named(container) => {
                 let container = *container as usize;
@@ -713,12 +711,7 @@ impl Serialize for Enc<'_, '_> {
                     ContainerShape::NewType(inner) => serializer
                         .serialize_newtype_struct("", &self.child(*inner, self.value.clone())),
                     ContainerShape::TupleStruct(items) => {
-                        let values = self.items(Some(items.len()))?;
-                        let mut out = serializer.serialize_tuple(items.len())?;
-                        for (i, (format, value)) in items.iter().zip(values).enumerate() {
-                            self.element(&mut out, Seg::Index(i), *format, value)?;
-                        }
-                        out.end()
+                        self.tuple(serializer, items.iter().copied())
                     }
                     ContainerShape::Struct(_) => self.fields(container, serializer),
                     ContainerShape::Enum(_) => self.variant(container, serializer),

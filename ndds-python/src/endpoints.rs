@@ -384,19 +384,20 @@ fn encode_csmat(value: &Bound<'_, PyAny>) -> PyResult<Vec<u8>> {
         .chunks_exact(8)
         .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
         .collect();
-    let fields = |list: &[(String, String)]| -> Vec<(String, String)> { list.to_vec() };
+    fn pairs(list: &[(String, String)]) -> impl Iterator<Item = (&str, &str)> {
+        list.iter().map(|(n, u)| (n.as_str(), u.as_str()))
+    }
     let mut mat = ndds_runtime::CsMat::from_row_slice(name, rows, cols, &data)
         .map_err(|err| PyValueError::new_err(err.to_string()))?;
-    let rf = fields(&row_fields);
-    let cf = fields(&col_fields);
-    if !rf.is_empty() {
+    // No fields on an axis is allowed; otherwise one per row (column), checked by the runtime.
+    if !row_fields.is_empty() {
         mat = mat
-            .with_row_fields(rf.iter().map(|(n, u)| (n.as_str(), u.as_str())))
+            .with_row_fields(pairs(&row_fields))
             .map_err(|err| PyValueError::new_err(err.to_string()))?;
     }
-    if !cf.is_empty() {
+    if !col_fields.is_empty() {
         mat = mat
-            .with_col_fields(cf.iter().map(|(n, u)| (n.as_str(), u.as_str())))
+            .with_col_fields(pairs(&col_fields))
             .map_err(|err| PyValueError::new_err(err.to_string()))?;
     }
     postcard::to_stdvec(&mat).map_err(|err| PyValueError::new_err(err.to_string()))
