@@ -4,7 +4,7 @@
 #   scripts/bench-sealed.sh            ROUNDS rounds (default 3) on CPUS (default 0)
 #
 # Environment: ROUNDS, CPUS (a taskset list: 0, or 0,1), CIPHERS (default
-# "aes-256-gcm aes-128-gcm chacha20-poly1305"). Builds nothing: run `cargo build --release -p
+# "aegis-128l aes-128-gcm aes-256-gcm chacha20-poly1305"). Builds nothing: run `cargo build --release -p
 # ndds-cli -p ndds-daemon` first, and nothing else meanwhile. One daemon per domain (open, and
 # one per cipher), all on 127.0.0.1; in each round every domain in turn: 8 KiB best-effort
 # throughput, 64 B batched throughput (--batch-us 1000 --batch-bytes 65000) and the 64 B round
@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 bin=target/release
 rounds=${ROUNDS:-3}
 cpus=${CPUS:-0}
-ciphers=${CIPHERS:-aes-256-gcm aes-128-gcm chacha20-poly1305}
+ciphers=${CIPHERS:-aegis-128l aes-128-gcm aes-256-gcm chacha20-poly1305}
 [[ -x $bin/ndds && -x $bin/ndds-daemon ]] || {
     echo "build first: cargo build --release -p ndds-cli -p ndds-daemon" >&2
     exit 2

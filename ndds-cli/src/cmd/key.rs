@@ -22,10 +22,10 @@ enum Action {
     New {
         /// Where to write it.
         file: PathBuf,
-        /// The domain's cipher: auto (aes-128-gcm if this processor has AES instructions,
-        /// else chacha20-poly1305), chacha20-poly1305 (fast on any processor), aes-128-gcm
-        /// or aes-256-gcm (several times faster where every host has AES instructions; see
-        /// docs/security.md).
+        /// The domain's cipher: auto (aegis-128l if this processor has AES instructions,
+        /// else chacha20-poly1305), chacha20-poly1305 (fast on any processor), aegis-128l,
+        /// aes-128-gcm or aes-256-gcm (several times faster where every host has AES
+        /// instructions; aes-*-gcm where NIST algorithms are required; see docs/security.md).
         #[arg(long, default_value = "auto", value_parser = parse_cipher)]
         cipher: CipherChoice,
     },

@@ -13,7 +13,7 @@
 //! Every `key EPOCH HEX` (a 256-bit key in 64 hex digits) is accepted from other senders;
 //! `send EPOCH` names the one this host seals with (by default the highest epoch);
 //! `cipher NAME` the AEAD of the whole domain (`chacha20-poly1305`, what a file without the
-//! line means, `aes-256-gcm` or `aes-128-gcm`: see [`Cipher`]). Rotation
+//! line means, `aegis-128l`, `aes-256-gcm` or `aes-128-gcm`: see [`Cipher`]). Rotation
 //! is three edits of every host's file: add the new key, then make it the one sent, then
 //! remove the old one; between the first and the last, both are accepted.
 
@@ -81,7 +81,9 @@ pub enum KeyFileError {
         line: usize,
     },
     /// A cipher this version does not know.
-    #[error("line {line}: unknown cipher `{name}` (chacha20-poly1305, aes-256-gcm or aes-128-gcm)")]
+    #[error(
+        "line {line}: unknown cipher `{name}` (chacha20-poly1305, aegis-128l, aes-256-gcm or aes-128-gcm)"
+    )]
     UnknownCipher {
         /// The line.
         line: usize,
