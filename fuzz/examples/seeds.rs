@@ -421,8 +421,8 @@ fn ipc_seeds(corpus: &mut Corpus) {
 }
 
 fn seal_seeds(corpus: &mut Corpus) {
-    for (name, flags) in [("chacha", 0u8), ("aes", 1), ("aes128", 9)] {
-        let keys = keyring(fixture::cipher(flags & 1 != 0, flags & 8 != 0));
+    for (name, flags) in [("chacha", 0u8), ("aes", 1), ("aes128", 9), ("aegis", 16)] {
+        let keys = keyring(fixture::cipher(flags));
         add(corpus, "keyfile", name, keys.to_file_text().into_bytes());
         let mut script = Script::new();
         script.u8(flags);
@@ -448,6 +448,8 @@ fn seal_seeds(corpus: &mut Corpus) {
         ("aes_integrity", 3),
         ("required", 6),
         ("aes128_encrypt", 9),
+        ("aegis_encrypt", 16),
+        ("aegis_integrity", 18),
     ] {
         let mut script = Script::new();
         script.u8(flags);

@@ -216,7 +216,7 @@ pub fn endpoint(participant: u64, entity: u32, producer: bool, host: u8) -> Endp
 /// The seal setup of a host of a keyed domain.
 pub fn seal_setup(flags: u8, session: u64) -> SealSetup {
     SealSetup {
-        keyring: fixture::keyring(fixture::cipher(flags & flag::AES != 0, false)),
+        keyring: fixture::keyring(fixture::cipher(u8::from(flags & flag::AES != 0))),
         mode: seal_mode(flags),
         session,
         require_encryption: false,

@@ -19,13 +19,14 @@ pub fn keyring(cipher: Cipher) -> Keyring {
     keyring
 }
 
-/// The cipher two flag bits select: ChaCha20-Poly1305, or AES-GCM with a 256-bit key (a
-/// 128-bit one if `short`).
-pub fn cipher(aes: bool, short: bool) -> Cipher {
-    match (aes, short) {
-        (false, _) => Cipher::ChaCha20Poly1305,
-        (true, false) => Cipher::Aes256Gcm,
-        (true, true) => Cipher::Aes128Gcm,
+/// The cipher a seal target's flag byte selects: bit 4 AEGIS-128L; else bit 0 AES-GCM, with
+/// a 128-bit key if bit 3 is set too (256-bit otherwise); else ChaCha20-Poly1305.
+pub fn cipher(flags: u8) -> Cipher {
+    match (flags & 16 != 0, flags & 1 != 0, flags & 8 != 0) {
+        (true, _, _) => Cipher::Aegis128L,
+        (false, false, _) => Cipher::ChaCha20Poly1305,
+        (false, true, false) => Cipher::Aes256Gcm,
+        (false, true, true) => Cipher::Aes128Gcm,
     }
 }
 

@@ -154,7 +154,7 @@ fn producer(reliable: Option<WriterConfig>) -> ProducerSpec {
 /// The seal setup of LOCAL (session 1) or PEER (session 2) in a keyed domain.
 pub fn seal_setup(flags: u8, session: u64) -> SealSetup {
     SealSetup {
-        keyring: fixture::keyring(fixture::cipher(flags & flag::AES != 0, false)),
+        keyring: fixture::keyring(fixture::cipher(u8::from(flags & flag::AES != 0))),
         mode: if flags & flag::INTEGRITY_ONLY != 0 {
             ndds_core::seal::SealMode::IntegrityOnly
         } else {

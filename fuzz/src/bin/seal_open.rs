@@ -1,9 +1,9 @@
 //! Sealed-datagram routing and opening on arbitrary bytes: `seal::route` (plain, open,
 //! sealed without a key, junk) and `Opener::open` with the fixture keyring (epochs 1 and 2).
-//! Input: a flag byte (bit 0: AES-GCM, bit 3 with it: AES-128-GCM, bit 1: encryption
-//! required, bit 2: the receiver holds no key), then datagrams as u16le-length chunks, opened
-//! in turn by one opener. What opens must start with a plain header; random bytes rarely pass
-//! the tag, which is why `seal_roundtrip` seals inputs first.
+//! Input: a flag byte (bit 0: AES-GCM, bit 3 with it: AES-128-GCM, bit 4: AEGIS-128L, bit 1:
+//! encryption required, bit 2: the receiver holds no key), then datagrams as u16le-length
+//! chunks, opened in turn by one opener. What opens must start with a plain header; random
+//! bytes rarely pass the tag, which is why `seal_roundtrip` seals inputs first.
 
 use std::time::{Duration, Instant};
 
@@ -18,7 +18,7 @@ fn main() {
         let flags = input.u8();
         let keyed = flags & 4 == 0;
         let mut opener = Opener::new(
-            keyring(cipher(flags & 1 != 0, flags & 8 != 0)),
+            keyring(cipher(flags)),
             DOMAIN,
             flags & 2 != 0,
         );

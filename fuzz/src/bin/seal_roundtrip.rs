@@ -14,7 +14,8 @@
 //!
 //! ```text
 //! input := flags { sel u16le-length-chunk }
-//! flags  bit 0: AES-GCM (bit 3: AES-128); bit 1: integrity only; bit 2: encryption required
+//! flags  bit 0: AES-GCM (bit 3: AES-128); bit 4: AEGIS-128L; bit 1: integrity only; bit 2:
+//!        encryption required
 //! sel    bits 0-1: action (0 seal and deliver, 1 seal and hold back, 2 deliver again an
 //!        earlier datagram, 3 deliver one with a bit flipped); bit 2: sender; bits 3-4:
 //!        session; bits 5-7 with the chunk's first byte: time that passes first (seconds)
@@ -52,7 +53,7 @@ fn main() {
     ndds_fuzz::main(|data: &[u8]| {
         let mut input = Input::new(data);
         let flags = input.u8();
-        let keys = keyring(cipher(flags & 1 != 0, flags & 8 != 0));
+        let keys = keyring(cipher(flags));
         let mode = if flags & 2 != 0 {
             SealMode::IntegrityOnly
         } else {

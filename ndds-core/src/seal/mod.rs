@@ -345,6 +345,39 @@ impl SessionKey {
         }
     }
 
+    /// True if it can encrypt from one buffer into another ([`SessionKey::seal_apart`]).
+    fn seals_apart(&self) -> bool {
+        matches!(self, SessionKey::Aegis(_))
+    }
+
+    /// Encrypts the concatenation of `parts`, less its first `skip` bytes, into `body` (as
+    /// long as that), authenticating `aad` with it; `None` (and nothing written) for a cipher
+    /// that encrypts only in place.
+    fn seal_apart(
+        &self,
+        counter: u64,
+        aad: &[u8],
+        parts: &[&[u8]],
+        mut skip: usize,
+        body: &mut [u8],
+    ) -> Option<Tag> {
+        let SessionKey::Aegis(key) = self else {
+            return None;
+        };
+        let aegis = aegis::aegis128l::Aegis128L::<TAG_LEN>::new(key, &wide_nonce(counter));
+        let mut encryptor = aegis.encryptor(aad);
+        let mut at = 0;
+        for part in parts {
+            let cut = skip.min(part.len());
+            skip -= cut;
+            let part = &part[cut..];
+            let end = at + part.len();
+            encryptor.update(part, body.get_mut(at..end)?);
+            at = end;
+        }
+        (at == body.len()).then(|| Tag::from(encryptor.finalize()))
+    }
+
     /// Verifies `tag` and decrypts `body` in place; false if the tag does not verify.
     fn open(&self, counter: u64, aad: &[u8], body: &mut [u8], tag: &Tag) -> bool {
         use chacha20poly1305::AeadInOut;

@@ -109,11 +109,37 @@ impl Sealer {
     }
 
     /// Writes the plain datagram `parts` (pieces in order; the header may span them) into
-    /// `out` (cleared first), sealed: the same bytes as [`Sealer::seal`] of their
-    /// concatenation, without moving the body to make room for the seal head.
+    /// `out` (whatever it held is overwritten), sealed: the same bytes as [`Sealer::seal`] of
+    /// their concatenation, without moving the body to make room for the seal head. With a
+    /// cipher that writes its output apart from its input (AEGIS-128L), the body is encrypted
+    /// from `parts` straight into `out` instead of being copied there first.
     pub fn seal_into(&mut self, out: &mut Vec<u8>, parts: &[&[u8]]) -> Result<(), SealError> {
         let len: usize = parts.iter().map(|part| part.len()).sum();
         self.ready(len)?;
+        if self.mode == SealMode::Encrypt && self.key.seals_apart() {
+            let sealed_len = len + super::SEAL_HEAD_LEN;
+            // Every byte up to `sealed_len` is written below, so a recycled buffer is only
+            // cut or grown, not cleared.
+            if out.len() >= sealed_len {
+                out.truncate(sealed_len);
+            } else {
+                out.resize(sealed_len, 0);
+            }
+            let mut header_at = 0;
+            for part in parts {
+                let take = (HEADER_LEN - header_at).min(part.len());
+                out[header_at..header_at + take].copy_from_slice(&part[..take]);
+                header_at += take;
+            }
+            let counter = self.stamp(out);
+            let (aad, body) = out.split_at_mut(SEALED_HEAD);
+            let tag = self
+                .key
+                .seal_apart(counter, aad, parts, HEADER_LEN, body)
+                .ok_or(SealError::NotADatagram)?;
+            out.extend_from_slice(&tag);
+            return Ok(());
+        }
         out.clear();
         out.reserve(len + super::OVERHEAD);
         let mut header_left = HEADER_LEN;
@@ -142,16 +168,7 @@ impl Sealer {
 
     /// Seals a plain datagram whose header is already followed by room for the seal head.
     fn seal_spaced(&mut self, datagram: &mut Vec<u8>) -> Result<(), SealError> {
-        let counter = self.counter;
-        self.counter += 1;
-        datagram[KIND_BYTE] |= SEALED;
-        if self.mode == SealMode::IntegrityOnly {
-            datagram[KIND_BYTE] |= CLEAR;
-        }
-        let head = &mut datagram[HEADER_LEN..SEALED_HEAD];
-        head[..4].copy_from_slice(&self.epoch.to_le_bytes());
-        head[4..12].copy_from_slice(&self.session.to_le_bytes());
-        head[12..].copy_from_slice(&counter.to_le_bytes());
+        let counter = self.stamp(datagram);
         let tag = match self.mode {
             SealMode::Encrypt => {
                 let (aad, body) = datagram.split_at_mut(SEALED_HEAD);
@@ -163,5 +180,21 @@ impl Sealer {
         let tag = tag.ok_or(SealError::NotADatagram)?;
         datagram.extend_from_slice(&tag);
         Ok(())
+    }
+
+    /// Takes the next counter and writes the seal flags and the seal head into `datagram`
+    /// (a header followed by room for the seal head); the counter.
+    fn stamp(&mut self, datagram: &mut [u8]) -> u64 {
+        let counter = self.counter;
+        self.counter += 1;
+        datagram[KIND_BYTE] |= SEALED;
+        if self.mode == SealMode::IntegrityOnly {
+            datagram[KIND_BYTE] |= CLEAR;
+        }
+        let head = &mut datagram[HEADER_LEN..SEALED_HEAD];
+        head[..4].copy_from_slice(&self.epoch.to_le_bytes());
+        head[4..12].copy_from_slice(&self.session.to_le_bytes());
+        head[12..].copy_from_slice(&counter.to_le_bytes());
+        counter
     }
 }

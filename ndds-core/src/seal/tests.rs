@@ -379,24 +379,35 @@ fn ring_and_rustcrypto_seal_the_same_bytes_and_open_each_other() {
 
 #[test]
 fn sealing_a_datagram_in_pieces_gives_the_bytes_of_sealing_it_whole() {
-    for mode in [SealMode::Encrypt, SealMode::IntegrityOnly] {
+    for (cipher, mode) in Cipher::ALL.into_iter().flat_map(|cipher| {
+        [
+            (cipher, SealMode::Encrypt),
+            (cipher, SealMode::IntegrityOnly),
+        ]
+    }) {
+        let keys = ring(1, 9).with_cipher(cipher);
         let whole_body: Vec<u8> = (0..300u32).map(|i| (i * 13) as u8).collect();
         let datagram = plain(42, &whole_body);
-        let mut whole = Sealer::new(&ring(1, 9), DOMAIN, 42, 1000, mode);
-        let mut pieces = Sealer::new(&ring(1, 9), DOMAIN, 42, 1000, mode);
-        let mut opener = Opener::new(ring(1, 9), DOMAIN, false);
+        let mut whole = Sealer::new(&keys, DOMAIN, 42, 1000, mode);
+        let mut pieces = Sealer::new(&keys, DOMAIN, 42, 1000, mode);
+        let mut opener = Opener::new(keys.clone(), DOMAIN, false);
         let t0 = Instant::now();
-        // Cuts inside the header, at its end, in the body, and at both ends.
-        for (first, second) in [(0, 0), (3, 3), (16, 16), (10, 40), (100, 250), (316, 316)] {
+        // Cuts inside the header, at its end, in the body, and at both ends; into a short
+        // buffer and into a recycled one longer than the datagram, both holding old bytes.
+        let cuts = [(0, 0), (3, 3), (16, 16), (10, 40), (100, 250), (316, 316)];
+        for ((first, second), old) in cuts.into_iter().flat_map(|cut| [(cut, 7), (cut, 2000)]) {
             let expected = sealed(&mut whole, 42, &whole_body);
-            let mut out = vec![0xee; 7];
+            let mut out = vec![0xee; old];
             let parts = [
                 &datagram[..first],
                 &datagram[first..second],
                 &datagram[second..],
             ];
             pieces.seal_into(&mut out, &parts).unwrap();
-            assert_eq!(out, expected, "{mode:?} cut at {first} and {second}");
+            assert_eq!(
+                out, expected,
+                "{cipher:?} {mode:?} cut at {first} and {second} into {old} bytes"
+            );
             let opened = opener.open(t0, &mut out).unwrap().to_vec();
             assert_eq!(opened, datagram);
         }
