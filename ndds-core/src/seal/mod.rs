@@ -201,14 +201,15 @@ pub enum Cipher {
     /// the rounds. The domain key stays 256 bits; each sender's session key is the first 16
     /// bytes of its derivation.
     Aes128Gcm,
-    /// AEGIS-128L (`aegis-128l`): an AES-round-based AEAD from the AEGIS family (a CAESAR
-    /// competition finalist, specified in the IRTF CFRG's draft-irtf-cfrg-aegis-aead; in
-    /// libsodium since 1.0.19), with a 128-bit key, nonce and tag. Where the processor has
-    /// AES instructions it seals 8 KiB in about half the time of AES-128-GCM (it needs no
-    /// GHASH: the AES rounds authenticate as they encrypt), which is what keeps sealed 8 KiB
-    /// samples within 15 % of open ones (docs/benchmarks.md); without them it runs in a slow
-    /// software form, as AES-GCM does. It is not a NIST algorithm: a site that must use
-    /// those takes `aes-128-gcm`. The session key is the first 16 bytes of the derivation.
+    /// AEGIS-128L (`aegis-128l`): an AEAD built on AES rounds, of the AEGIS family (AEGIS-128
+    /// is in the CAESAR competition's final portfolio; specified in the IRTF CFRG's
+    /// draft-irtf-cfrg-aegis-aead; in libsodium since 1.0.19), with a 128-bit key, nonce and
+    /// tag. Where the processor has AES instructions it seals 8 KiB in about half the time of
+    /// AES-128-GCM (it needs no GHASH: the AES rounds authenticate as they encrypt), which is
+    /// what keeps sealed 8 KiB samples within 15 % of open ones (docs/benchmarks.md); without
+    /// them it runs in a slow software form, as AES-GCM does. It is not a NIST algorithm: a
+    /// site that must use those takes `aes-128-gcm`. The session key is the first 16 bytes of
+    /// the derivation.
     Aegis128L,
 }
 
