@@ -91,11 +91,12 @@ impl TestDomain {
         }
     }
 
-    /// A new isolated domain sealed with a new key (ChaCha20-Poly1305).
+    /// A new isolated domain sealed with a new key, in the cipher `ndds key new` chooses on
+    /// this processor (AEGIS-128L where it has AES instructions, else ChaCha20-Poly1305).
     pub fn sealed() -> Self {
         let mut domain = Self::new();
         let key = domain.path("domain.key");
-        ndds_daemon::keys::create(&key, ndds_core::seal::Cipher::default())
+        ndds_daemon::keys::create(&key, ndds_daemon::keys::suggested_cipher())
             .expect("a new key file");
         domain.key = Some(key);
         domain
