@@ -92,12 +92,17 @@ impl TestDomain {
     }
 
     /// A new isolated domain sealed with a new key, in the cipher `ndds key new` chooses on
-    /// this processor (AEGIS-128L where it has AES instructions, else ChaCha20-Poly1305).
+    /// this processor (AEGIS-128L where it has the instructions, else AES-128-GCM or
+    /// ChaCha20-Poly1305).
     pub fn sealed() -> Self {
+        Self::sealed_with(ndds_daemon::keys::suggested_cipher())
+    }
+
+    /// A new isolated domain sealed with a new key in `cipher`.
+    pub fn sealed_with(cipher: ndds_core::seal::Cipher) -> Self {
         let mut domain = Self::new();
         let key = domain.path("domain.key");
-        ndds_daemon::keys::create(&key, ndds_daemon::keys::suggested_cipher())
-            .expect("a new key file");
+        ndds_daemon::keys::create(&key, cipher).expect("a new key file");
         domain.key = Some(key);
         domain
     }

@@ -91,7 +91,7 @@ fn forged_samples_heartbeats_gaps_and_acknowledgements_are_dropped_and_counted()
             "--wait-timeout",
             "30",
             "--linger",
-            "5",
+            "10",
         ],
     );
     producer.event("matched", WAIT).expect("producer matched");

@@ -10,7 +10,9 @@
 //!   another session and back since (an older session is accepted again once the newest
 //!   one was idle for `SESSION_IDLE`, with a fresh replay window: see "Replays across
 //!   sessions" in docs/fuzzing.md);
-//! - a datagram with any bit flipped never opens.
+//! - a datagram with any bit flipped never opens;
+//! - sealed in three pieces into a recycled buffer of old bytes (`Sealer::seal_into`, the data
+//!   plane's way), a datagram has the bytes `Sealer::seal` gives it.
 //!
 //! ```text
 //! input := flags { sel u16le-length-chunk }
@@ -49,6 +51,22 @@ struct SenderModel {
     changes: u32,
 }
 
+/// `plain` cut in three pieces, and a recycled buffer of old bytes to seal them into; the
+/// cuts and the buffer's length follow from `sel` and the bytes themselves.
+fn cut(sel: u8, plain: &[u8]) -> ([&[u8]; 3], Vec<u8>) {
+    let hash = plain.iter().fold(usize::from(sel), |hash, byte| {
+        hash.wrapping_mul(31).wrapping_add(usize::from(*byte))
+    });
+    let len = plain.len();
+    let first = hash % (len + 1);
+    let second = first + (hash / 7) % (len + 1 - first);
+    let recycled = vec![0xa5; (hash / 13) % (2 * len + 64)];
+    (
+        [&plain[..first], &plain[first..second], &plain[second..]],
+        recycled,
+    )
+}
+
 fn main() {
     ndds_fuzz::main(|data: &[u8]| {
         let mut input = Input::new(data);
@@ -62,6 +80,9 @@ fn main() {
         let require_encryption = flags & 4 != 0;
         let mut opener = Opener::new(keys.clone(), DOMAIN, require_encryption);
         let mut sealers: HashMap<(u64, u64), Sealer> = HashMap::new();
+        // A second sealer per sender and session, sealing the same datagrams in pieces into a
+        // recycled buffer (`Sealer::seal_into`, as the data plane does).
+        let mut twins: HashMap<(u64, u64), Sealer> = HashMap::new();
         let mut model: HashMap<u64, SenderModel> = HashMap::new();
         let mut sent: Vec<Sealed> = Vec::new();
         let mut now = Instant::now();
@@ -90,6 +111,13 @@ fn main() {
                     sealer
                         .seal(&mut sealed)
                         .expect("a datagram with a header seals");
+                    let twin = twins
+                        .entry((sender, session))
+                        .or_insert_with(|| Sealer::new(&keys, DOMAIN, sender, session, mode));
+                    let (pieces, mut recycled) = cut(sel, &plain);
+                    twin.seal_into(&mut recycled, &pieces)
+                        .expect("a datagram with a header seals in pieces");
+                    assert_eq!(recycled, sealed, "sealed in pieces, the same bytes");
                     assert_eq!(route(&sealed, true), Route::Open);
                     assert_eq!(route(&sealed, false), Route::SealedWithoutKey);
                     sent.push(Sealed {

@@ -22,10 +22,11 @@ enum Action {
     New {
         /// Where to write it.
         file: PathBuf,
-        /// The domain's cipher: auto (aegis-128l if this processor has AES instructions,
-        /// else chacha20-poly1305), chacha20-poly1305 (fast on any processor), aegis-128l,
-        /// aes-128-gcm or aes-256-gcm (several times faster where every host has AES
-        /// instructions; aes-*-gcm where NIST algorithms are required; see docs/security.md).
+        /// The domain's cipher: auto (aegis-128l if this processor has the instructions it
+        /// needs, else aes-128-gcm if it has those, else chacha20-poly1305),
+        /// chacha20-poly1305 (fast on any processor), aegis-128l, aes-128-gcm or aes-256-gcm
+        /// (several times faster where every host has AES instructions; aes-*-gcm where NIST
+        /// algorithms are required; see docs/security.md).
         #[arg(long, default_value = "auto", value_parser = parse_cipher)]
         cipher: CipherChoice,
     },
@@ -65,14 +66,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 CipherChoice::Named(cipher) => *cipher,
             };
             keys::create(file, chosen)?;
-            let why = match (cipher, keys::hardware_aes()) {
-                (CipherChoice::Named(_), _) => "as asked".to_owned(),
-                (CipherChoice::Auto, true) => format!(
-                    "this processor has AES instructions; if a host of the domain lacks them \
-                     (many ARM boards), make the key with --cipher {} instead",
+            let why = match cipher {
+                CipherChoice::Named(_) => "as asked".to_owned(),
+                CipherChoice::Auto if chosen == Cipher::ChaCha20Poly1305 => {
+                    "this processor has no AES instructions".to_owned()
+                }
+                CipherChoice::Auto => format!(
+                    "this processor has the instructions it needs; if a host of the domain \
+                     lacks them (many ARM boards), make the key with --cipher {} instead",
                     Cipher::ChaCha20Poly1305.name()
                 ),
-                (CipherChoice::Auto, false) => "this processor has no AES instructions".to_owned(),
             };
             outln!("cipher {} ({why})", chosen.name())?;
             if let Some(warning) = keys::slow_cipher_warning(chosen) {

@@ -28,7 +28,8 @@
 //!   is never shared by two processes.
 //! - `session`: chosen by the sender when it starts (the driver gives its start time in
 //!   microseconds, so a restarted sender's sessions grow); `counter` counts the sender's
-//!   datagrams in the session and is the nonce (8 bytes little-endian, then 4 zero bytes).
+//!   datagrams in the session and is the nonce (8 bytes little-endian, then 4 zero bytes; 8
+//!   for AEGIS-128L's 128-bit nonce).
 //!   A sender never reuses a counter: it stops sealing before the counter would wrap.
 //! - Associated data: the 36 bytes of header and seal head (and, integrity only, the body).
 //!
@@ -49,7 +50,8 @@
 //! GCM and ChaCha20-Poly1305 come from ring, whose assembly is several times faster than
 //! RustCrypto's pure Rust; without it, from RustCrypto. The two seal the same bytes, so hosts
 //! built either way share a domain. AEGIS-128L comes from the `aegis` crate (libaegis, which
-//! picks its AES-NI, VAES or ARM crypto-extension code at run time) either way.
+//! picks its AES-NI code, used where AVX is present too, or its ARM crypto-extension code at
+//! run time) either way.
 
 mod keyring;
 mod opener;
@@ -245,11 +247,6 @@ impl Cipher {
             Cipher::Aes128Gcm => 3,
             Cipher::Aegis128L => 4,
         }
-    }
-
-    /// True if it needs the processor's AES instructions to be fast (and constant-time).
-    pub fn wants_hardware_aes(self) -> bool {
-        !matches!(self, Cipher::ChaCha20Poly1305)
     }
 }
 

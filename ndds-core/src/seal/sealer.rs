@@ -120,11 +120,7 @@ impl Sealer {
             let sealed_len = len + super::SEAL_HEAD_LEN;
             // Every byte up to `sealed_len` is written below, so a recycled buffer is only
             // cut or grown, not cleared.
-            if out.len() >= sealed_len {
-                out.truncate(sealed_len);
-            } else {
-                out.resize(sealed_len, 0);
-            }
+            out.resize(sealed_len, 0);
             let mut header_at = 0;
             for part in parts {
                 let take = (HEADER_LEN - header_at).min(part.len());

@@ -324,7 +324,7 @@ fn aegis_128l_seals_the_drafts_test_vector() {
     );
     assert!(key.open(counter, &ad, &mut body, &tag));
     assert_eq!(body, msg);
-    // The draft's test vector 7: one changed ciphertext byte fails.
+    // A forged variant of it: one changed ciphertext bit fails.
     let mut forged = ct;
     forged[39] ^= 1;
     assert!(!key.open(counter, &ad, &mut forged, &tag));
@@ -411,10 +411,21 @@ fn sealing_a_datagram_in_pieces_gives_the_bytes_of_sealing_it_whole() {
             let opened = opener.open(t0, &mut out).unwrap().to_vec();
             assert_eq!(opened, datagram);
         }
-        let mut out = Vec::new();
+        // A header and no body.
+        let bare = plain(42, b"");
+        let expected = sealed(&mut whole, 42, b"");
+        let mut out = vec![0xee; 100];
+        pieces
+            .seal_into(&mut out, &[&bare[..5], &bare[5..]])
+            .unwrap();
+        assert_eq!(out, expected, "{cipher:?} {mode:?} a bare header");
+        // Less than a header: refused before anything is written or counted.
+        let counted = pieces.sealed();
+        let mut out = vec![0xee; 7];
         assert_eq!(
             pieces.seal_into(&mut out, &[&datagram[..10], &datagram[10..15]]),
             Err(SealError::NotADatagram)
         );
+        assert_eq!((pieces.sealed(), &out[..]), (counted, &[0xee; 7][..]));
     }
 }
