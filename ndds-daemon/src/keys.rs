@@ -214,31 +214,26 @@ pub fn random_bytes() -> Result<[u8; 32], std::io::Error> {
 /// with AES-NI and no AVX run it in software). Without them those ciphers run in a slower
 /// software form and ChaCha20-Poly1305 is the faster choice.
 pub fn fast_here(cipher: Cipher) -> bool {
+    // Whether AES-GCM runs in hardware here, and whether AEGIS-128L does.
     #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-    {
+    let (gcm, aegis) = {
         let aes = std::arch::is_x86_feature_detected!("aes");
-        match cipher {
-            Cipher::ChaCha20Poly1305 => true,
-            Cipher::Aes128Gcm | Cipher::Aes256Gcm => {
-                aes && std::arch::is_x86_feature_detected!("pclmulqdq")
-            }
-            Cipher::Aegis128L => aes && std::arch::is_x86_feature_detected!("avx"),
-        }
-    }
+        (
+            aes && std::arch::is_x86_feature_detected!("pclmulqdq"),
+            aes && std::arch::is_x86_feature_detected!("avx"),
+        )
+    };
     #[cfg(target_arch = "aarch64")]
-    {
+    let (gcm, aegis) = {
         let aes = std::arch::is_aarch64_feature_detected!("aes");
-        match cipher {
-            Cipher::ChaCha20Poly1305 => true,
-            Cipher::Aes128Gcm | Cipher::Aes256Gcm => {
-                aes && std::arch::is_aarch64_feature_detected!("pmull")
-            }
-            Cipher::Aegis128L => aes,
-        }
-    }
+        (aes && std::arch::is_aarch64_feature_detected!("pmull"), aes)
+    };
     #[cfg(not(any(target_arch = "x86", target_arch = "x86_64", target_arch = "aarch64")))]
-    {
-        cipher == Cipher::ChaCha20Poly1305
+    let (gcm, aegis) = (false, false);
+    match cipher {
+        Cipher::ChaCha20Poly1305 => true,
+        Cipher::Aes128Gcm | Cipher::Aes256Gcm => gcm,
+        Cipher::Aegis128L => aegis,
     }
 }
 

@@ -337,7 +337,7 @@ impl SessionKey {
                 Tag::try_from(tag.as_ref()).ok()
             }
             SessionKey::Aegis(key) => {
-                let aegis = aegis::aegis128l::Aegis128L::<TAG_LEN>::new(key, &wide_nonce(counter));
+                let aegis = aegis_at(key, counter);
                 Some(Tag::from(aegis.encrypt_in_place(body, aad)))
             }
         }
@@ -362,7 +362,7 @@ impl SessionKey {
         let SessionKey::Aegis(key) = self else {
             return None;
         };
-        let aegis = aegis::aegis128l::Aegis128L::<TAG_LEN>::new(key, &wide_nonce(counter));
+        let aegis = aegis_at(key, counter);
         let mut encryptor = aegis.encryptor(aad);
         let mut at = 0;
         for part in parts {
@@ -398,7 +398,7 @@ impl SessionKey {
                     .is_ok()
             }
             SessionKey::Aegis(key) => {
-                let aegis = aegis::aegis128l::Aegis128L::<TAG_LEN>::new(key, &wide_nonce(counter));
+                let aegis = aegis_at(key, counter);
                 aegis
                     .decrypt_in_place(body, &<[u8; TAG_LEN]>::from(*tag), aad)
                     .is_ok()
@@ -466,11 +466,11 @@ fn short_key(bytes: &[u8; 32]) -> [u8; 16] {
     short
 }
 
-/// The 128-bit nonce of `counter` (AEGIS-128L's): the counter, then 8 zero bytes.
-fn wide_nonce(counter: u64) -> [u8; 16] {
+/// AEGIS-128L with `key` and the 128-bit nonce of `counter`: the counter, then 8 zero bytes.
+fn aegis_at(key: &[u8; 16], counter: u64) -> aegis::aegis128l::Aegis128L<TAG_LEN> {
     let mut nonce = [0u8; 16];
     nonce[..8].copy_from_slice(&counter.to_le_bytes());
-    nonce
+    aegis::aegis128l::Aegis128L::new(key, &nonce)
 }
 
 /// The nonce of `counter`.
