@@ -15,6 +15,7 @@ use ndds_core::types::TypeDescription;
 use ndds_core::wire::{
     self, Announce, EndpointInfo, EndpointQos, Guid, Locator, Message, NodeInfo, ProducerQosWire,
 };
+use ndds_daemon::log_budget;
 use support::{counter, exclusive, node};
 
 const VICTIM: usize = 0;
@@ -127,17 +128,36 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
         GENUINE,
         &["produce", "--topic", TOPIC, "--rate", "50"],
     );
+    let declared_us = support::unix_us_now();
     let genuine_started = Instant::now();
-    let matched = support::read_until(&consumer, Duration::from_secs(20), |line| {
+    // The consumer prints a notification for every forged producer it is told of (their type
+    // is not its own) before the genuine sample: the line is read seconds after it was
+    // written, so the time is the consumer's own, `recv_unix_us`, on this machine's clock.
+    let (matched, before) = support::read_until(&consumer, Duration::from_secs(60), |line| {
         line["event"] == "sample"
-    })
-    .0;
-    let to_first_sample = genuine_started.elapsed();
+    });
+    let read_after = genuine_started.elapsed();
+    let notifications = before
+        .iter()
+        .filter(|l| l["event"] == "notification")
+        .count();
+    let to_first_sample = matched.as_ref().map_or(Duration::MAX, |sample| {
+        let received = support::field(sample, "recv_unix_us");
+        Duration::from_micros(received.saturating_sub(declared_us))
+    });
     let memory_after = cluster.daemon(VICTIM).memory().expect("daemon memory");
     // Held after the flood (the tables), and at the peak (with the flood's input queue).
     let growth = memory_after.rss_kib.saturating_sub(memory_before.rss_kib);
     let peak_growth = memory_after.peak_kib.saturating_sub(memory_before.rss_kib);
     let graph = cluster.graph(VICTIM);
+    // One log line per forged pair would be a flood of its own: the log takes a few per window
+    // and counts the rest (ndds_daemon::log_budget).
+    let windows = started.elapsed().as_secs() / log_budget::WINDOW.as_secs() + 1;
+    let logged_pairs = cluster
+        .daemon(VICTIM)
+        .log_text()
+        .matches("incompatible types on one topic")
+        .count() as u64;
     let genuine_known = graph
         .endpoints
         .iter()
@@ -145,8 +165,9 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
     eprintln!(
         "flood: {sent} forged announcements ({bytes} bytes, {} endpoints) in {flood:?}; kept {} \
          forged endpoints of {} nodes, evicted {evicted} nodes; genuine producer's first sample \
-         {to_first_sample:?} after it was declared; daemon memory {} -> {} KiB \
-         (+{growth} KiB), peak +{peak_growth} KiB",
+         received {to_first_sample:?} after it was declared (read {read_after:?} after, behind \
+         {notifications} notifications); daemon memory {} -> {} KiB (+{growth} KiB), peak \
+         +{peak_growth} KiB; {logged_pairs} incompatible pairs logged",
         FORGED_NODES * ENDPOINTS_PER_NODE,
         forged_endpoints,
         graph.nodes.len(),
@@ -171,6 +192,10 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
         "the genuine producer's samples never arrived"
     );
     assert!(
+        logged_pairs > 0 && logged_pairs <= windows * u64::from(log_budget::LINES_PER_WINDOW),
+        "{logged_pairs} incompatible pairs logged in {windows} windows"
+    );
+    assert!(
         genuine_known,
         "the genuine producer is in the victim's table"
     );
@@ -179,8 +204,11 @@ fn a_flood_of_forged_nodes_and_endpoints_keeps_a_daemon_bounded_and_open_to_genu
         "daemon memory grew by {growth} KiB, {peak_growth} KiB at the peak (bound \
          {MEMORY_BOUND_KIB} KiB)"
     );
-    // The issue asks for 2 s (measured: under 1 s); generous here, as for every real-process
-    // test on a loaded machine.
+    // The issue asks for 2 s; generous here, as for every real-process test on a loaded
+    // machine. The victim's daemon hears the genuine one within tens of milliseconds of its
+    // start (its log says so); the first sample waits for the consumer to work through the
+    // news of the forged pairs that came before it (about 150 000 of them; measured 1.1-1.9 s
+    // in a debug build).
     assert!(
         to_first_sample < Duration::from_secs(10),
         "first genuine sample {to_first_sample:?} after the producer was declared"

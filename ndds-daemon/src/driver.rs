@@ -23,6 +23,7 @@ use tokio::sync::mpsc;
 
 use crate::connection::ClientLink;
 use crate::local::PeerCred;
+use crate::log_budget::{LogBudget, Verdict};
 use crate::peers::Peer;
 
 /// Daemon-local number of a connection.
@@ -140,6 +141,9 @@ pub struct Driver {
     /// Pairs waiting in all clients' backlogs, and the most that may.
     backlog_pairs: usize,
     max_backlog_pairs: usize,
+    /// The log lines of incompatible and of refused pairs (see [`crate::log_budget`]).
+    incompatible_log: LogBudget,
+    refused_log: LogBudget,
 }
 
 impl Driver {
@@ -163,6 +167,8 @@ impl Driver {
             slow_client: SLOW_CLIENT,
             backlog_pairs: 0,
             max_backlog_pairs: MAX_BACKLOG_PAIRS,
+            incompatible_log: LogBudget::default(),
+            refused_log: LogBudget::default(),
         }
     }
 
@@ -193,7 +199,15 @@ impl Driver {
 
     /// Runs the engine's due timers.
     pub fn on_timer(&mut self) {
-        self.engine.handle_timeout(Instant::now());
+        let now = Instant::now();
+        self.engine.handle_timeout(now);
+        // The engine's timer fires at least once per announce period.
+        if let Some(held_back) = self.incompatible_log.ended(now) {
+            held_back_incompatible(held_back, self.incompatible_log.window());
+        }
+        if let Some(held_back) = self.refused_log.ended(now) {
+            held_back_refused(held_back, self.refused_log.window());
+        }
     }
 
     /// Handles one input.
@@ -286,13 +300,17 @@ impl Driver {
                 )
             }
             Event::Incompatible { local, remote } => {
-                tracing::warn!(
-                    topic = remote.topic,
-                    local = %local,
-                    remote = %remote.guid,
-                    remote_type = remote.type_desc.short_name(),
-                    "incompatible types on one topic"
-                );
+                let budget = &mut self.incompatible_log;
+                if let Verdict::Log { held_back } = budget.ask(Instant::now()) {
+                    held_back_incompatible(held_back, budget.window());
+                    tracing::warn!(
+                        topic = remote.topic,
+                        local = %local,
+                        remote = %remote.guid,
+                        remote_type = remote.type_desc.short_name(),
+                        "incompatible types on one topic"
+                    );
+                }
                 (
                     local,
                     DaemonMessage::Incompatible {
@@ -306,13 +324,17 @@ impl Driver {
                 remote,
                 reason,
             } => {
-                tracing::info!(
-                    topic = remote.topic,
-                    local = %local,
-                    remote = %remote.guid,
-                    %reason,
-                    "pair refused by the permissions document"
-                );
+                let budget = &mut self.refused_log;
+                if let Verdict::Log { held_back } = budget.ask(Instant::now()) {
+                    held_back_refused(held_back, budget.window());
+                    tracing::info!(
+                        topic = remote.topic,
+                        local = %local,
+                        remote = %remote.guid,
+                        %reason,
+                        "pair refused by the permissions document"
+                    );
+                }
                 (
                     local,
                     DaemonMessage::NotPermitted {
@@ -916,6 +938,30 @@ impl Driver {
         }
         out.push(("unsealable".to_owned(), stats.unsealable));
         out
+    }
+}
+
+/// Says how many incompatible pairs were not logged (none: says nothing).
+fn held_back_incompatible(held_back: u64, window: Duration) {
+    if held_back > 0 {
+        tracing::warn!(
+            held_back,
+            window_s = window.as_secs(),
+            "more pairs with incompatible types than the log takes in a window: these were not \
+             logged; each was still sent to its client (`ndds topics` lists the types on a topic)"
+        );
+    }
+}
+
+/// Says how many refused pairs were not logged (none: says nothing).
+fn held_back_refused(held_back: u64, window: Duration) {
+    if held_back > 0 {
+        tracing::info!(
+            held_back,
+            window_s = window.as_secs(),
+            "more pairs refused by the permissions document than the log takes in a window: \
+             these were not logged; each was still sent to its client"
+        );
     }
 }
 

@@ -34,6 +34,7 @@ pub mod embed;
 pub mod iface;
 pub mod keys;
 pub mod local;
+pub mod log_budget;
 pub mod peers;
 pub mod security;
 pub mod sockets;
