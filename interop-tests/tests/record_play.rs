@@ -23,6 +23,11 @@ struct Pose {
 }
 
 const WAIT: Duration = Duration::from_secs(20);
+const POSES: u64 = 200;
+const STATES: u64 = 100;
+const BLOBS: u64 = 10;
+const BLOB: usize = 1 << 20;
+const SEQS: u64 = 1000;
 
 /// The two tests of this file take turns: each measures timing (the replay's inter-arrival
 /// times, the loop seeing the replayed values), and beside each other on two cores, in a debug
@@ -33,11 +38,6 @@ fn turn() -> std::sync::MutexGuard<'static, ()> {
     TURN.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
-const POSES: u64 = 200;
-const STATES: u64 = 100;
-const BLOBS: u64 = 10;
-const BLOB: usize = 1 << 20;
-const SEQS: u64 = 1000;
 
 fn pose(i: u64, strong: bool) -> Pose {
     Pose {
