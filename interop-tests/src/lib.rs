@@ -239,6 +239,15 @@ pub fn participant(socket: &Path, name: &str) -> Participant {
         })
 }
 
+/// One test of this test binary at a time while the guard lives: tests that measure timing,
+/// or that must not fork while another copies a binary, take turns. Each test binary is its own
+/// process, so the turns are per file.
+pub fn exclusive() -> std::sync::MutexGuard<'static, ()> {
+    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    TURN.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// Polls `check` every 5 ms until it holds; returns how long that took, or `None` at the
 /// timeout.
 pub fn wait_until(timeout: Duration, mut check: impl FnMut() -> bool) -> Option<Duration> {

@@ -17,14 +17,9 @@ use std::time::Duration;
 use interop_tests::{TestDomain, binary, process, wait_until};
 use ndds_client::{ConnectError, EmbeddedPolicy, Participant};
 
-/// The tests of this file take turns: one copies the daemon binary while another could fork,
-/// and a child holding the copy's open file makes running it fail ("text file busy").
-static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn turn() -> std::sync::MutexGuard<'static, ()> {
-    TURN.lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
+// The tests of this file take turns: one copies the daemon binary while another could fork,
+// and a child holding the copy's open file makes running it fail ("text file busy").
+use interop_tests::exclusive as turn;
 
 /// The unprivileged user who squats.
 const SQUATTER: u32 = 65534;

@@ -9,6 +9,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime};
 
+// The two tests of this file take turns: each measures timing (the replay's inter-arrival
+// times, the loop seeing the replayed values), and beside each other on two cores, in a debug
+// build, each disturbs the other's figures.
+use interop_tests::exclusive as turn;
 use interop_tests::{ClientProcess, TestDomain, participant};
 use ndds_client::{ConsumerQos, ProducerQos, Reliability, Sample};
 use ndds_runtime::CsMat;
@@ -28,16 +32,6 @@ const STATES: u64 = 100;
 const BLOBS: u64 = 10;
 const BLOB: usize = 1 << 20;
 const SEQS: u64 = 1000;
-
-/// The two tests of this file take turns: each measures timing (the replay's inter-arrival
-/// times, the loop seeing the replayed values), and beside each other on two cores, in a debug
-/// build, each disturbs the other's figures.
-static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn turn() -> std::sync::MutexGuard<'static, ()> {
-    TURN.lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
 
 fn pose(i: u64, strong: bool) -> Pose {
     Pose {

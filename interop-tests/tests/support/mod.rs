@@ -6,7 +6,6 @@
 
 use std::collections::BTreeSet;
 use std::io::Write as _;
-use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
 use interop_tests::ClientProcess;
@@ -77,9 +76,8 @@ fn netns_required() -> Option<&'static str> {
 
 /// The tests of one file take turns, so each measures its figures on an otherwise quiet
 /// machine (two cores: a neighbour's 40 processes would show in a failover time).
-pub fn exclusive() -> MutexGuard<'static, ()> {
-    static TURN: Mutex<()> = Mutex::new(());
-    TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+pub fn exclusive() -> std::sync::MutexGuard<'static, ()> {
+    interop_tests::exclusive()
 }
 
 /// Starts `ndds-test-node ARGS` on host `host` of `cluster`; returns once it is `ready`.
